@@ -1,0 +1,145 @@
+"""Measurement chain: from recorded channels to the states q1 (velocity), q2 (displacement) and q1_dot.
+
+Band-limited frequency-domain integration (Schoukens 1990, cited by the paper's section 2.2): divide the
+spectrum by (j w)^p inside the excited band and zero it outside, so drift and noise outside the band
+are not integrated. Derivatives of displacement-type outputs are the converse, times (j w)^p.
+
+Records are not periodic, so before the FFT each channel is
+1. detrended by the straight line through its end samples (its periodic extension is continuous),
+2. tapered at both ends by a half-cosine over `taper_s` (no jump at the record's edges),
+3. zero-padded to at least twice its length (no circular wrap-around of the integrals),
+and afterwards the tapered edges plus a guard are *trimmed*: those samples are excluded from fitting.
+Band edges roll off with a half-cosine over a fraction of the edge frequency, which keeps the operator's
+impulse response short (hard edges ring for seconds). Every signal that enters the regression, the input
+included, goes through the same band so the equation stays consistent.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.fft import irfft, next_fast_len, rfft, rfftfreq
+from scipy.signal import welch
+
+from .errors import IdentificationError
+from .recording import Recording
+
+#: Band edge roll-off as a fraction of the edge frequency (lower: down to f_lo/2; upper: up to 1.25 f_hi).
+EDGE_FRACTION = 0.5
+#: Excited = Welch PSD at least this many dB above the noise floor (the spectrum's 10th percentile).
+EXCITATION_MARGIN_DB = 10.0
+
+
+@dataclass
+class StateSignals:
+    """States and derivatives on the recording's samples; only rows in `valid` are fit for use."""
+
+    q1: np.ndarray      # velocity (m/s for the rig)
+    q2: np.ndarray      # displacement (m)
+    q1_dot: np.ndarray  # acceleration (m/s^2): the regression target of the first equation
+    input: np.ndarray   # band-limited input (zdd or u)
+    fs_hz: float
+    band_hz: tuple[float, float]
+    valid: slice
+    input_name: str
+
+    @property
+    def states(self) -> np.ndarray:
+        return np.column_stack([self.q1, self.q2])
+
+
+def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARGIN_DB) -> tuple[float, float]:
+    """Frequency range (Hz) where the signal's PSD stands `margin_db` above its noise floor."""
+    n = x.size
+    nper = int(min(n, 2 ** int(np.ceil(np.log2(fs_hz * 8.0)))))  # ~0.125 Hz resolution
+    nper = max(min(nper, n // 2), 16)
+    f, p = welch(x, fs_hz, nperseg=nper, detrend="linear")
+    skip = 3  # the lowest bins hold the window's leakage of offsets and drifts, not excitation
+    floor = np.percentile(p[skip:], 10)
+    above = np.flatnonzero(p[skip:] > floor * 10 ** (margin_db / 10)) + skip
+    if above.size == 0:
+        raise IdentificationError("the input shows no excited frequency band above its noise floor")
+    df = f[1] - f[0]
+    return float(max(f[above[0]] - df, df)), float(min(f[above[-1]] + df, fs_hz / 2))
+
+
+def band_gain(f: np.ndarray, band: tuple[float, float], fs_hz: float) -> np.ndarray:
+    """1 inside [f_lo, f_hi], half-cosine roll-off outside, 0 beyond."""
+    lo, hi = band
+    g = np.ones_like(f)
+    if lo > 0:
+        a = lo * (1 - EDGE_FRACTION)
+        g = np.where(f < lo, 0.5 - 0.5 * np.cos(np.pi * np.clip((f - a) / (lo - a), 0, 1)), g)
+    top = min(hi * (1 + EDGE_FRACTION / 2), fs_hz / 2)
+    if top > hi:
+        g = np.where(f > hi, 0.5 + 0.5 * np.cos(np.pi * np.clip((f - hi) / (top - hi), 0, 1)), g)
+    return g
+
+
+def spectral_op(x: np.ndarray, fs_hz: float, band: tuple[float, float], power: int, taper_n: int) -> np.ndarray:
+    """Band-limit x and multiply its spectrum by (j w)^power (power < 0 integrates)."""
+    x = np.asarray(x, dtype=float)
+    n = x.size
+    line = x[0] + (x[-1] - x[0]) * np.arange(n) / max(n - 1, 1)
+    xd = x - line
+    if taper_n > 0:
+        ramp = 0.5 - 0.5 * np.cos(np.pi * (np.arange(taper_n) + 0.5) / taper_n)
+        xd[:taper_n] *= ramp
+        xd[n - taper_n:] *= ramp[::-1]
+    nfft = next_fast_len(2 * n, real=True)
+    f = rfftfreq(nfft, 1.0 / fs_hz)
+    jw = 2j * np.pi * f
+    h = band_gain(f, band, fs_hz).astype(complex)
+    if power:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            h *= jw ** power
+        h[0] = 0.0 if power < 0 or band[0] > 0 else h[0]
+    y = irfft(rfft(xd, nfft) * h, nfft)[:n]
+    if band[0] == 0 and power in (0, 1):
+        # DC is in the band: the detrending line is signal, restore it (or its slope)
+        y += line if power == 0 else (x[-1] - x[0]) * fs_hz / max(n - 1, 1)
+    return y
+
+
+def reconstruct_states(rec: Recording, band_hz: tuple[float, float] | None = None, harmonics: float = 5.0,
+                       taper_s: float | None = None) -> StateSignals:
+    """States of the paper (q1 = velocity, q2 = displacement) and q1_dot from a recording.
+
+    band_hz : (f_lo, f_hi) to integrate in; default from the input's spectrum: its excited range, the top
+        widened `harmonics`-fold for the response's nonlinear harmonics, capped below Nyquist.
+    taper_s : edge taper length; default one period of f_lo (base layout) or 64 samples (force layout).
+    """
+    fs = rec.fs_hz
+    nyq = fs / 2
+    if band_hz is None:
+        lo, hi = excited_band(rec.input, fs)
+        lo = 0.0 if rec.layout == "force" else 0.8 * lo
+        band_hz = (lo, min(hi * harmonics, 0.8 * nyq))
+    lo, hi = float(band_hz[0]), float(band_hz[1])
+    if not (0 <= lo < hi <= nyq):
+        raise IdentificationError(f"band {band_hz} Hz must satisfy 0 <= f_lo < f_hi <= Nyquist ({nyq:g} Hz)")
+    if rec.layout == "base" and lo <= 0:
+        raise IdentificationError("integrating accelerations needs a band with f_lo > 0 Hz")
+    if taper_s is None:
+        taper_s = 1.0 / lo if lo > 0 else 64.0 / fs
+    taper_n = int(min(round(taper_s * fs), rec.n_samples // 8))
+    guard = taper_n // 2 + 1
+    trim = taper_n + guard
+    if rec.n_samples - 2 * trim < 64:
+        raise IdentificationError(f"{rec.source}: too short for band {lo:.3g}-{hi:.3g} Hz: "
+                                  f"{rec.n_samples} samples, {2 * trim} lost to edge tapers")
+    band = (lo, hi)
+    if rec.layout == "base":
+        qdd = rec.output - rec.input  # relative acceleration q'' = x'' - z''
+        q1 = spectral_op(qdd, fs, band, -1, taper_n)
+        q2 = spectral_op(qdd, fs, band, -2, taper_n)
+        q1_dot = spectral_op(qdd, fs, band, 0, taper_n)
+        u = spectral_op(rec.input, fs, band, 0, taper_n)
+    else:
+        y = rec.output
+        q2 = spectral_op(y, fs, band, 0, taper_n)
+        q1 = spectral_op(y, fs, band, 1, taper_n)
+        q1_dot = spectral_op(y, fs, band, 2, taper_n)
+        u = spectral_op(rec.input, fs, band, 0, taper_n)
+    return StateSignals(q1, q2, q1_dot, u, fs, band, slice(trim, rec.n_samples - trim),
+                        "zdd" if rec.layout == "base" else "u")

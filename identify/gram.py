@@ -1,0 +1,65 @@
+"""Normal equations per block of samples.
+
+The library matrix A (n x m) and targets Y (n x p) are reduced once to per-block cross-products
+[A Y]^T [A Y] over contiguous sample blocks. Everything downstream (LASSO path, MSE along it, held-out
+error, least-squares refit, block-robust standard errors) works on these (m+p)^2 numbers per block, so
+its cost does not grow with the record length.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class NormalEquations:
+    """Sums over a set of samples: G = A^T A, B = A^T Y, yy = diag(Y^T Y), n samples."""
+
+    G: np.ndarray
+    B: np.ndarray
+    yy: np.ndarray
+    n: int
+
+    def mse(self, X: np.ndarray, eq: int | None = None) -> np.ndarray:
+        """Mean squared residual of coefficient columns X (m, k) for target `eq` (or X (m, p) all)."""
+        if eq is None:
+            return (self.yy - 2 * np.einsum("ij,ij->j", self.B, X) + np.einsum("ij,ij->j", X, self.G @ X)) / self.n
+        b = self.B[:, eq][:, None]
+        return (self.yy[eq] - 2 * (b * X).sum(0) + np.einsum("ij,ij->j", X, self.G @ X)) / self.n
+
+
+class BlockGram:
+    """Per-block cross-products of [A | Y] over contiguous blocks of rows; `edges` are the block
+    boundaries (row indices, first 0, last n)."""
+
+    def __init__(self, AY: np.ndarray, n_targets: int, edges: np.ndarray):
+        n, w = AY.shape
+        self.edges = np.asarray(edges, dtype=int)
+        n_blocks = self.edges.size - 1
+        self.m = w - n_targets
+        self.p = n_targets
+        self.C = np.empty((n_blocks, w, w))
+        for b in range(n_blocks):
+            blk = AY[self.edges[b]:self.edges[b + 1]]
+            self.C[b] = blk.T @ blk
+        self.counts = np.diff(self.edges)
+
+    @property
+    def n_blocks(self) -> int:
+        return self.C.shape[0]
+
+    def equations(self, blocks) -> NormalEquations:
+        """Normal equations summed over the given block indices (or a boolean mask)."""
+        idx = np.flatnonzero(blocks) if np.asarray(blocks).dtype == bool else np.asarray(blocks, dtype=int)
+        C = self.C[idx].sum(0)
+        m = self.m
+        return NormalEquations(C[:m, :m], C[:m, m:], np.diag(C[m:, m:]).copy(), int(self.counts[idx].sum()))
+
+    def block_scores(self, blocks, support: np.ndarray, x: np.ndarray, eq: int) -> np.ndarray:
+        """Per-block sums of a_t * r_t on `support` (for sandwich standard errors), shape (k, |S|)."""
+        idx = np.flatnonzero(blocks) if np.asarray(blocks).dtype == bool else np.asarray(blocks, dtype=int)
+        C = self.C[idx]
+        G = C[:, support][:, :, support]
+        b = C[:, support, self.m + eq]
+        return b - G @ x

@@ -1,0 +1,86 @@
+"""The library of candidate terms (the paper's matrix A(q, zdd), eq. 7)."""
+from __future__ import annotations
+
+import numpy as np
+
+from .terms import FeatureSpace, Term
+
+#: Non-polynomial terms of physical effects the library can add on request.
+PHYSICAL_TERMS = ("sign(q1)", "q1*|q1|", "|q1|", "|q2|")
+
+
+class Library:
+    """Named candidate terms: constant, state monomials up to `degree`, extra terms, then the inputs.
+
+    Parameters
+    ----------
+    states, inputs : names of the state and input signals (default: q1 = relative velocity,
+        q2 = relative displacement, zdd = table acceleration).
+    degree : highest total degree of the state monomials (the paper uses 4: 16 columns with zdd).
+    extra_terms : further term names, e.g. ``("sign(q1)", "q1*|q1|")`` for friction effects.
+    """
+
+    def __init__(self, states=("q1", "q2"), inputs=("zdd",), degree: int = 4, extra_terms=()):
+        self.states = tuple(states)
+        self.inputs = tuple(inputs)
+        self.degree = int(degree)
+        self.extra_terms = tuple(extra_terms)
+        self.space = FeatureSpace(self.states, self.inputs)
+        terms = self.space.monomials(self.degree)
+        terms += [self.space.parse(n) for n in self.extra_terms]
+        terms += [self.space.parse(n) for n in self.inputs]
+        names = [t.name for t in terms]
+        dupes = {n for n in names if names.count(n) > 1}
+        if dupes:
+            raise ValueError(f"library has duplicate terms: {sorted(dupes)}")
+        self.terms: list[Term] = terms
+        self.names: list[str] = names
+
+    def __len__(self) -> int:
+        return len(self.terms)
+
+    def evaluate(self, states: np.ndarray, inputs: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Library matrix (n_samples, n_terms) for states (n, n_states) and inputs (n, n_inputs).
+
+        Each column is its parent column (one factor power lower) times one feature: one multiply
+        per column. `out` may be any (n, n_terms) view; a Fortran-ordered one is fastest.
+        """
+        return evaluate_terms(self.space, self.terms, states, inputs, out)
+
+
+def evaluate_terms(space: FeatureSpace, terms, states, inputs, out=None) -> np.ndarray:
+    states = np.asarray(states, dtype=float)
+    inputs = np.asarray(inputs, dtype=float)
+    n = states.shape[0]
+    if out is None:
+        out = np.empty((n, len(terms)), order="F")
+    feats: dict[str, np.ndarray] = {}
+
+    def feature(name: str) -> np.ndarray:
+        if name not in feats:
+            idx = space.index[name]
+            ns = len(space.states)
+            if idx >= 3 * ns:
+                feats[name] = inputs[:, idx - 3 * ns]
+            else:
+                q = states[:, idx // 3]
+                feats[name] = (q, np.abs(q), np.sign(q))[idx % 3]
+        return feats[name]
+
+    done: dict[tuple, np.ndarray] = {}
+    for j, term in enumerate(terms):
+        col = out[:, j]
+        if not term.factors:
+            col[:] = 1.0
+        else:
+            # parent: the same term with the last factor's power lowered by one
+            f, p = term.factors[-1]
+            parent = term.factors[:-1] + (((f, p - 1),) if p > 1 else ())
+            if parent in done:
+                np.multiply(done[parent], feature(f), out=col)
+            elif not parent:
+                col[:] = feature(f)
+            else:
+                col[:] = evaluate_terms(space, [Term(parent)], states, inputs)[:, 0] * feature(f)
+        done[term.factors] = col
+    return out

@@ -1,0 +1,191 @@
+"""Recordings: uniformly sampled input/output channels, and readers for CSV and MAT files.
+
+Two layouts:
+- ``base`` (the shaker rig): input = table acceleration, output = mass (absolute) acceleration, m/s^2.
+  Default CSV header ``t,table_acc,mass_acc``.
+- ``force`` (e.g. Silverbox): input = force-like `u`, output = displacement-like `y`; needs `fs_hz`
+  when the file has no time column.
+
+Every problem a file can have ends in a RecordingError naming the file and what is wrong.
+"""
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import RecordingError
+
+LAYOUTS = {
+    "base": {"input": "table_acc", "output": "mass_acc", "time": "t", "units": ("m/s^2", "m/s^2")},
+    "force": {"input": "u", "output": "y", "time": "t", "units": ("", "")},
+}
+#: Fewer samples than this cannot carry a sweep worth identifying.
+MIN_SAMPLES = 256
+
+
+@dataclass
+class Recording:
+    """Input and output samples at `fs_hz`; `layout` says what they are (see module doc)."""
+
+    input: np.ndarray
+    output: np.ndarray
+    fs_hz: float
+    layout: str = "base"
+    input_name: str = "table_acc"
+    output_name: str = "mass_acc"
+    units: tuple[str, str] = ("m/s^2", "m/s^2")
+    source: str = "<memory>"
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.input = np.asarray(self.input, dtype=float).ravel()
+        self.output = np.asarray(self.output, dtype=float).ravel()
+        if self.layout not in LAYOUTS:
+            raise RecordingError(f"{self.source}: unknown layout {self.layout!r} (base or force)")
+        if self.input.shape != self.output.shape:
+            raise RecordingError(f"{self.source}: input has {self.input.size} samples, output {self.output.size}")
+        if not (np.isfinite(self.fs_hz) and self.fs_hz > 0):
+            raise RecordingError(f"{self.source}: sample rate must be positive, got {self.fs_hz}")
+        for name, x in ((self.input_name, self.input), (self.output_name, self.output)):
+            bad = np.flatnonzero(~np.isfinite(x))
+            if bad.size:
+                raise RecordingError(f"{self.source}: column {name!r} has {bad.size} NaN/inf values "
+                                     f"(first at sample {bad[0]})")
+        if self.input.size < MIN_SAMPLES:
+            raise RecordingError(f"{self.source}: too short: {self.input.size} samples, need at least {MIN_SAMPLES}")
+        if np.ptp(self.input) == 0:
+            raise RecordingError(f"{self.source}: input column {self.input_name!r} is constant: nothing was excited")
+
+    @property
+    def n_samples(self) -> int:
+        return self.input.size
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.fs_hz
+
+    @property
+    def time_s(self) -> np.ndarray:
+        return np.arange(self.n_samples) / self.fs_hz
+
+    def slice(self, start: int, stop: int) -> "Recording":
+        return Recording(self.input[start:stop], self.output[start:stop], self.fs_hz, self.layout,
+                         self.input_name, self.output_name, self.units, f"{self.source}[{start}:{stop}]",
+                         dict(self.metadata))
+
+
+def _sample_rate_from_time(t: np.ndarray, source: str, name: str) -> float:
+    if t.size < 2:
+        raise RecordingError(f"{source}: time column {name!r} needs at least two samples")
+    d = np.diff(t)
+    if not np.all(np.isfinite(d)) or np.any(d <= 0):
+        raise RecordingError(f"{source}: time column {name!r} is not strictly increasing")
+    dt = np.median(d)
+    # A uniform clock drifts by float rounding only; a dropped or doubled sample shows as a whole dt.
+    worst = np.max(np.abs(d - dt))
+    if worst > 1e-3 * dt:
+        k = int(np.argmax(np.abs(d - dt)))
+        raise RecordingError(f"{source}: time column {name!r} is not uniformly sampled: step {d[k]:.6g} s at "
+                             f"sample {k + 1}, median step {dt:.6g} s (gaps must be repaired, not spliced)")
+    return 1.0 / dt
+
+
+def read_recording(path, layout: str = "base", input: str | None = None, output: str | None = None,
+                   time: str | None = None, fs_hz: float | None = None) -> Recording:
+    """Read a CSV or MAT recording (HDF5 recordings of the DAQ arrive with the DAQ)."""
+    path = Path(path)
+    if layout not in LAYOUTS:
+        raise RecordingError(f"unknown layout {layout!r} (base or force)")
+    names = LAYOUTS[layout]
+    input = input or names["input"]
+    output = output or names["output"]
+    time = time or names["time"]
+    if not path.exists():
+        raise RecordingError(f"{path}: no such file")
+    if not path.is_file():
+        raise RecordingError(f"{path}: not a file")
+    suffix = path.suffix.lower()
+    if suffix == ".mat":
+        columns = _read_mat(path)
+    elif suffix in (".csv", ".txt"):
+        columns = _read_csv(path)
+    else:
+        raise RecordingError(f"{path}: unsupported file type {suffix!r} (csv or mat)")
+    missing = [c for c in (input, output) if c not in columns]
+    if missing:
+        raise RecordingError(f"{path}: missing column(s) {', '.join(map(repr, missing))}; "
+                             f"found {', '.join(map(repr, columns)) or 'none'}")
+    if time in columns and fs_hz is None:
+        fs = _sample_rate_from_time(columns[time], str(path), time)
+    elif fs_hz is not None:
+        fs = float(fs_hz)
+    else:
+        raise RecordingError(f"{path}: no time column {time!r}; give the sample rate (--fs)")
+    return Recording(columns[input], columns[output], fs, layout, input, output, names["units"], str(path))
+
+
+def _read_csv(path: Path) -> dict[str, np.ndarray]:
+    try:
+        with path.open(newline="") as f:
+            lines = [ln for ln in f if ln.strip() and not ln.lstrip().startswith("#")]
+    except UnicodeDecodeError:
+        raise RecordingError(f"{path}: not a text CSV file") from None
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read: {exc.strerror}") from None
+    if not lines:
+        raise RecordingError(f"{path}: empty file")
+    try:
+        dialect = csv.Sniffer().sniff(lines[0], delimiters=",;\t ")
+        delim = dialect.delimiter
+    except csv.Error:
+        delim = ","
+    header = [h.strip() for h in next(csv.reader([lines[0]], delimiter=delim))]
+    if any(_is_number(h) for h in header):
+        raise RecordingError(f"{path}: first line must be a header naming the columns, got {lines[0].strip()!r}")
+    rows = list(csv.reader(lines[1:], delimiter=delim))
+    data = np.empty((len(rows), len(header)))
+    for i, row in enumerate(rows):
+        if len(row) != len(header):
+            raise RecordingError(f"{path}: line {i + 2} has {len(row)} fields, header has {len(header)}")
+        try:
+            data[i] = [float(v) for v in row]
+        except ValueError:
+            raise RecordingError(f"{path}: line {i + 2} has a non-numeric value: {','.join(row)[:80]!r}") from None
+    return {h: data[:, j] for j, h in enumerate(header)}
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+        return True
+    except ValueError:
+        return False
+
+
+def _read_mat(path: Path) -> dict[str, np.ndarray]:
+    from scipy.io import loadmat
+
+    try:
+        raw = loadmat(path)
+    except NotImplementedError:
+        raise RecordingError(f"{path}: MATLAB v7.3 (HDF5) .mat files are not supported; save with -v7") from None
+    except Exception as exc:  # scipy raises ValueError/TypeError/MatReadError on garbage
+        raise RecordingError(f"{path}: not a readable MAT file ({exc.__class__.__name__}: {exc})") from None
+    out = {}
+    for k, v in raw.items():
+        if k.startswith("__") or not isinstance(v, np.ndarray) or v.dtype.kind not in "fiu":
+            continue
+        if v.ndim <= 2 and min(v.shape or (1,)) == 1 and v.size > 1:
+            out[k] = v.astype(float).ravel()
+    return out
+
+
+def write_csv(path, recording: Recording, extra: dict[str, np.ndarray] | None = None) -> None:
+    """Write a recording as CSV with a time column (header t,<input>,<output>[,extra...])."""
+    cols = {"t": recording.time_s, recording.input_name: recording.input, recording.output_name: recording.output}
+    cols.update(extra or {})
+    data = np.column_stack(list(cols.values()))
+    np.savetxt(path, data, delimiter=",", header=",".join(cols), comments="", fmt="%.10g")

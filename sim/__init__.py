@@ -1,0 +1,1 @@
+"""Simulated Duffing rig: physics, table sweeps and accelerometers (ground truth for tests and demo)."""
