@@ -28,6 +28,8 @@ from .recording import Recording
 EDGE_FRACTION = 0.5
 #: Excited = Welch PSD at least this many dB above the noise floor (the spectrum's 10th percentile).
 EXCITATION_MARGIN_DB = 10.0
+#: Excited bins closer than this (Welch bins, ~0.125 Hz each) belong to one band.
+MAX_GAP_BINS = 8
 
 
 @dataclass
@@ -59,8 +61,16 @@ def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARG
     above = np.flatnonzero(p[skip:] > floor * 10 ** (margin_db / 10)) + skip
     if above.size == 0:
         raise IdentificationError("the input shows no excited frequency band above its noise floor")
+    # With few Welch averages single bins of noise cross any threshold: keep the run of excited bins
+    # (gaps up to MAX_GAP bins merged, for multisines' sparse lines) that holds the most power.
+    breaks = np.flatnonzero(np.diff(above) > MAX_GAP_BINS)
+    starts = np.concatenate([[0], breaks + 1])
+    stops = np.concatenate([breaks, [above.size - 1]])
+    power = [p[above[a]:above[b] + 1].sum() for a, b in zip(starts, stops)]
+    best = int(np.argmax(power))
+    lo_bin, hi_bin = above[starts[best]], above[stops[best]]
     df = f[1] - f[0]
-    return float(max(f[above[0]] - df, df)), float(min(f[above[-1]] + df, fs_hz / 2))
+    return float(max(f[lo_bin] - df, df)), float(min(f[hi_bin] + df, fs_hz / 2))
 
 
 def band_gain(f: np.ndarray, band: tuple[float, float], fs_hz: float) -> np.ndarray:

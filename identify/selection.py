@@ -9,9 +9,12 @@ Rules (per state equation):
   samples and scored on the held-out samples. Refitting removes the LASSO shrinkage that inflates a
   sparse model's error; held-out samples make a spurious term cost error instead of buying it.
   Tolerance line at (1 + 0.01) x the minimum held-out MSE: a term must explain at least 1 % of the
-  remaining error variance to be kept. The sparsest support under the line wins.
+  remaining error variance to be kept. The sparsest support under the line wins, then terms are
+  removed one at a time while the refit stays under the line: the path moves in discrete lambda steps
+  and can add two terms at once (a spurious one with a real one), so its supports alone may never
+  contain the right model.
 - ``bic``: refit supports scored by n_eff ln(MSE) + k ln(n_eff) with n_eff = 2 B T, the number of
-  independent samples a band of B Hz carries over T seconds.
+  independent samples a band of B Hz carries over T seconds; backward elimination as for heldout.
 """
 from __future__ import annotations
 
@@ -77,4 +80,33 @@ def select(path: SparsePath, eq: int, train: NormalEquations, heldout: NormalEqu
         score = n_eff * np.log(mse) + nnz * np.log(n_eff)
         thr = float("nan")
         k = int(np.argmin(score))
-    return Selection(rule, int(k), supports[k].copy(), coef_k[k].copy(), path_mse, nnz, score, float(thr))
+    support, coef = supports[k].copy(), coef_k[k].copy()
+    if rule != "paper":
+        support, coef = _backward_eliminate(support, coef, train, heldout, eq, rule, thr, score[k], n_eff)
+    return Selection(rule, int(k), support, coef, path_mse, nnz, score, float(thr))
+
+
+def _backward_eliminate(support, coef, train, heldout, eq, rule, thr, current, n_eff):
+    """Drop terms one at a time while the refit model still meets the rule (under the tolerance line
+    for heldout, a lower BIC for bic); each round drops the term whose removal costs least."""
+    b = train.B[:, eq]
+    floor = 1e-13 * train.yy[eq] / max(train.n, 1)
+
+    def crit(x, k):
+        if rule == "heldout":
+            return float(heldout.mse(x[:, None], eq)[0])
+        return float(n_eff * np.log(max(train.mse(x[:, None], eq)[0], floor)) + k * np.log(n_eff))
+
+    while support.any():
+        trials = []
+        for j in np.flatnonzero(support):
+            s2 = support.copy()
+            s2[j] = False
+            x2 = least_squares(train.G, b, s2)
+            trials.append((crit(x2, s2.sum()), j, s2, x2))
+        best = min(trials, key=lambda t: t[0])
+        if (rule == "heldout" and best[0] <= thr) or (rule == "bic" and best[0] < current):
+            current, _, support, coef = best
+        else:
+            break
+    return support, coef

@@ -1,0 +1,212 @@
+"""The `shakeid` command line: identify, simulate, demo.
+
+Errors an operator can fix (bad file, bad option) print one line `shakeid: error: ...` on stderr and exit
+with status 2; nothing is half-written.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from identify.errors import ShakeidError
+
+EXIT_USAGE = 2
+
+
+def _add_identify_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("recording layout")
+    g.add_argument("--layout", choices=("base", "force"), default="base",
+                   help="base: table/mass accelerations (default); force: input u, displacement-like output y")
+    g.add_argument("--input", help="input column/variable (default table_acc, or u for --layout force)")
+    g.add_argument("--output", help="output column/variable (default mass_acc, or y)")
+    g.add_argument("--time", help="time column (default t)")
+    g.add_argument("--fs", type=float, help="sample rate in Hz when the file has no time column")
+    g = p.add_argument_group("identification")
+    g.add_argument("--degree", type=int, default=4, help="highest monomial degree of the library (4)")
+    g.add_argument("--extra-terms", default="", help="comma-separated extra terms, e.g. 'sign(q1),q1*|q1|'")
+    g.add_argument("--method", choices=("admm", "stlsq"), default="admm")
+    g.add_argument("--lambdas", type=int, default=100, help="points on the path (100)")
+    g.add_argument("--threshold", type=float, help="STLSQ: a single threshold instead of a path")
+    g.add_argument("--raw-threshold", action="store_true",
+                   help="STLSQ: threshold raw coefficients, as the paper's Table 2 (lambda = 0.95)")
+    g.add_argument("--selection", choices=("heldout", "paper", "bic"), default="heldout")
+    g.add_argument("--tolerance", type=float, help="selection tolerance (paper 0.25, heldout 0.01)")
+    g.add_argument("--holdout-samples", type=int, help="hold out the first N samples (the paper: 30000)")
+    g.add_argument("--holdout-fraction", type=float, default=0.2,
+                   help="share held out in interleaved blocks when --holdout-samples is not given (0.2)")
+    g.add_argument("--band", type=float, nargs=2, metavar=("F_LO", "F_HI"), help="integration band in Hz")
+    g.add_argument("--mass-kg", type=float, default=0.49, help="moving mass for physical parameters (0.49)")
+
+
+def _identifier(args):
+    from identify.identifier import SparseIdentifier
+    from identify.physical import RigConstants
+
+    if args.lambdas < 2:
+        raise ShakeidError("--lambdas must be at least 2")
+    if not 0 <= args.holdout_fraction < 0.9:
+        raise ShakeidError("--holdout-fraction must be in [0, 0.9)")
+    extra = tuple(t.strip() for t in args.extra_terms.split(",") if t.strip())
+    return SparseIdentifier(degree=args.degree, extra_terms=extra, method=args.method, n_lambdas=args.lambdas,
+                            threshold=args.threshold, normalize_threshold=not args.raw_threshold,
+                            selection=args.selection, tolerance=args.tolerance,
+                            holdout_fraction=args.holdout_fraction, holdout_samples=args.holdout_samples,
+                            band_hz=tuple(args.band) if args.band else None,
+                            rig=RigConstants(mass_kg=args.mass_kg))
+
+
+def cmd_identify(args) -> int:
+    from identify.recording import read_recording
+
+    rec = read_recording(args.file, args.layout, args.input, args.output, args.time, args.fs)
+    try:
+        ident = _identifier(args).fit(rec)
+    except ValueError as exc:  # library/term specification problems
+        raise ShakeidError(str(exc)) from None
+    result = ident.result()
+    if args.report:
+        from .report import write_report
+
+        write_report(ident, args.report)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(summary(result, rec.source))
+        if args.report:
+            print(f"report: {Path(args.report) / 'index.html'}")
+    return 0
+
+
+def summary(result: dict, source: str) -> str:
+    from .report import coefficient_table
+
+    lines = [f"identified {source}: method {result['method']}, selection {result['selection']['rule']}", "",
+             coefficient_table(result)]
+    val = result.get("validation")
+    if val:
+        h = val["heldout"]
+        fmt = lambda m: "diverged" if m["fit_percent"] is None else f"{m['fit_percent']:.2f} %"  # noqa: E731
+        lines.append(f"free-run fit on {val['heldout_samples']} held-out samples: acceleration {fmt(h['q1_dot'])},"
+                     f" velocity {fmt(h['q1'])}, displacement {fmt(h['q2'])}")
+    phys = result.get("physical")
+    if phys:
+        def pv(key, unit, scale=1.0):
+            v = phys[key]["value"]
+            return f"{key} = {v * scale:.5g} {unit}" if v is not None else f"{key}: term not in model"
+        lines.append("physical: " + "; ".join([pv("damping_ns_per_m", "N s/m"), pv("stiffness_n_per_m", "N/m"),
+                                               pv("cubic_stiffness_n_per_m3", "N/m^3"),
+                                               pv("prestress_b_m", "mm", 1e3)]) +
+                     f" (design k3 = {phys['design']['cubic_stiffness_n_per_m3']:.4g} N/m^3)")
+    return "\n".join(lines)
+
+
+def _add_sweep_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--f-start-hz", type=float, default=1.0)
+    p.add_argument("--f-end-hz", type=float, default=20.0)
+    p.add_argument("--duration-s", type=float, default=60.0)
+    p.add_argument("--amplitude-mm", type=float, default=1.3)
+    p.add_argument("--fs-hz", type=float, default=2048.0, help="sample rate (2048 Hz = the paper's 0.488 ms)")
+    p.add_argument("--noise", type=float, default=0.005, help="sensor noise as a fraction of each channel's std")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--rig", choices=("paper-table1", "design"), default="paper-table1")
+    p.add_argument("--effect", action="append", default=[], metavar="NAME=COEF",
+                   help="add a physical effect (force coefficient, SI), e.g. coulomb_friction=0.3")
+
+
+def _synthesize(args):
+    from sim.rig import RigParameters
+    from sim.sensors import Accelerometer
+    from sim.sweep import SineSweep
+    from sim.synth import run_sweep
+
+    rig = RigParameters.paper_table1() if args.rig == "paper-table1" else RigParameters.design()
+    for spec in args.effect:
+        name, _, value = spec.partition("=")
+        try:
+            rig.effects[name.strip()] = float(value)
+        except ValueError:
+            raise ShakeidError(f"--effect {spec!r}: expected NAME=NUMBER") from None
+    try:
+        rig.__post_init__()
+        sweep = SineSweep(args.f_start_hz, args.f_end_hz, args.duration_s, args.amplitude_mm)
+        sensor = Accelerometer(noise_fraction=args.noise)
+        return run_sweep(rig, sweep, args.fs_hz, table_sensor=sensor, mass_sensor=sensor, seed=args.seed)
+    except ValueError as exc:
+        raise ShakeidError(str(exc)) from None
+
+
+def cmd_simulate(args) -> int:
+    from identify.recording import write_csv
+
+    run = _synthesize(args)
+    out = Path(args.out)
+    write_csv(out, run.recording)
+    truth = out.with_suffix(".truth.json")
+    truth.write_text(json.dumps(run.truth, indent=2))
+    print(f"wrote {out} ({run.recording.n_samples} samples at {run.recording.fs_hz:g} Hz) and {truth}; "
+          f"max |q| = {run.truth['max_abs_q_m'] * 1e3:.2f} mm")
+    return 0
+
+
+def cmd_demo(args) -> int:
+    """Simulate a sweep of the paper's rig, identify it and write the report."""
+    from identify.identifier import SparseIdentifier
+    from identify.recording import write_csv
+
+    from .report import write_report
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    print("simulating a 1-20 Hz sweep of the paper's rig (Table 1 model, 0.5 % sensor noise) ...", flush=True)
+    run = _synthesize(args)
+    write_csv(out / "recording.csv", run.recording)
+    (out / "truth.json").write_text(json.dumps(run.truth, indent=2))
+    print(f"identifying {out / 'recording.csv'} ...", flush=True)
+    ident = SparseIdentifier().fit(run.recording)
+    write_report(ident, out / "report")
+    result = ident.result()
+    print(summary(result, str(out / "recording.csv")))
+    print("true model: " + json.dumps(run.truth["model"]))
+    print(f"report: {out / 'report' / 'index.html'}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="shakeid", description="Sparse nonlinear identification of shaker rigs")
+    sub = p.add_subparsers(dest="command", required=True)
+    q = sub.add_parser("identify", help="identify a sparse ODE model from a recording (CSV, MAT)")
+    q.add_argument("file")
+    _add_identify_options(q)
+    q.add_argument("--report", metavar="DIR", help="write figures, coefficient table and model JSON here")
+    q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    q.set_defaults(func=cmd_identify)
+    q = sub.add_parser("simulate", help="write a synthetic recording of the simulated rig (CSV + truth JSON)")
+    q.add_argument("--out", required=True, metavar="FILE.csv")
+    _add_sweep_options(q)
+    q.set_defaults(func=cmd_simulate)
+    q = sub.add_parser("demo", help="simulate a sweep, identify it, write the report")
+    q.add_argument("--out", default="demo-output")
+    _add_sweep_options(q)
+    q.set_defaults(func=cmd_demo)
+    return p
+
+
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except ShakeidError as exc:
+        print(f"shakeid: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("shakeid: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
