@@ -28,6 +28,7 @@ from .model import SparseModel
 from .optimizers import ADMMLasso, STLSQ
 from .physical import RigConstants, physical_parameters
 from .recording import Recording
+from .refine import refine_free_run
 from .selection import DEFAULT_TOLERANCE, select
 from .validation import validate
 
@@ -44,6 +45,9 @@ class SparseIdentifier:
     threshold, normalize_threshold : STLSQ threshold (None: a path) and whether it applies to
         unit-RMS columns (True) or raw coefficients as in the paper's Table 2 (False).
     selection, tolerance : rule ("heldout", "paper", "bic") and its tolerance (None: the rule's default).
+    max_terms : optional budget of terms per equation (least costly terms eliminated beyond it).
+    refine : None, or "free-run" to refit the kept coefficients on the free-run simulation error of the
+        fit samples (identify.refine); standard errors are then those of the equation-error fit.
     holdout_fraction : share of samples held out in interleaved blocks; holdout_samples : hold out
         the first N samples instead (paper).
     band_hz, harmonics, taper_s : measurement-chain settings (identify.chain.reconstruct_states).
@@ -53,7 +57,8 @@ class SparseIdentifier:
 
     def __init__(self, degree: int = 4, extra_terms=(), method: str = "admm", n_lambdas: int = 100,
                  lambda_eps: float = 1e-5, threshold: float | None = None, normalize_threshold: bool = True,
-                 selection: str = "heldout", tolerance: float | None = None, holdout_fraction: float = 0.2,
+                 selection: str = "heldout", tolerance: float | None = None, max_terms: int | None = None,
+                 refine: str | None = None, holdout_fraction: float = 0.2,
                  holdout_samples: int | None = None, band_hz=None, harmonics: float = 5.0,
                  taper_s: float | None = None, rig: RigConstants | None = None, validate: bool = True):
         self.degree = degree
@@ -65,6 +70,8 @@ class SparseIdentifier:
         self.normalize_threshold = normalize_threshold
         self.selection = selection
         self.tolerance = tolerance
+        self.max_terms = max_terms
+        self.refine = refine
         self.holdout_fraction = holdout_fraction
         self.holdout_samples = holdout_samples
         self.band_hz = band_hz
@@ -136,8 +143,8 @@ class SparseIdentifier:
         duration = (v.stop - v.start) / sig.fs_hz
         n_eff = 2 * (sig.band_hz[1] - sig.band_hz[0]) * duration
         eqs = ["q1_dot", "q2_dot"]
-        self.selections_ = {eq: select(self.path_, e, train, heldout, self.selection, self.tolerance, n_eff)
-                            for e, eq in enumerate(eqs)}
+        self.selections_ = {eq: select(self.path_, e, train, heldout, self.selection, self.tolerance, n_eff,
+                                       self.max_terms) for e, eq in enumerate(eqs)}
         coefs = {eq: {lib.names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)}
                  for eq, s in self.selections_.items()}
         self.standard_errors_ = {eq: self._standard_errors(gram, ~held, train, e, s)
@@ -145,6 +152,14 @@ class SparseIdentifier:
         timings["selection_refit"] = time.perf_counter() - t0
         self.model_ = SparseModel(coefs, ("q1", "q2"), (sig.input_name,), self.standard_errors_)
         self.heldout_rows_ = np.repeat(held, np.diff(edges))
+        self.refinement_ = None
+        if self.refine is not None:
+            if self.refine != "free-run":
+                raise IdentificationError(f"unknown refine {self.refine!r} (free-run)")
+            t0 = time.perf_counter()
+            refined, self.refinement_ = refine_free_run(self.model_, sig, ~self.heldout_rows_)
+            self.model_ = SparseModel(refined.equations, refined.states, refined.inputs, self.standard_errors_)
+            timings["refine"] = time.perf_counter() - t0
         self.validation_ = None
         if self.validate:
             t0 = time.perf_counter()
@@ -173,7 +188,7 @@ class SparseIdentifier:
         """The identification result as one JSON-ready dict (the CLI's --json document)."""
         lib = self.library_
         sig = self.states_
-        sel = {"rule": self.selection,
+        sel = {"rule": self.selection, "max_terms": self.max_terms,
                "tolerance": DEFAULT_TOLERANCE[self.selection] if self.tolerance is None else self.tolerance}
         for eq, s in self.selections_.items():
             e = 0 if eq == "q1_dot" else 1
@@ -195,6 +210,7 @@ class SparseIdentifier:
                       "heldout_samples": int(np.count_nonzero(self.heldout_rows_)),
                       "holdout": ("first %d samples" % self.holdout_samples if self.holdout_samples is not None
                                   else f"{self.holdout_fraction:.0%} in interleaved blocks")},
+            "refinement": self.refinement_,
             "validation": self.validation_,
             "timings_s": self.timings_,
         }

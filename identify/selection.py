@@ -45,7 +45,10 @@ class Selection:
 
 
 def select(path: SparsePath, eq: int, train: NormalEquations, heldout: NormalEquations | None,
-           rule: str = "heldout", tolerance: float | None = None, n_eff: float | None = None) -> Selection:
+           rule: str = "heldout", tolerance: float | None = None, n_eff: float | None = None,
+           max_terms: int | None = None) -> Selection:
+    """Choose and refit one equation's model from the path. `max_terms` caps the support: past the
+    rule's own choice, the least costly terms are eliminated until it fits the budget."""
     if rule not in RULES:
         raise IdentificationError(f"unknown selection rule {rule!r}; choose from {', '.join(RULES)}")
     if rule == "heldout" and (heldout is None or heldout.n == 0):
@@ -83,18 +86,24 @@ def select(path: SparsePath, eq: int, train: NormalEquations, heldout: NormalEqu
     support, coef = supports[k].copy(), coef_k[k].copy()
     if rule != "paper":
         support, coef = _backward_eliminate(support, coef, train, heldout, eq, rule, thr, score[k], n_eff)
+    if max_terms is not None and support.sum() > max_terms:
+        support, coef = _backward_eliminate(support, coef, train, heldout, eq, rule, thr, score[k], n_eff,
+                                            max_terms)
     return Selection(rule, int(k), support, coef, path_mse, nnz, score, float(thr))
 
 
-def _backward_eliminate(support, coef, train, heldout, eq, rule, thr, current, n_eff):
+def _backward_eliminate(support, coef, train, heldout, eq, rule, thr, current, n_eff, max_terms=None):
     """Drop terms one at a time while the refit model still meets the rule (under the tolerance line
-    for heldout, a lower BIC for bic); each round drops the term whose removal costs least."""
+    for heldout, a lower BIC for bic), or unconditionally while it has more than `max_terms`; each
+    round drops the term whose removal costs least."""
     b = train.B[:, eq]
     floor = 1e-13 * train.yy[eq] / max(train.n, 1)
 
     def crit(x, k):
-        if rule == "heldout":
+        if rule in ("heldout", "paper") and heldout is not None and heldout.n:
             return float(heldout.mse(x[:, None], eq)[0])
+        if rule == "paper":
+            return float(train.mse(x[:, None], eq)[0])
         return float(n_eff * np.log(max(train.mse(x[:, None], eq)[0], floor)) + k * np.log(n_eff))
 
     while support.any():
@@ -105,7 +114,8 @@ def _backward_eliminate(support, coef, train, heldout, eq, rule, thr, current, n
             x2 = least_squares(train.G, b, s2)
             trials.append((crit(x2, s2.sum()), j, s2, x2))
         best = min(trials, key=lambda t: t[0])
-        if (rule == "heldout" and best[0] <= thr) or (rule == "bic" and best[0] < current):
+        over_budget = max_terms is not None and support.sum() > max_terms
+        if over_budget or (rule == "heldout" and best[0] <= thr) or (rule == "bic" and best[0] < current):
             current, _, support, coef = best
         else:
             break

@@ -33,6 +33,9 @@ def _add_identify_options(p: argparse.ArgumentParser) -> None:
                    help="STLSQ: threshold raw coefficients, as the paper's Table 2 (lambda = 0.95)")
     g.add_argument("--selection", choices=("heldout", "paper", "bic"), default="heldout")
     g.add_argument("--tolerance", type=float, help="selection tolerance (paper 0.25, heldout 0.01)")
+    g.add_argument("--max-terms", type=int, help="at most this many terms per equation")
+    g.add_argument("--refine", choices=("free-run",),
+                   help="refit the kept coefficients on the free-run simulation error")
     g.add_argument("--holdout-samples", type=int, help="hold out the first N samples (the paper: 30000)")
     g.add_argument("--holdout-fraction", type=float, default=0.2,
                    help="share held out in interleaved blocks when --holdout-samples is not given (0.2)")
@@ -51,7 +54,8 @@ def _identifier(args):
     extra = tuple(t.strip() for t in args.extra_terms.split(",") if t.strip())
     return SparseIdentifier(degree=args.degree, extra_terms=extra, method=args.method, n_lambdas=args.lambdas,
                             threshold=args.threshold, normalize_threshold=not args.raw_threshold,
-                            selection=args.selection, tolerance=args.tolerance,
+                            selection=args.selection, tolerance=args.tolerance, max_terms=args.max_terms,
+                            refine=args.refine,
                             holdout_fraction=args.holdout_fraction, holdout_samples=args.holdout_samples,
                             band_hz=tuple(args.band) if args.band else None,
                             rig=RigConstants(mass_kg=args.mass_kg))
