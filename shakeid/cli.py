@@ -32,7 +32,7 @@ def _add_identify_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--raw-threshold", action="store_true",
                    help="STLSQ: threshold raw coefficients, as the paper's Table 2 (lambda = 0.95)")
     g.add_argument("--selection", choices=("heldout", "paper", "bic"), default="heldout")
-    g.add_argument("--tolerance", type=float, help="selection tolerance (paper 0.25, heldout 0.01)")
+    g.add_argument("--tolerance", type=float, help="selection tolerance (paper 0.25, heldout 0.003)")
     g.add_argument("--max-terms", type=int, help="at most this many terms per equation")
     g.add_argument("--refine", choices=("free-run",),
                    help="refit the kept coefficients on the free-run simulation error")

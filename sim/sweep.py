@@ -52,12 +52,15 @@ class SineSweep:
         phi = 2 * np.pi * (f0 * tc + (f1 - f0) * tc**2 / (2 * T))
         dphi = 2 * np.pi * (f0 + (f1 - f0) * tc / T)
         ddphi = 2 * np.pi * (f1 - f0) / T
-        w_in, dw_in, ddw_in = _smoothstep(t / F)
-        w_out, dw_out, ddw_out = _smoothstep((T - t) / F)
-        # envelope = w_in * w_out; d/dt of w_out(T - t) flips sign once
-        w = w_in * w_out
-        dw = (dw_in * w_out - w_in * dw_out) / F
-        ddw = (ddw_in * w_out - 2 * dw_in * dw_out + w_in * ddw_out) / F**2
+        # envelope = fade_in(t / F) * fade_out((T - t) / F): 1 between the fades, so evaluate only there
+        w, dw, ddw = np.ones_like(tc), np.zeros_like(tc), np.zeros_like(tc)
+        for edge in (tc < F, tc > T - F):
+            te = tc[edge]
+            w_in, dw_in, ddw_in = _smoothstep(te / F)
+            w_out, dw_out, ddw_out = _smoothstep((T - te) / F)
+            w[edge] = w_in * w_out
+            dw[edge] = (dw_in * w_out - w_in * dw_out) / F  # d/dt of the fade-out flips sign
+            ddw[edge] = (ddw_in * w_out - 2 * dw_in * dw_out + w_in * ddw_out) / F**2
         inside = (t >= 0) & (t <= T)
         s, c = np.sin(phi), np.cos(phi)
         z = A * w * s
