@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .errors import ModelError
 from .terms import FeatureSpace, Term
 
 #: Non-polynomial terms of physical effects the library can add on request.
@@ -25,6 +26,8 @@ class Library:
         self.inputs = tuple(inputs)
         self.degree = int(degree)
         self.extra_terms = tuple(extra_terms)
+        if not 1 <= self.degree <= 8:
+            raise ModelError(f"library degree must be 1..8, got {degree}")
         self.space = FeatureSpace(self.states, self.inputs)
         terms = self.space.monomials(self.degree)
         terms += [self.space.parse(n) for n in self.extra_terms]
@@ -32,7 +35,7 @@ class Library:
         names = [t.name for t in terms]
         dupes = {n for n in names if names.count(n) > 1}
         if dupes:
-            raise ValueError(f"library has duplicate terms: {sorted(dupes)}")
+            raise ModelError(f"library has duplicate terms: {sorted(dupes)}")
         self.terms: list[Term] = terms
         self.names: list[str] = names
 

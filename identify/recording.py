@@ -90,7 +90,8 @@ def _sample_rate_from_time(t: np.ndarray, source: str, name: str) -> float:
         k = int(np.argmax(np.abs(d - dt)))
         raise RecordingError(f"{source}: time column {name!r} is not uniformly sampled: step {d[k]:.6g} s at "
                              f"sample {k + 1}, median step {dt:.6g} s (gaps must be repaired, not spliced)")
-    return 1.0 / dt
+    # the whole span is far less sensitive to the rounding of printed time stamps than any one step
+    return (t.size - 1) / (t[-1] - t[0])
 
 
 def read_recording(path, layout: str = "base", input: str | None = None, output: str | None = None,
@@ -188,4 +189,4 @@ def write_csv(path, recording: Recording, extra: dict[str, np.ndarray] | None = 
     cols = {"t": recording.time_s, recording.input_name: recording.input, recording.output_name: recording.output}
     cols.update(extra or {})
     data = np.column_stack(list(cols.values()))
-    np.savetxt(path, data, delimiter=",", header=",".join(cols), comments="", fmt="%.10g")
+    np.savetxt(path, data, delimiter=",", header=",".join(cols), comments="", fmt="%.12g")

@@ -52,6 +52,9 @@ def _identifier(args):
     if not 0 <= args.holdout_fraction < 0.9:
         raise ShakeidError("--holdout-fraction must be in [0, 0.9)")
     extra = tuple(t.strip() for t in args.extra_terms.split(",") if t.strip())
+    from identify.library import Library
+
+    Library(degree=args.degree, extra_terms=extra)  # unknown terms are refused here, by name
     return SparseIdentifier(degree=args.degree, extra_terms=extra, method=args.method, n_lambdas=args.lambdas,
                             threshold=args.threshold, normalize_threshold=not args.raw_threshold,
                             selection=args.selection, tolerance=args.tolerance, max_terms=args.max_terms,
@@ -64,9 +67,10 @@ def _identifier(args):
 def cmd_identify(args) -> int:
     from identify.recording import read_recording
 
+    ident = _identifier(args)  # option errors first, before any file is read
     rec = read_recording(args.file, args.layout, args.input, args.output, args.time, args.fs)
     try:
-        ident = _identifier(args).fit(rec)
+        ident.fit(rec)
     except ValueError as exc:  # library/term specification problems
         raise ShakeidError(str(exc)) from None
     result = ident.result()

@@ -37,5 +37,7 @@ def test_library_columns_equal_their_formulas():
 
 
 def test_duplicate_terms_are_refused():
-    with pytest.raises(ValueError, match="duplicate"):
+    with pytest.raises(ModelError, match="duplicate"):
         Library(extra_terms=("q2*q1",))
+    with pytest.raises(ModelError, match="degree"):
+        Library(degree=0)

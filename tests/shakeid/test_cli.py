@@ -1,0 +1,71 @@
+"""The `shakeid` executable: its JSON contract and its one-line errors (a real subprocess each)."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+SHAKEID = str(Path(sys.executable).with_name("shakeid"))
+
+
+def run(*args, cwd=None):
+    return subprocess.run([SHAKEID, *map(str, args)], capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+def test_identify_json_contract(table1_csv, table1_truth):
+    proc = run("identify", table1_csv, "--json")
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads(proc.stdout)  # exactly one JSON object: json.loads rejects trailing text
+    assert set(doc) >= {"model", "selection", "validation", "physical"}
+    assert set(doc["model"]["q1_dot"]) == set(table1_truth["q1_dot"])
+    assert doc["model"]["q2_dot"] == {"q1": pytest.approx(1.0, abs=1e-6)}
+    assert all(c != 0 for eq in doc["model"].values() for c in eq.values())
+    assert doc["validation"]["heldout"]["q1_dot"]["fit_percent"] > 98
+
+
+def test_identify_options_and_report(table1_csv, tmp_path):
+    out = tmp_path / "rep"
+    proc = run("identify", table1_csv, "--method", "stlsq", "--selection", "paper", "--lambdas", "50",
+               "--degree", "3", "--holdout-samples", "30000", "--report", out)
+    assert proc.returncode == 0, proc.stderr
+    assert "free-run fit" in proc.stdout and "q1*q2^2" in proc.stdout
+    assert (out / "model.json").exists() and (out / "lambda_path.png").exists()
+    doc = json.loads((out / "model.json").read_text())
+    assert doc["method"] == "stlsq" and doc["selection"]["rule"] == "paper" and len(doc["library"]["terms"]) == 11
+
+
+@pytest.mark.parametrize("content,args,message", [
+    (None, [], "no such file"),
+    ("t,table_acc\n0,1\n", [], "missing column"),
+    ("t,table_acc,mass_acc\n" + "".join(f"{i / 100},{i % 7},nan\n" for i in range(400)), [], "NaN"),
+    ("t,table_acc,mass_acc\n" + "".join(f"{i * i / 1e4},{i % 7},{i % 5}\n" for i in range(400)), [],
+     "not uniformly sampled"),
+    ("t,table_acc,mass_acc\n" + "".join(f"{i / 100},{i % 7},{i % 5}\n" for i in range(30)), [], "too short"),
+    ("\x00\x01\x02binary", [], "rec.csv"),
+    ("t,u,y\n1,2,3\n", ["--lambdas", "1"], "--lambdas"),
+    ("t,table_acc,mass_acc\n" + "".join(f"{i / 100},{i % 7},{i % 5}\n" for i in range(400)),
+     ["--extra-terms", "cos(q1)"], "unknown term"),
+])
+def test_errors_are_one_clear_line(tmp_path, content, args, message):
+    path = tmp_path / "rec.csv"
+    if content is not None:
+        path.write_text(content)
+    proc = run("identify", path, *args)
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    assert "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("shakeid: error:") and message in lines[0], proc.stderr
+
+
+def test_simulate_writes_recording_and_truth(tmp_path):
+    out = tmp_path / "s.csv"
+    proc = run("simulate", "--out", out, "--duration-s", "10", "--effect", "coulomb_friction=0.1")
+    assert proc.returncode == 0, proc.stderr
+    truth = json.loads(out.with_suffix(".truth.json").read_text())
+    assert truth["rig"]["effects"] == {"displacement_dependent_damping": pytest.approx(-0.49 * 1.162e4),
+                                       "coulomb_friction": 0.1}
+    assert out.read_text().splitlines()[0] == "t,table_acc,mass_acc"
+    bad = run("simulate", "--out", out, "--effect", "warp_drive=1")
+    assert bad.returncode == 2 and "unknown effect" in bad.stderr
