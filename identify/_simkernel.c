@@ -18,31 +18,62 @@
 #define MAX_STATES 8
 #define MAX_FEATS (3 * MAX_STATES + 8)
 
+#define MAX_POW 16
+#define MAX_NZ 512
+
 typedef struct {
     const int *ptr, *feat, *pow;
-    const double *coef;
     int n_terms, n_states, n_inputs;
+    /* precomputed once per call: which features are used, to which power; nonzero coefficients */
+    int used[MAX_FEATS], n_used, max_pow[MAX_FEATS];
+    int nz_eq[MAX_NZ], nz_term[MAX_NZ], n_nz;
+    double nz_coef[MAX_NZ];
 } model_t;
 
-static void rhs(const model_t *m, const double *x, const double *u, double *dx) {
-    double f[MAX_FEATS];
-    int i, j, k, e;
-    for (i = 0; i < m->n_states; i++) {
-        f[3 * i] = x[i];
-        f[3 * i + 1] = fabs(x[i]);
-        f[3 * i + 2] = (x[i] > 0) - (x[i] < 0);
+static int prepare(model_t *m, const double *coef) {
+    int j, k, e, f, n_feats = 3 * m->n_states + m->n_inputs;
+    for (f = 0; f < n_feats; f++) m->max_pow[f] = 0;
+    for (k = 0; k < m->ptr[m->n_terms]; k++) {
+        if (m->feat[k] < 0 || m->feat[k] >= n_feats || m->pow[k] < 1 || m->pow[k] >= MAX_POW) return 0;
+        if (m->pow[k] > m->max_pow[m->feat[k]]) m->max_pow[m->feat[k]] = m->pow[k];
     }
-    for (j = 0; j < m->n_inputs; j++) f[3 * m->n_states + j] = u[j];
-    for (e = 0; e < m->n_states; e++) dx[e] = 0.0;
+    m->n_used = 0;
+    for (f = 0; f < n_feats; f++)
+        if (m->max_pow[f] > 0) m->used[m->n_used++] = f;
+    m->n_nz = 0;
+    for (e = 0; e < m->n_states; e++)
+        for (j = 0; j < m->n_terms; j++)
+            if (coef[e * m->n_terms + j] != 0.0) {
+                if (m->n_nz >= MAX_NZ) return 0;
+                m->nz_eq[m->n_nz] = e;
+                m->nz_term[m->n_nz] = j;
+                m->nz_coef[m->n_nz++] = coef[e * m->n_terms + j];
+            }
+    return 1;
+}
+
+static void rhs(const model_t *m, const double *x, const double *u, double *dx) {
+    double pw[MAX_FEATS][MAX_POW], val[MAX_NZ];
+    int i, j, k, f, p;
+    for (i = 0; i < m->n_used; i++) {
+        f = m->used[i];
+        double b;
+        if (f < 3 * m->n_states) {
+            double q = x[f / 3];
+            b = (f % 3 == 0) ? q : (f % 3 == 1) ? fabs(q) : (double)((q > 0) - (q < 0));
+        } else {
+            b = u[f - 3 * m->n_states];
+        }
+        pw[f][1] = b;
+        for (p = 2; p <= m->max_pow[f]; p++) pw[f][p] = pw[f][p - 1] * b;
+    }
     for (j = 0; j < m->n_terms; j++) {
         double v = 1.0;
-        for (k = m->ptr[j]; k < m->ptr[j + 1]; k++) {
-            double b = f[m->feat[k]];
-            int p;
-            for (p = 0; p < m->pow[k]; p++) v *= b;
-        }
-        for (e = 0; e < m->n_states; e++) dx[e] += m->coef[e * m->n_terms + j] * v;
+        for (k = m->ptr[j]; k < m->ptr[j + 1]; k++) v *= pw[m->feat[k]][m->pow[k]];
+        val[j] = v;
     }
+    for (i = 0; i < m->n_states; i++) dx[i] = 0.0;
+    for (i = 0; i < m->n_nz; i++) dx[m->nz_eq[i]] += m->nz_coef[i] * val[m->nz_term[i]];
 }
 
 static PyObject *simulate(PyObject *self, PyObject *args) {
@@ -57,7 +88,6 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
     m.ptr = (const int *)b_ptr.buf;
     m.feat = (const int *)b_feat.buf;
     m.pow = (const int *)b_pow.buf;
-    m.coef = (const double *)b_coef.buf;
     m.n_terms = (int)(b_ptr.len / sizeof(int)) - 1;
     m.n_states = (int)(b_x0.len / sizeof(double));
     m.n_inputs = n_inputs;
@@ -68,8 +98,9 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
     if (m.n_states < 1 || m.n_states > MAX_STATES || n_inputs < 0 || n_inputs > 8 || substeps < 1 ||
         b_coef.len != (Py_ssize_t)(sizeof(double) * m.n_states * m.n_terms) ||
         b_u.len < (Py_ssize_t)sizeof(double) * need_u ||
-        b_out.len < (Py_ssize_t)sizeof(double) * n_out * m.n_states) {
-        PyErr_SetString(PyExc_ValueError, "simulate: inconsistent buffer sizes");
+        b_out.len < (Py_ssize_t)sizeof(double) * n_out * m.n_states || m.n_terms > MAX_NZ ||
+        !prepare(&m, (const double *)b_coef.buf)) {
+        PyErr_SetString(PyExc_ValueError, "simulate: inconsistent buffer sizes or model too large");
         goto done;
     }
     {

@@ -52,9 +52,12 @@ class Library:
 
 
 def evaluate_terms(space: FeatureSpace, terms, states, inputs, out=None) -> np.ndarray:
-    states = np.asarray(states, dtype=float)
+    """states: (n, n_states) array or a sequence of 1-D columns (contiguous columns are faster)."""
+    if isinstance(states, np.ndarray):
+        states = states.T if states.ndim == 2 else states[None, :]
+    cols = [np.asarray(c, dtype=float) for c in states]
     inputs = np.asarray(inputs, dtype=float)
-    n = states.shape[0]
+    n = cols[0].shape[0]
     if out is None:
         out = np.empty((n, len(terms)), order="F")
     feats: dict[str, np.ndarray] = {}
@@ -66,7 +69,7 @@ def evaluate_terms(space: FeatureSpace, terms, states, inputs, out=None) -> np.n
             if idx >= 3 * ns:
                 feats[name] = inputs[:, idx - 3 * ns]
             else:
-                q = states[:, idx // 3]
+                q = cols[idx // 3]
                 feats[name] = (q, np.abs(q), np.sign(q))[idx % 3]
         return feats[name]
 
@@ -84,6 +87,6 @@ def evaluate_terms(space: FeatureSpace, terms, states, inputs, out=None) -> np.n
             elif not parent:
                 col[:] = feature(f)
             else:
-                col[:] = evaluate_terms(space, [Term(parent)], states, inputs)[:, 0] * feature(f)
+                col[:] = evaluate_terms(space, [Term(parent)], cols, inputs)[:, 0] * feature(f)
         done[term.factors] = col
     return out
