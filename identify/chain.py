@@ -54,10 +54,17 @@ class StateSignals:
     band_hz: tuple[float, float]
     valid: slice
     input_name: str
+    taper_n: int = 0
 
     @property
     def states(self) -> np.ndarray:
         return np.column_stack([self.q1, self.q2])
+
+    def band_limit(self, x: np.ndarray) -> np.ndarray:
+        """Pass a signal on the valid rows (a simulation, a library column) through the same band as the
+        measured states, so that it is compared with them like with like: accelerometers cannot see
+        what lies outside the band (e.g. the static offset an asymmetric spring produces)."""
+        return spectral_op(x, self.fs_hz, self.band_hz, 0, self.taper_n)
 
 
 def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARGIN_DB) -> tuple[float, float]:
@@ -176,7 +183,7 @@ def reconstruct_states(rec: Recording, band_hz: tuple[float, float] | None = Non
         q1_dot = spectral_op(y, fs, band, 2, taper_n)
         u = spectral_op(rec.input, fs, band, 0, taper_n)
     return StateSignals(q1, q2, q1_dot, u, fs, band, slice(trims[0], rec.n_samples - trims[1]),
-                        "zdd" if rec.layout == "base" else "u")
+                        "zdd" if rec.layout == "base" else "u", taper_n)
 
 
 def _edge_is_live(x: np.ndarray, edge: str, n: int) -> bool:

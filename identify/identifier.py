@@ -35,6 +35,30 @@ from .validation import validate
 N_BLOCKS = 50
 
 
+def holdout_blocks(sig: StateSignals, fraction: float = 0.2, first_samples: int | None = None):
+    """Block edges over the valid rows, and which blocks are held out.
+
+    Default: N_BLOCKS equal blocks, `fraction` of them held out, spread evenly over the record.
+    `first_samples`: hold out the record's first N samples instead (the paper's split)."""
+    n = sig.valid.stop - sig.valid.start
+    if first_samples is not None:
+        n1 = int(np.clip(first_samples - sig.valid.start, 0, n))
+        if n - n1 < 64:
+            raise IdentificationError(f"holding out {first_samples} samples leaves {n - n1} to fit")
+        nb1 = max(int(round(N_BLOCKS * n1 / n)), 1) if n1 else 0
+        e1 = np.linspace(0, n1, nb1 + 1).round().astype(int) if n1 else np.array([0])
+        e2 = np.linspace(n1, n, N_BLOCKS - nb1 + 1).round().astype(int)
+        edges = np.concatenate([e1, e2[1:]])
+        return edges, np.arange(edges.size - 1) < nb1
+    nb = int(min(N_BLOCKS, max(n // 64, 2)))
+    edges = np.linspace(0, n, nb + 1).round().astype(int)
+    n_ho = int(round(fraction * nb))
+    held = np.zeros(nb, dtype=bool)
+    if n_ho:
+        held[((np.arange(n_ho) + 0.5) * nb / n_ho).astype(int)] = True
+    return edges, held
+
+
 class SparseIdentifier:
     """Parameters (stored as given, sklearn-style; fitted attributes end in `_`):
 
@@ -90,26 +114,7 @@ class SparseIdentifier:
         raise IdentificationError(f"unknown method {self.method!r} (admm or stlsq)")
 
     def _blocks(self, sig: StateSignals):
-        """Block edges over the valid rows and the held-out mask over blocks."""
-        n = sig.valid.stop - sig.valid.start
-        if self.holdout_samples is not None:
-            n1 = int(np.clip(self.holdout_samples - sig.valid.start, 0, n))
-            if n - n1 < 64:
-                raise IdentificationError(f"holding out {self.holdout_samples} samples leaves {n - n1} to fit")
-            nb1 = int(round(N_BLOCKS * n1 / n)) if n1 else 0
-            nb1 = max(nb1, 1) if n1 else 0
-            e1 = np.linspace(0, n1, nb1 + 1).round().astype(int) if n1 else np.array([0])
-            e2 = np.linspace(n1, n, N_BLOCKS - nb1 + 1).round().astype(int)
-            edges = np.concatenate([e1, e2[1:]])
-            held = np.arange(edges.size - 1) < nb1
-        else:
-            nb = int(min(N_BLOCKS, max(n // 64, 2)))
-            edges = np.linspace(0, n, nb + 1).round().astype(int)
-            n_ho = int(round(self.holdout_fraction * nb))
-            held = np.zeros(nb, dtype=bool)
-            if n_ho:
-                held[((np.arange(n_ho) + 0.5) * nb / n_ho).astype(int)] = True
-        return edges, held
+        return holdout_blocks(sig, self.holdout_fraction, self.holdout_samples)
 
     def fit(self, recording: Recording) -> "SparseIdentifier":
         timings = {}

@@ -39,6 +39,20 @@ class Library:
         self.terms: list[Term] = terms
         self.names: list[str] = names
 
+    @classmethod
+    def from_terms(cls, names, states=("q1", "q2"), inputs=("zdd",)) -> "Library":
+        """A library of exactly these terms (canonical names, duplicates removed, order kept)."""
+        lib = cls.__new__(cls)
+        lib.states, lib.inputs, lib.degree, lib.extra_terms = tuple(states), tuple(inputs), None, ()
+        lib.space = FeatureSpace(lib.states, lib.inputs)
+        terms: list[Term] = []
+        for n in names:
+            t = lib.space.parse(n)
+            if t not in terms:
+                terms.append(t)
+        lib.terms, lib.names = terms, [t.name for t in terms]
+        return lib
+
     def __len__(self) -> int:
         return len(self.terms)
 

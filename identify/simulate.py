@@ -59,8 +59,11 @@ def fine_grid_input(inputs: np.ndarray, substeps: int, interpolation: str = "ban
     raise ValueError(f"unknown interpolation {interpolation!r} (bandlimited, cubic, linear)")
 
 
-def max_frequency(model: SparseModel, state_scale, inputs_scale=None, n_grid: int = 5) -> float:
-    """Largest |eigenvalue| (rad/s) of the model's Jacobian over a grid of states within +-state_scale."""
+def max_frequency(model: SparseModel, state_scale, inputs_scale=None, n_grid: int = 6) -> float:
+    """Largest |eigenvalue| (rad/s) of the model's Jacobian over a grid of states within +-state_scale.
+
+    The grid has an even number of points, so no point sits on a state's zero, where sign(q) and |q|
+    jump or kink: a difference quotient across the jump is 1/eps, not a frequency."""
     scale = np.asarray(state_scale, dtype=float)
     axes = [np.linspace(-s, s, n_grid) for s in scale]
     pts = np.stack(np.meshgrid(*axes), axis=-1).reshape(-1, len(scale))

@@ -22,7 +22,8 @@ def fit_metrics(measured: np.ndarray, simulated: np.ndarray) -> dict:
 def free_run(model: SparseModel, sig: StateSignals, substeps: int | None = None):
     """Simulate over the valid rows from the measured state at their start.
 
-    Returns (simulated states (n, 2), simulated q1_dot (n,), substeps, diverged)."""
+    Returns (simulated states (n, 2), simulated q1_dot (n,), substeps, diverged), each simulated signal
+    passed through the measurement chain's band (StateSignals.band_limit) unless the run diverged."""
     v = sig.valid
     states = sig.states[v]
     u = sig.input[v][:, None]
@@ -32,7 +33,11 @@ def free_run(model: SparseModel, sig: StateSignals, substeps: int | None = None)
     qdot = np.full(u.shape[0], np.nan)
     ok = slice(0, res.n_valid)
     qdot[ok] = model.rhs(res.states[ok], u[ok])[:, 0]
-    return res.states, qdot, res.substeps, res.diverged
+    sim = res.states
+    if not res.diverged:
+        sim = np.column_stack([sig.band_limit(sim[:, 0]), sig.band_limit(sim[:, 1])])
+        qdot = sig.band_limit(qdot)
+    return sim, qdot, res.substeps, res.diverged
 
 
 def validate(model: SparseModel, sig: StateSignals, heldout_rows: np.ndarray, substeps: int | None = None) -> dict:

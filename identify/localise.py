@@ -1,0 +1,80 @@
+"""Where a model's equation-error residual concentrates: along the sweep (time and excitation frequency),
+in the frequency domain, and over the state space (displacement x velocity bins, sign of velocity,
+amplitude). Each effect of the catalog leaves its own signature: Coulomb friction a step in the mean
+residual against velocity, quadratic damping a parabola-signed one, displacement-dependent damping a
+residual growing with |q2| at fixed velocity, quadratic stiffness one even in q2."""
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import welch
+
+from .chain import StateSignals
+from .model import SparseModel
+
+N_WINDOWS = 40
+N_BINS = 9
+
+
+def localise(model: SparseModel, sig: StateSignals) -> dict:
+    v = sig.valid
+    q1, q2, u = sig.q1[v], sig.q2[v], sig.input[v]
+    r = sig.q1_dot[v] - model.rhs(np.column_stack([q1, q2]), u[:, None])[:, 0]
+    fs = sig.fs_hz
+    total = float(np.sqrt(np.mean(r**2))) or 1.0
+
+    # along the record: residual RMS per window and the input's dominant frequency there
+    edges = np.linspace(0, r.size, N_WINDOWS + 1).astype(int)
+    windows = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        seg = u[a:b] - u[a:b].mean()
+        spec = np.abs(np.fft.rfft(seg * np.hanning(seg.size)))
+        f = np.fft.rfftfreq(seg.size, 1 / fs)
+        windows.append({"t_start_s": (v.start + a) / fs, "t_end_s": (v.start + b) / fs,
+                        "excitation_hz": float(f[1:][np.argmax(spec[1:])]) if seg.size > 2 else 0.0,
+                        "residual_rms": float(np.sqrt(np.mean(r[a:b] ** 2))),
+                        "signal_rms": float(np.sqrt(np.mean(sig.q1_dot[v][a:b] ** 2)))})
+    energy = np.array([w["residual_rms"] ** 2 for w in windows])
+    top = np.argsort(energy)[::-1][: max(1, N_WINDOWS // 5)]
+    worst = windows[int(top[0])]
+
+    # frequency content of the residual
+    f, p = welch(r, fs, nperseg=min(r.size, int(2 ** np.ceil(np.log2(fs * 4)))))
+    peaks = np.argsort(p)[::-1][:3]
+
+    # state space: mean and RMS residual over displacement x velocity bins (symmetric, linear)
+    e2 = np.linspace(-1, 1, N_BINS + 1) * np.max(np.abs(q2))
+    e1 = np.linspace(-1, 1, N_BINS + 1) * np.max(np.abs(q1))
+    i2 = np.clip(np.digitize(q2, e2) - 1, 0, N_BINS - 1)
+    i1 = np.clip(np.digitize(q1, e1) - 1, 0, N_BINS - 1)
+    count = np.zeros((N_BINS, N_BINS))
+    np.add.at(count, (i2, i1), 1)
+    mean = np.zeros_like(count)
+    np.add.at(mean, (i2, i1), r)
+    sq = np.zeros_like(count)
+    np.add.at(sq, (i2, i1), r**2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(count > 20, mean / count, np.nan)
+        rms = np.where(count > 20, np.sqrt(sq / count), np.nan)
+    # velocity signature: mean residual per velocity bin (all displacements)
+    vel_mean = [float(np.mean(r[i1 == k])) if np.count_nonzero(i1 == k) > 20 else None for k in range(N_BINS)]
+    amp = np.abs(q2) / (np.max(np.abs(q2)) or 1.0)
+    return {
+        "residual_rms": total,
+        "relative_residual": total / (float(np.sqrt(np.mean(sig.q1_dot[v] ** 2))) or 1.0),
+        "time": {"windows": windows, "worst_window": worst,
+                 "share_in_top_fifth": float(energy[top].sum() / energy.sum()) if energy.sum() > 0 else 0.0},
+        "frequency": {"peak_hz": [float(f[k]) for k in peaks]},
+        "state": {"q2_edges_m": e2.tolist(), "q1_edges_ms": e1.tolist(),
+                  "mean_residual": _nan_to_none(mean), "rms_residual": _nan_to_none(rms),
+                  "velocity_signature": {"q1_centres_ms": (0.5 * (e1[1:] + e1[:-1])).tolist(),
+                                         "mean_residual": vel_mean},
+                  "sign_of_velocity": {"mean_residual_q1_pos": float(np.mean(r[q1 > 0]) / total),
+                                       "mean_residual_q1_neg": float(np.mean(r[q1 < 0]) / total)},
+                  "amplitude": {"rms_small_q": float(np.sqrt(np.mean(r[amp < 1 / 3] ** 2))) if np.any(amp < 1 / 3) else None,
+                                "rms_large_q": float(np.sqrt(np.mean(r[amp > 2 / 3] ** 2))) if np.any(amp > 2 / 3) else None}},
+        "_residual": r,
+    }
+
+
+def _nan_to_none(a: np.ndarray) -> list:
+    return [[None if not np.isfinite(x) else float(x) for x in row] for row in a]
