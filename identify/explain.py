@@ -14,8 +14,9 @@ much adding it closes the gap.
    band-limited columns of the training blocks, scored on the held-out blocks: a cross-validated partial
    R^2), with a Wald test of its coefficients under block-robust (sandwich) covariance, as residuals are
    correlated over many samples. Rank: each effect that passes (p < alpha, share >= min_share) is refit on
-   the free-run error and ranked by the share of the baseline's held-out free-run error variance it
-   removes; a paired comparison over held-out blocks against the runner-up gives the confidence.
+   the free-run error and ranked by the share of the baseline's held-out free-run error it removes;
+   it is named if that share is at least `min_gap_closed`. Confidence: the Wald test's 1 - p times the
+   block-bootstrap probability that it beats both the runner-up and the baseline.
    Equation error alone misranks non-smooth effects: where a rig with dry friction sticks, q1 is ~0
    plus noise and sign(q1) is a coin toss, so a smooth q1*|q1| fits the equation better while
    explaining the motion worse. The answer is `none` when nothing passes the screen.
@@ -75,16 +76,23 @@ def noise_floor_nrmse(rec: Recording, sig, rows: np.ndarray) -> float:
 
 class DiscrepancyAnalysis:
     """Parameters: baseline (SparseModel or None for the fitted textbook Duffing), catalog of effects,
-    holdout_fraction, min_share (smallest held-out residual share an effect must explain), alpha (Wald
-    test level), refine (free-run refit of baseline and fix), band_hz (measurement chain)."""
+    holdout_fraction, min_share (screen: smallest share of the held-out equation error an effect must
+    explain), alpha (screen: Wald test level), min_gap_closed (name: smallest share of the baseline's
+    held-out free-run error the effect must remove),
+    refine (free-run refit of baseline and fix), band_hz (measurement chain).
+
+    The screen has no size bar by default (min_share = 0: significance and a positive held-out share):
+    near a jump bifurcation of the Duffing response a term worth 0.01 % of the equation error decides
+    where the jump happens, and so most of the free-run gap (seen: 17 % of NRMSE)."""
 
     def __init__(self, baseline: SparseModel | None = None, catalog: dict[str, Effect] | None = None,
-                 holdout_fraction: float = 0.2, min_share: float = 0.05, alpha: float = 1e-3,
-                 refine: bool = True, band_hz=None):
+                 holdout_fraction: float = 0.2, min_share: float = 0.0, alpha: float = 1e-3,
+                 min_gap_closed: float = 0.2, refine: bool = True, band_hz=None):
         self.baseline = baseline
         self.catalog = catalog
         self.holdout_fraction = holdout_fraction
         self.min_share = min_share
+        self.min_gap_closed = min_gap_closed
         self.alpha = alpha
         self.refine = refine
         self.band_hz = band_hz
@@ -164,32 +172,42 @@ class DiscrepancyAnalysis:
 
         # rank the effects that pass the screen by the free-run gap they close
         for c in candidates:
-            c["screen_passed"] = bool("_x" in c and c["p_value"] < self.alpha and c["score"] >= self.min_share)
+            c["screen_passed"] = bool("_x" in c and c["p_value"] < self.alpha and c["score"] > self.min_share)
             if not c["screen_passed"]:
                 continue
-            model = self._model(lib, c["_x"], u_name)
-            if self.refine:
-                model = refine_free_run(model, sig, fit_rows)[0]
-            val, _, qdot = validate(model, sig, self.heldout_rows_)
-            c["_model"], c["_val"], c["_err"] = model, val, self._block_errors(qdot, ho_edges)
-            c["gap_share_closed"] = float(1 - np.sum(c["_err"]) / np.sum(base_err)) if np.sum(base_err) > 0 else 0.0
+            model, val, err = self._fix(self._model(lib, c["_x"], u_name), sig, fit_rows, ho_edges)
+            if self.refine and np.sum(err) >= np.sum(base_err):
+                # The equation-error start can free-run into another regime (e.g. the far side of an
+                # asymmetric spring, whose rectified offset accelerometers cannot see, biases it).
+                # Continuation: start again from the stable baseline with the new term(s) switched on
+                # gradually (30 %, then 100 % of their equation-error values); keep the best.
+                for frac in (0.3, 1.0):
+                    start = dict(before.equations["q1_dot"])
+                    start.update({t: frac * float(c["_x"][idx[t]]) for t in c["coefficients"]})
+                    alt = self._fix(SparseModel({"q1_dot": start, "q2_dot": {"q1": 1.0}}, inputs=(u_name,)),
+                                    sig, fit_rows, ho_edges)
+                    if np.sum(alt[2]) < np.sum(err):
+                        model, val, err = alt
+            c["_model"], c["_val"], c["_err"] = model, val, err
+            c["gap_share_closed"] = float(1 - np.sum(err) / np.sum(base_err)) if np.sum(base_err) > 0 else 0.0
         ranked = sorted([c for c in candidates if "_err" in c], key=lambda c: -c["gap_share_closed"])
-        best = ranked[0] if ranked and ranked[0]["gap_share_closed"] > 0 else None
-        named = best is not None
-        p_pair = 1.0
-        if named:
-            ref = ranked[1]["_err"] if len(ranked) > 1 else base_err
-            d = ref - best["_err"]  # > 0 where the best tracks the measurement better
-            se = np.std(d, ddof=1) / np.sqrt(d.size) if d.size > 1 else np.inf
-            p_pair = float(stats.t.sf(np.mean(d) / se, d.size - 1)) if se > 0 else float(np.mean(d) <= 0)
+        best = ranked[0] if ranked else None
+        for c in ranked:  # probability (block bootstrap) that it beats the baseline in free run
+            c["p_beats_baseline"] = self._bootstrap_prob(base_err, c["_err"])
+        p_runner = 1.0
+        if best is not None:
+            runner = ranked[1]["_err"] if len(ranked) > 1 else base_err
+            p_runner = self._bootstrap_prob(runner, best["_err"])
+        named = best is not None and best["gap_share_closed"] >= self.min_gap_closed
         self.effect_ = best["name"] if named else "none"
         self.terms_ = [t for t in best["terms"] if t not in base_terms] if named else []
         if named:
-            self.confidence_ = float((1 - best["p_value"]) * (1 - p_pair))
-        else:  # confidence in "none": no candidate is both significant and large
-            strength = [(1 - c["p_value"]) * min(1.0, c["score"] / self.min_share) for c in candidates
-                        if "_x" in c and c["score"] > 0]
+            self.confidence_ = float((1 - best["p_value"]) * min(p_runner, best["p_beats_baseline"]))
+        else:  # confidence in "none": no candidate closes a real part of the free-run gap
+            strength = [c["p_beats_baseline"] * min(1.0, max(c["gap_share_closed"], 0) / self.min_gap_closed)
+                        for c in ranked]
             self.confidence_ = float(1 - max(strength, default=0.0))
+        p_pair = p_runner
         self.pair_p_value_ = p_pair
         self.baseline_model_ = before
         self.model_ = best["_model"] if named else before
@@ -201,6 +219,23 @@ class DiscrepancyAnalysis:
         self.gap_before_ = self.validation_before_["heldout"][GAP_SIGNAL]["nrmse"]
         self.gap_after_ = self.validation_after_["heldout"][GAP_SIGNAL]["nrmse"]
         return self
+
+    @staticmethod
+    def _bootstrap_prob(ref: np.ndarray, new: np.ndarray, n_boot: int = 4000) -> float:
+        """Probability that `new` has the smaller total free-run error than `ref`, over held-out blocks
+        resampled with replacement (ties count half). A paired t-test is the wrong tool here: a missing
+        effect shows in the one or two blocks that hold the resonance, not evenly."""
+        rng = np.random.default_rng(0)  # reproducible
+        idx = rng.integers(0, ref.size, (n_boot, ref.size))
+        d = ref[idx].sum(1) - new[idx].sum(1)
+        return float(np.mean(d > 0) + 0.5 * np.mean(d == 0))
+
+    def _fix(self, model: SparseModel, sig, fit_rows, ho_edges):
+        """Refit on the free-run error (if enabled) and validate: (model, validation, block errors)."""
+        if self.refine:
+            model = refine_free_run(model, sig, fit_rows)[0]
+        val, _, qdot = validate(model, sig, self.heldout_rows_)
+        return model, val, self._block_errors(qdot, ho_edges)
 
     def _block_errors(self, q_sim: np.ndarray, blocks) -> np.ndarray:
         """Sum of squared free-run errors of q'' per held-out block; a diverged run counts as an error
@@ -231,6 +266,6 @@ class DiscrepancyAnalysis:
                          "equation_error_heldout_mse": self.baseline_residual_mse_},
             "validation": {"before": self.validation_before_, "after": self.validation_after_},
             "localisation": {k: v for k, v in self.localisation_.items() if not k.startswith("_")},
-            "thresholds": {"min_share": self.min_share, "alpha": self.alpha,
-                           "runner_up_p_value": self.pair_p_value_},
+            "thresholds": {"min_share": self.min_share, "alpha": self.alpha, "min_gap_closed": self.min_gap_closed},
+            "p_beats_runner_up": self.pair_p_value_,
         }

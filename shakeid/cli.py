@@ -110,6 +110,43 @@ def summary(result: dict, source: str) -> str:
     return "\n".join(lines)
 
 
+def cmd_explain(args) -> int:
+    from identify.explain import DiscrepancyAnalysis
+    from identify.model import SparseModel
+    from identify.recording import read_recording
+
+    baseline = SparseModel.load(args.model) if args.model else None
+    rec = read_recording(args.file, args.layout, args.input, args.output, args.time, args.fs)
+    analysis = DiscrepancyAnalysis(baseline=baseline, band_hz=tuple(args.band) if args.band else None).fit(rec)
+    result = analysis.result()
+    if args.report:
+        from .explain_report import write_explain_report
+
+        write_explain_report(analysis, args.report)
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    f = lambda v: "n/a" if v is None else f"{v:.4f}"  # noqa: E731
+    print(f"baseline: {result['baseline']['source']}; {result['metric']}: {f(result['gap_before'])}"
+          f" (sensor-noise floor <= {f(result['noise_floor_upper'])})")
+    worst = result["localisation"]["time"]["worst_window"]
+    print(f"largest misfit: t = {worst['t_start_s']:.1f}-{worst['t_end_s']:.1f} s, excitation "
+          f"{worst['excitation_hz']:.1f} Hz")
+    for c in result["candidates"]:
+        closed = c.get("gap_share_closed")
+        print(f"  {c['name']:32s} equation-error share {c['score']:+.3f}  p = {c['p_value']:.1e}  "
+              f"free-run gap closed {'-' if closed is None else f'{closed:+.2f}'}")
+    if result["effect"] == "none":
+        print(f"missing effect: none (confidence {result['confidence']:.2f})")
+    else:
+        print(f"missing effect: {result['effect']} {result['terms']} (confidence {result['confidence']:.2f}); "
+              f"gap {f(result['gap_before'])} -> {f(result['gap_after'])}")
+        print("model: " + json.dumps(result["model"]))
+    if args.report:
+        print(f"report: {args.report}")
+    return 0
+
+
 def _add_sweep_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--f-start-hz", type=float, default=1.0)
     p.add_argument("--f-end-hz", type=float, default=20.0)
@@ -190,6 +227,19 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--report", metavar="DIR", help="write figures, coefficient table and model JSON here")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     q.set_defaults(func=cmd_identify)
+    q = sub.add_parser("explain", help="where a model misses the rig, which effect is missing, and the fix")
+    q.add_argument("file")
+    q.add_argument("--model", metavar="MODEL.json", help="baseline model (default: textbook Duffing fitted)")
+    g = q.add_argument_group("recording layout")
+    g.add_argument("--layout", choices=("base", "force"), default="base")
+    g.add_argument("--input")
+    g.add_argument("--output")
+    g.add_argument("--time")
+    g.add_argument("--fs", type=float)
+    g.add_argument("--band", type=float, nargs=2, metavar=("F_LO", "F_HI"))
+    q.add_argument("--report", metavar="DIR")
+    q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    q.set_defaults(func=cmd_explain)
     q = sub.add_parser("simulate", help="write a synthetic recording of the simulated rig (CSV + truth JSON)")
     q.add_argument("--out", required=True, metavar="FILE.csv")
     _add_sweep_options(q)
