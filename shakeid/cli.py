@@ -23,6 +23,8 @@ def _add_identify_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--output", help="output column/variable (default mass_acc, or y)")
     g.add_argument("--time", help="time column (default t)")
     g.add_argument("--fs", type=float, help="sample rate in Hz when the file has no time column")
+    g.add_argument("--samples", type=int, nargs=2, metavar=("START", "STOP"),
+                   help="use samples [START, STOP) only (0-based), e.g. Silverbox's estimation range")
     g = p.add_argument_group("identification")
     g.add_argument("--degree", type=int, default=4, help="highest monomial degree of the library (4)")
     g.add_argument("--extra-terms", default="", help="comma-separated extra terms, e.g. 'sign(q1),q1*|q1|'")
@@ -64,11 +66,23 @@ def _identifier(args):
                             rig=RigConstants(mass_kg=args.mass_kg))
 
 
-def cmd_identify(args) -> int:
-    from identify.recording import read_recording
+def _read(args):
+    """The recording named on the command line, cut to --samples if given."""
+    from identify.recording import Recording, read_recording
 
-    ident = _identifier(args)  # option errors first, before any file is read
     rec = read_recording(args.file, args.layout, args.input, args.output, args.time, args.fs)
+    if getattr(args, "samples", None):
+        a, b = args.samples
+        if not 0 <= a < b <= rec.n_samples:
+            raise ShakeidError(f"--samples {a} {b}: the recording has {rec.n_samples} samples")
+        rec = rec.slice(a, b)
+        Recording.__post_init__(rec)  # the cut must still be a usable recording
+    return rec
+
+
+def cmd_identify(args) -> int:
+    ident = _identifier(args)  # option errors first, before any file is read
+    rec = _read(args)
     try:
         ident.fit(rec)
     except ValueError as exc:  # library/term specification problems
@@ -116,7 +130,7 @@ def cmd_explain(args) -> int:
     from identify.recording import read_recording
 
     baseline = SparseModel.load(args.model) if args.model else None
-    rec = read_recording(args.file, args.layout, args.input, args.output, args.time, args.fs)
+    rec = _read(args)
     analysis = DiscrepancyAnalysis(baseline=baseline, band_hz=tuple(args.band) if args.band else None).fit(rec)
     result = analysis.result()
     if args.report:
@@ -236,6 +250,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--output")
     g.add_argument("--time")
     g.add_argument("--fs", type=float)
+    g.add_argument("--samples", type=int, nargs=2, metavar=("START", "STOP"))
     g.add_argument("--band", type=float, nargs=2, metavar=("F_LO", "F_HI"))
     q.add_argument("--report", metavar="DIR")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")

@@ -66,7 +66,7 @@ def write_explain_report(analysis, out_dir) -> Path:
     meas = sig.q1_dot[v]
     held = analysis.heldout_rows_
     idx = np.flatnonzero(held)
-    err = np.abs(analysis.sim_before_qdot_ - meas)
+    err = np.abs(np.nan_to_num(analysis.sim_before_qdot_, nan=np.inf) - meas)
     centre = idx[np.nanargmax(err[idx])] if idx.size else int(np.nanargmax(err))
     half = int(sig.fs_hz)
     z = slice(max(centre - half, 0), min(centre + half, meas.size))
