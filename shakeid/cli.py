@@ -168,6 +168,8 @@ def _add_sweep_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--amplitude-mm", type=float, default=1.3)
     p.add_argument("--fs-hz", type=float, default=2048.0, help="sample rate (2048 Hz = the paper's 0.488 ms)")
     p.add_argument("--noise", type=float, default=0.005, help="sensor noise as a fraction of each channel's std")
+    p.add_argument("--bias-ms2", type=float, default=0.0, help="accelerometer bias, m/s^2 (both sensors)")
+    p.add_argument("--lsb-ms2", type=float, default=0.0, help="ADC quantisation step, m/s^2 (0: none)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--rig", choices=("paper-table1", "design"), default="paper-table1")
     p.add_argument("--effect", action="append", default=[], metavar="NAME=COEF",
@@ -190,7 +192,9 @@ def _synthesize(args):
     try:
         rig.__post_init__()
         sweep = SineSweep(args.f_start_hz, args.f_end_hz, args.duration_s, args.amplitude_mm)
-        sensor = Accelerometer(noise_fraction=args.noise)
+        if args.noise < 0 or args.lsb_ms2 < 0:
+            raise ShakeidError("--noise and --lsb-ms2 must be >= 0")
+        sensor = Accelerometer(noise_fraction=args.noise, bias_ms2=args.bias_ms2, lsb_ms2=args.lsb_ms2)
         return run_sweep(rig, sweep, args.fs_hz, table_sensor=sensor, mass_sensor=sensor, seed=args.seed)
     except ValueError as exc:
         raise ShakeidError(str(exc)) from None

@@ -61,11 +61,15 @@ def test_errors_are_one_clear_line(tmp_path, content, args, message):
 
 def test_simulate_writes_recording_and_truth(tmp_path):
     out = tmp_path / "s.csv"
-    proc = run("simulate", "--out", out, "--duration-s", "10", "--effect", "coulomb_friction=0.1")
+    proc = run("simulate", "--out", out, "--duration-s", "10", "--effect", "coulomb_friction=0.1",
+               "--bias-ms2", "0.05", "--lsb-ms2", "0.01")
     assert proc.returncode == 0, proc.stderr
     truth = json.loads(out.with_suffix(".truth.json").read_text())
     assert truth["rig"]["effects"] == {"displacement_dependent_damping": pytest.approx(-0.49 * 1.162e4),
                                        "coulomb_friction": 0.1}
-    assert out.read_text().splitlines()[0] == "t,table_acc,mass_acc"
+    lines = out.read_text().splitlines()
+    assert lines[0] == "t,table_acc,mass_acc"
+    table = [float(ln.split(",")[1]) for ln in lines[1:200]]  # at rest before the sweep: bias, quantised
+    assert all(abs(round(v / 0.01) * 0.01 - v) < 1e-9 for v in table) and abs(sum(table) / len(table) - 0.05) < 0.01
     bad = run("simulate", "--out", out, "--effect", "warp_drive=1")
     assert bad.returncode == 2 and "unknown effect" in bad.stderr
