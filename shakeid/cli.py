@@ -236,6 +236,38 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def cmd_sim(args) -> int:
+    """Run the simulated rig until Ctrl-C or SIGTERM."""
+    import signal
+    import threading
+
+    from sim.plc import PLCConfig
+    from sim.server import SimulatedRig
+
+    if args.speed <= 0:
+        raise ShakeidError("--speed must be positive")
+    rig = SimulatedRig(PLCConfig(), host=args.host, modbus_port=args.modbus_port, stream_port=args.stream_port,
+                       speed=args.speed)
+    try:
+        rig.start()
+    except RuntimeError as exc:
+        raise ShakeidError(str(exc)) from None
+    ep = rig.endpoints
+    print(f"simulated rig (speed {args.speed:g}x): PLC Modbus TCP {ep['modbus'][0]}:{ep['modbus'][1]} device 1; "
+          f"accelerometers {ep['stream']} ({ep['fs_hz']:g} Hz, channels {', '.join(ep['channels'])}, "
+          f"{ep['sensitivity_counts_per_ms2']:.2f} counts per m/s^2). Ctrl-C stops.", flush=True)
+    done = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    try:
+        while not done.wait(0.5):
+            pass
+    except KeyboardInterrupt:
+        pass
+    rig.stop()
+    print("simulated rig stopped")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="shakeid", description="Sparse nonlinear identification of shaker rigs")
     sub = p.add_subparsers(dest="command", required=True)
@@ -259,6 +291,12 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--report", metavar="DIR")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     q.set_defaults(func=cmd_explain)
+    q = sub.add_parser("sim", help="run the simulated rig: PLC over Modbus TCP, accelerometer stream over TCP")
+    q.add_argument("--host", default="127.0.0.1")
+    q.add_argument("--modbus-port", type=int, default=5020)
+    q.add_argument("--stream-port", type=int, default=5021)
+    q.add_argument("--speed", type=float, default=1.0, help="rig seconds per wall second (PLC and streams)")
+    q.set_defaults(func=cmd_sim)
     q = sub.add_parser("simulate", help="write a synthetic recording of the simulated rig (CSV + truth JSON)")
     q.add_argument("--out", required=True, metavar="FILE.csv")
     _add_sweep_options(q)

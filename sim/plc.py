@@ -1,0 +1,245 @@
+"""The simulated PLC: one logic for every protocol front end (Modbus TCP, ADS).
+
+It holds the sweep setpoints, obeys commands, checks the safety limits before a sweep starts, keeps a
+heartbeat watchdog, and moves the table. `advance(dt_s)` runs the rig physics for dt_s of rig time and
+returns the accelerometer samples it produced, so a front end or a stream server never touches physics.
+
+States: IDLE -> RUNNING -> DONE; FAULT (refused start, watchdog, injected fault) and ESTOP need RESET.
+Stopping (command, watchdog, e-stop) ramps the table to rest with a C2 fade of `ramp_s` (e-stop: the
+shorter `estop_ramp_s`), so the motion stays physical and the accelerometers see no step.
+"""
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from identify.simulate import simulate
+
+from .rig import RigParameters
+from .sensors import Accelerometer
+from .sweep import SineSweep, _smoothstep
+
+
+class State(enum.IntEnum):
+    IDLE = 0
+    RUNNING = 1
+    DONE = 2
+    FAULT = 3
+    ESTOP = 4
+
+
+class Command(enum.IntEnum):
+    NONE = 0
+    START = 1
+    STOP = 2
+    RESET = 3
+    ESTOP = 4
+
+
+class Fault(enum.IntEnum):
+    NONE = 0
+    STROKE = 1        # amplitude above the stroke limit
+    VELOCITY = 2      # peak table velocity above the limit
+    ACCELERATION = 3  # peak table acceleration above the limit
+    FREQUENCY = 4     # frequency outside [f_min, f_max]
+    DURATION = 5      # duration not positive or above the limit
+    WATCHDOG = 6      # heartbeat stopped changing during a sweep
+    INJECTED = 7      # drive fault injected for tests
+    NOT_READY = 8     # START while not IDLE/DONE
+
+
+@dataclass
+class Limits:
+    """Safety limits of the table, checked before a sweep starts (and by the DAQ before it writes)."""
+
+    max_stroke_mm: float = 5.0
+    max_velocity_ms: float = 0.5
+    max_acceleration_ms2: float = 40.0
+    f_min_hz: float = 0.2
+    f_max_hz: float = 50.0
+    max_duration_s: float = 600.0
+    watchdog_s: float = 0.3
+
+    def check(self, sweep: SineSweep) -> tuple[Fault, str]:
+        """(Fault.NONE, "") if the sweep is safe, else the first violated limit and a message naming it."""
+        a = sweep.amplitude_mm * 1e-3
+        f_top = max(sweep.f_start_hz, sweep.f_end_hz)
+        f_low = min(sweep.f_start_hz, sweep.f_end_hz)
+        if not (self.f_min_hz <= f_low and f_top <= self.f_max_hz):
+            return Fault.FREQUENCY, (f"frequency {f_low:g}-{f_top:g} Hz outside the limit "
+                                     f"{self.f_min_hz:g}-{self.f_max_hz:g} Hz")
+        if not 0 < sweep.duration_s <= self.max_duration_s:
+            return Fault.DURATION, f"duration {sweep.duration_s:g} s outside (0, {self.max_duration_s:g}] s"
+        if sweep.amplitude_mm > self.max_stroke_mm:
+            return Fault.STROKE, f"amplitude {sweep.amplitude_mm:g} mm above the stroke limit {self.max_stroke_mm:g} mm"
+        v = a * 2 * np.pi * f_top
+        if v > self.max_velocity_ms:
+            return Fault.VELOCITY, f"peak velocity {v:.3g} m/s above the limit {self.max_velocity_ms:g} m/s"
+        acc = a * (2 * np.pi * f_top) ** 2
+        if acc > self.max_acceleration_ms2:
+            return Fault.ACCELERATION, (f"peak acceleration {acc:.3g} m/s^2 above the limit "
+                                        f"{self.max_acceleration_ms2:g} m/s^2")
+        return Fault.NONE, ""
+
+
+@dataclass
+class PLCConfig:
+    rig: RigParameters = field(default_factory=RigParameters.paper_table1)
+    limits: Limits = field(default_factory=Limits)
+    fs_hz: float = 2048.0
+    table_sensor: Accelerometer = field(default_factory=lambda: Accelerometer(noise_fraction=0, noise_ms2=0.02))
+    mass_sensor: Accelerometer = field(default_factory=lambda: Accelerometer(noise_fraction=0, noise_ms2=0.02))
+    ramp_s: float = 0.2
+    estop_ramp_s: float = 0.05
+    substeps: int = 8
+    seed: int = 0
+
+
+class RigPLC:
+    """Setpoints (f_start_hz, f_end_hz, duration_s, amplitude_mm), commands, status, and the rig."""
+
+    SETPOINTS = ("f_start_hz", "f_end_hz", "duration_s", "amplitude_mm")
+
+    def __init__(self, config: PLCConfig | None = None):
+        self.config = config or PLCConfig()
+        self.model = self.config.rig.model()
+        self.rng = np.random.default_rng(self.config.seed)
+        self.setpoints = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 60.0, "amplitude_mm": 1.0}
+        self.state = State.IDLE
+        self.fault = Fault.NONE
+        self.fault_message = ""
+        self.time_s = 0.0            # rig clock, s since power-on
+        self.sample_index = 0        # samples produced since power-on
+        self.sweep: SineSweep | None = None
+        self.sweep_t0 = 0.0
+        self.stop_t: float | None = None  # rig time the ramp-down began
+        self.stop_ramp = self.config.ramp_s
+        self.heartbeat = 0
+        self.heartbeat_seen_t = 0.0
+        self.x = np.zeros(2)         # rig state (q1, q2) at the last emitted sample
+        self.hidden_faults: set[str] = set()
+
+    # -- interface of every front end --------------------------------------------------------------
+    def set_setpoint(self, name: str, value: float) -> None:
+        if name not in self.SETPOINTS:
+            raise KeyError(name)
+        self.setpoints[name] = float(value)
+
+    def set_heartbeat(self, value: int) -> None:
+        if value != self.heartbeat:
+            self.heartbeat = value
+            self.heartbeat_seen_t = self.time_s
+
+    def command(self, cmd: int) -> None:
+        cmd = Command(cmd)
+        if cmd == Command.ESTOP:
+            self._begin_stop(self.config.estop_ramp_s)
+            self.state = State.ESTOP
+        elif cmd == Command.STOP and self.state == State.RUNNING:
+            self._begin_stop(self.config.ramp_s)
+            self.state = State.DONE
+        elif cmd == Command.RESET and self.state in (State.FAULT, State.ESTOP, State.DONE):
+            if self._table_at_rest():
+                self.state, self.fault, self.fault_message = State.IDLE, Fault.NONE, ""
+        elif cmd == Command.START:
+            self._start()
+
+    def status(self) -> dict:
+        t = self._sweep_time()
+        running = self.state == State.RUNNING and self.sweep is not None
+        return {"state": int(self.state), "state_name": self.state.name.lower(), "fault_code": int(self.fault),
+                "fault": self.fault_message, "elapsed_s": t if running else 0.0,
+                "frequency_hz": float(self.sweep.frequency_hz(t)) if running else 0.0,
+                "position_mm": float(self._table(np.array([self.time_s]))[0][0] * 1e3),
+                "heartbeat": self.heartbeat, "time_s": self.time_s}
+
+    def inject_fault(self) -> None:
+        """A drive fault mid-sweep (tests of the DAQ's abort path)."""
+        if self.state == State.RUNNING:
+            self._begin_stop(self.config.estop_ramp_s)
+        self.state, self.fault, self.fault_message = State.FAULT, Fault.INJECTED, "drive fault (injected)"
+
+    # -- physics ------------------------------------------------------------------------------------
+    def advance(self, dt_s: float) -> tuple[int, np.ndarray]:
+        """Run dt_s of rig time: returns (index of the first new sample, samples (n, 2) in m/s^2:
+        table, mass). The watchdog and the end of the sweep are checked on the way."""
+        fs = self.config.fs_hz
+        n_end = int(np.floor((self.time_s + dt_s) * fs))
+        first = self.sample_index
+        n = n_end - first
+        if n <= 0:
+            self.time_s += dt_s
+            return first, np.empty((0, 2))
+        if self.state == State.RUNNING:
+            silent = self.time_s - self.heartbeat_seen_t
+            if silent > self.config.limits.watchdog_s:
+                self._begin_stop(self.config.ramp_s)
+                self.state, self.fault = State.FAULT, Fault.WATCHDOG
+                self.fault_message = f"heartbeat silent for {silent:.2f} s (watchdog {self.config.limits.watchdog_s:g} s)"
+        S = self.config.substeps
+        # self.x is the state at the last emitted sample, index first - 1; the new samples are
+        # first .. n_end - 1, sample k at rig time k / fs
+        t_fine = (first - 1 + np.arange(n * 2 * S + 1) / (2 * S)) / fs
+        zdd_fine = self._table(t_fine)[2]
+        res = simulate(self.model, 1 / fs, self.x, inputs_fine=zdd_fine[:, None], substeps=S, n_samples=n + 1,
+                       bound=10.0)
+        states = res.states[1:]
+        zdd = zdd_fine[2 * S::2 * S]
+        self.x = states[-1].copy()
+        qdd = self.model.rhs(states, zdd[:, None])[:, 0]
+        samples = np.column_stack([self.config.table_sensor.measure(zdd, self.rng),
+                                   self.config.mass_sensor.measure(qdd + zdd, self.rng)])
+        self.sample_index = n_end
+        self.time_s += dt_s
+        if self.state == State.RUNNING and self._sweep_time() >= self.sweep.duration_s:
+            self.state = State.DONE
+        return first, samples
+
+    # -- internals ----------------------------------------------------------------------------------
+    def _start(self) -> None:
+        if self.state not in (State.IDLE, State.DONE) or not self._table_at_rest():
+            self.state, self.fault = State.FAULT, Fault.NOT_READY
+            self.fault_message = "start refused: the rig is not idle"
+            return
+        try:
+            sweep = SineSweep(**self.setpoints)
+        except ValueError as exc:
+            self.state, self.fault, self.fault_message = State.FAULT, Fault.DURATION, f"start refused: {exc}"
+            return
+        fault, message = self.config.limits.check(sweep)
+        if fault != Fault.NONE:
+            self.state, self.fault, self.fault_message = State.FAULT, fault, "start refused: " + message
+            return
+        self.sweep, self.sweep_t0, self.stop_t = sweep, self.time_s, None
+        self.heartbeat_seen_t = self.time_s
+        self.state = State.RUNNING
+
+    def _begin_stop(self, ramp_s: float) -> None:
+        if self.sweep is not None and self.stop_t is None:
+            self.stop_t, self.stop_ramp = self.time_s, ramp_s
+
+    def _sweep_time(self) -> float:
+        return self.time_s - self.sweep_t0 if self.sweep is not None else 0.0
+
+    def _table_at_rest(self) -> bool:
+        if self.sweep is None:
+            return True
+        end = self.sweep_t0 + self.sweep.duration_s
+        if self.stop_t is not None:
+            end = min(end, self.stop_t + self.stop_ramp)
+        return self.time_s >= end
+
+    def _table(self, t: np.ndarray):
+        """Table displacement, velocity, acceleration at rig times t: the sweep times the stop ramp."""
+        if self.sweep is None:
+            z = np.zeros_like(t)
+            return z, z, z
+        z, zd, zdd = self.sweep.kinematics(t - self.sweep_t0)
+        if self.stop_t is None:
+            return z, zd, zdd
+        r = self.stop_ramp
+        w, dw, ddw = _smoothstep((t - self.stop_t) / r)
+        env, denv, ddenv = 1 - w, -dw / r, -ddw / r**2
+        return env * z, denv * z + env * zd, ddenv * z + 2 * denv * zd + env * zdd

@@ -1,0 +1,164 @@
+"""The simulated rig on the wire: PLC over Modbus TCP, accelerometers as a framed TCP byte stream.
+
+    rig = SimulatedRig(PLCConfig(), speed=10.0).start()   # background thread, free loopback ports
+    rig.endpoints   # {"modbus": ("127.0.0.1", p1), "stream": "socket://127.0.0.1:p2", ...}
+    rig.stop()
+
+One asyncio loop runs everything: every tick it advances the PLC by tick x speed of rig time (so
+speed=10 runs the rig ten times faster, PLC clock and streams alike) and sends the new samples as
+frames (sim.frames) to every connected stream client.
+"""
+from __future__ import annotations
+
+import asyncio
+import socket
+import threading
+
+import numpy as np
+
+from . import frames
+from .modbus import make_server
+from .plc import PLCConfig, RigPLC
+
+#: ADC counts per m/s^2: +-32767 counts span +-50 m/s^2.
+SENSITIVITY = 32767 / 50.0
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+class SimulatedRig:
+    """speed: rig seconds per wall second; tick_s: wall time between physics steps;
+    frame_samples: samples per channel in one stream frame."""
+
+    def __init__(self, config: PLCConfig | None = None, host: str = "127.0.0.1", modbus_port: int = 0,
+                 stream_port: int = 0, speed: float = 1.0, tick_s: float = 0.01, frame_samples: int = 64,
+                 sensitivity: float = SENSITIVITY):
+        self.plc = RigPLC(config)
+        self.host = host
+        self.modbus_port = modbus_port or free_port(host)
+        self.stream_port = stream_port or free_port(host)
+        self.speed = speed
+        self.tick_s = tick_s
+        self.frame_samples = frame_samples
+        self.sensitivity = sensitivity
+        self.fault_injection = {"drop_plc_link": False, "drop_frames": 0, "corrupt_frames": 0, "stuck": False}
+        self._clients: set[asyncio.StreamWriter] = set()
+        self._pending = np.empty((0, 2))
+        self._pending_first = 0
+        self._seq = 0
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._ready = threading.Event()
+        self._stopping: asyncio.Event | None = None
+        self.error: BaseException | None = None
+
+    @property
+    def endpoints(self) -> dict:
+        return {"modbus": (self.host, self.modbus_port), "stream": f"socket://{self.host}:{self.stream_port}",
+                "fs_hz": self.plc.config.fs_hz, "sensitivity_counts_per_ms2": self.sensitivity,
+                "channels": ["table_acc", "mass_acc"]}
+
+    # -- lifecycle ------------------------------------------------------------------------------------
+    def start(self, timeout: float = 10.0) -> "SimulatedRig":
+        self._thread = threading.Thread(target=self._run, name="simulated-rig", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(timeout) or self.error is not None:
+            raise RuntimeError(f"simulated rig did not start: {self.error}")
+        return self
+
+    def stop(self, timeout: float = 10.0) -> None:
+        if self._loop is not None and self._stopping is not None:
+            self._loop.call_soon_threadsafe(self._stopping.set)
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def call(self, fn, *args):
+        """Run fn(*args) on the rig's loop thread (the PLC is not thread-safe) and return its result."""
+        fut = asyncio.run_coroutine_threadsafe(self._call(fn, *args), self._loop)
+        return fut.result(5.0)
+
+    async def _call(self, fn, *args):
+        return fn(*args)
+
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._main())
+        except BaseException as exc:  # reported to start()/the caller
+            self.error = exc
+            self._ready.set()
+
+    async def _main(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stopping = asyncio.Event()
+        modbus = make_server(self.plc, self.host, self.modbus_port,
+                             on_access=lambda *a: self.fault_injection["drop_plc_link"])
+        modbus_task = asyncio.create_task(modbus.serve_forever())
+        stream = await asyncio.start_server(self._on_stream_client, self.host, self.stream_port)
+        physics = asyncio.create_task(self._physics())
+        await asyncio.sleep(0.05)
+        self._ready.set()
+        await self._stopping.wait()
+        physics.cancel()
+        stream.close()
+        for w in list(self._clients):
+            w.close()
+        await modbus.shutdown()
+        modbus_task.cancel()
+
+    async def _on_stream_client(self, reader, writer) -> None:
+        self._clients.add(writer)
+        try:
+            await reader.read()  # until the client goes away
+        finally:
+            self._clients.discard(writer)
+
+    # -- physics and streaming -------------------------------------------------------------------------
+    async def _physics(self) -> None:
+        loop = asyncio.get_running_loop()
+        t_wall0 = loop.time()
+        rig_t = 0.0
+        while True:
+            await asyncio.sleep(self.tick_s)
+            target = (loop.time() - t_wall0) * self.speed
+            dt = target - rig_t
+            if dt <= 0:
+                continue
+            first, samples = self.plc.advance(dt)
+            rig_t = target
+            if samples.size:
+                if not self._pending.size:
+                    self._pending_first = first
+                self._pending = np.vstack([self._pending, samples])
+            await self._send_frames()
+
+    async def _send_frames(self) -> None:
+        n = self.frame_samples
+        fs = self.plc.config.fs_hz
+        while self._pending.shape[0] >= n:
+            block, self._pending = self._pending[:n], self._pending[n:]
+            first, self._pending_first = self._pending_first, self._pending_first + n
+            if self.fault_injection["stuck"]:
+                block = np.repeat(block[:1], n, axis=0)
+            counts, flags = frames.to_counts(block, self.sensitivity)
+            data = frames.encode(self._seq, int(round(first / fs * 1e6)), counts, flags)
+            self._seq += 1
+            if self.fault_injection["drop_frames"] > 0:
+                self.fault_injection["drop_frames"] -= 1
+                continue
+            if self.fault_injection["corrupt_frames"] > 0:
+                self.fault_injection["corrupt_frames"] -= 1
+                data = data[:20] + bytes([data[20] ^ 0xFF]) + data[21:]
+            for w in list(self._clients):
+                try:
+                    w.write(data)
+                except (ConnectionError, RuntimeError):
+                    self._clients.discard(w)
+            for w in list(self._clients):
+                try:
+                    await w.drain()
+                except (ConnectionError, RuntimeError):
+                    self._clients.discard(w)

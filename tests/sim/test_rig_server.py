@@ -1,0 +1,225 @@
+"""The simulated rig driven by real clients over loopback: pymodbus TCP client, pyserial socket://."""
+import threading
+import time
+
+import numpy as np
+import pytest
+import serial
+from pymodbus.client import ModbusTcpClient
+
+from identify.identifier import SparseIdentifier
+from identify.recording import Recording
+from sim.frames import FrameDecoder
+from sim.plc import Fault, Limits, PLCConfig, State
+from sim.server import SimulatedRig
+
+SPEED = 10.0  # rig seconds per wall second
+
+
+@pytest.fixture
+def rig():
+    # watchdog 1 s of rig time = 0.1 s of wall time at SPEED: comfortably above a Python client's jitter
+    r = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=1.0)), speed=SPEED).start()
+    yield r
+    r.stop()
+
+
+class Client:
+    """A minimal PLC client over Modbus TCP, with a heartbeat thread like the DAQ's."""
+
+    def __init__(self, rig):
+        host, port = rig.endpoints["modbus"]
+        self.mb = ModbusTcpClient(host, port=port, timeout=2)
+        assert self.mb.connect()
+        self.lock = threading.Lock()
+        self.beating = False
+        self.F = self.mb.DATATYPE.FLOAT32
+
+    def sweep(self, f0, f1, duration, amplitude):
+        with self.lock:
+            for addr, v in ((0, f0), (2, f1), (4, duration), (6, amplitude)):
+                self.mb.write_registers(addr, self.mb.convert_to_registers([v], self.F), device_id=1)
+
+    def command(self, code):
+        with self.lock:
+            return self.mb.write_register(10, code, device_id=1)
+
+    def status(self):
+        with self.lock:
+            r = self.mb.read_holding_registers(20, count=8, device_id=1).registers
+        f = lambda i: self.mb.convert_from_registers(r[i:i + 2], self.F)  # noqa: E731
+        return {"state": r[0], "fault": r[1], "elapsed_s": f(2), "frequency_hz": f(4), "position_mm": f(6)}
+
+    def start_heartbeat(self):
+        self.beating = True
+
+        def beat():
+            n = 0
+            while self.beating:
+                n = (n + 1) & 0xFFFF
+                with self.lock:
+                    self.mb.write_register(11, n, device_id=1)
+                time.sleep(0.02)
+
+        self.thread = threading.Thread(target=beat, daemon=True)
+        self.thread.start()
+
+    def stop_heartbeat(self):
+        self.beating = False
+        self.thread.join()
+
+    def wait_state(self, state, timeout=10.0):
+        end = time.time() + timeout
+        while time.time() < end:
+            st = self.status()
+            if st["state"] == state:
+                return st
+            time.sleep(0.02)
+        raise AssertionError(f"state {state} not reached: {self.status()}")
+
+
+def record(rig, seconds, inject=None):
+    """Read the accelerometer stream over pyserial's socket:// for `seconds` of wall time; `inject`
+    (a dict of fault injections) is applied once the reader is connected."""
+    port = serial.serial_for_url(rig.endpoints["stream"], timeout=0.2)
+    dec, frames = FrameDecoder(), []
+    frames += dec.feed(port.read(65536))
+    if inject:
+        rig.call(rig.fault_injection.update, inject)
+    end = time.time() + seconds
+    while time.time() < end:
+        frames += dec.feed(port.read(65536))
+    port.close()
+    return frames, dec
+
+
+def test_sweep_over_modbus_and_stream_over_socket(rig):
+    cli = Client(rig)
+    cli.sweep(2.0, 8.0, 20.0, 1.0)
+    with cli.lock:
+        back = cli.mb.read_holding_registers(0, count=8, device_id=1).registers
+    assert cli.mb.convert_from_registers(back[6:8], cli.F) == pytest.approx(1.0)
+    cli.start_heartbeat()
+    cli.command(1)
+    st = cli.wait_state(State.RUNNING)
+    frames, dec = record(rig, 0.3)
+    st = cli.status()
+    assert st["state"] == State.RUNNING and 0 < st["elapsed_s"] < 20.0 and 2.0 <= st["frequency_hz"] <= 8.0
+    cli.wait_state(State.DONE)
+    cli.stop_heartbeat()
+    assert frames and dec.crc_errors == 0
+    seq = np.array([f.seq for f in frames])
+    assert np.all(np.diff(seq) == 1)
+    ts = np.array([f.timestamp_us for f in frames])
+    assert np.allclose(np.diff(ts), 64 / 2048 * 1e6, atol=1)  # 64 samples per frame at 2048 Hz
+
+
+def test_unsafe_setpoints_are_refused_by_the_plc(rig):
+    cli = Client(rig)
+    for sweep, fault in (((1, 20, 60, 9.0), Fault.STROKE), ((1, 45, 60, 2.0), Fault.VELOCITY),
+                         ((1, 80, 60, 0.1), Fault.FREQUENCY), ((1, 20, -5, 1.0), Fault.DURATION)):
+        cli.command(3)
+        cli.sweep(*sweep)
+        cli.command(1)
+        st = cli.status()
+        assert (st["state"], st["fault"]) == (State.FAULT, fault), sweep
+        assert st["position_mm"] == 0.0
+    assert "start refused" in rig.call(lambda: rig.plc.fault_message)
+
+
+def test_watchdog_stops_the_table_within_half_a_second(rig):
+    cli = Client(rig)
+    cli.sweep(3.0, 6.0, 60.0, 1.0)
+    cli.start_heartbeat()
+    cli.command(1)
+    cli.wait_state(State.RUNNING)
+    time.sleep(0.5)
+    cli.stop_heartbeat()
+    silent_from = rig.call(lambda: rig.plc.heartbeat_seen_t)
+    cli.wait_state(State.FAULT)
+    assert cli.status()["fault"] == Fault.WATCHDOG
+    stopped_at = rig.call(lambda: rig.plc.stop_t + rig.plc.stop_ramp)  # rig time the table is at rest
+    assert stopped_at - silent_from <= 1.0 + 0.5  # watchdog period + at most 0.5 s to rest
+    time.sleep(0.2)
+    assert cli.status()["position_mm"] == 0.0
+
+
+def test_emergency_stop_mid_sweep(rig):
+    cli = Client(rig)
+    cli.sweep(3.0, 6.0, 60.0, 1.0)
+    cli.start_heartbeat()
+    cli.command(1)
+    cli.wait_state(State.RUNNING)
+    time.sleep(0.3)
+    cli.command(4)
+    assert cli.status()["state"] == State.ESTOP
+    time.sleep(0.1)
+    assert cli.status()["position_mm"] == 0.0
+    cli.command(1)  # no restart out of e-stop without a reset
+    assert cli.status()["state"] == State.FAULT and cli.status()["fault"] == Fault.NOT_READY
+    cli.stop_heartbeat()
+
+
+def test_injected_faults_are_observable(rig):
+    frames, dec = record(rig, 0.5, inject={"drop_frames": 3, "corrupt_frames": 2})
+    seq = np.array([f.seq for f in frames])
+    assert dec.crc_errors == 2
+    assert np.sum(np.diff(seq) - 1) == 5  # 3 dropped + 2 corrupted frames show as sequence gaps
+    cli = Client(rig)
+    rig.call(rig.fault_injection.update, {"drop_plc_link": True})
+    with pytest.raises(Exception):  # the PLC answers with an exception and pymodbus drops the link
+        r = cli.mb.read_holding_registers(20, count=2, device_id=1)
+        if r.isError():
+            raise RuntimeError(r)
+    rig.call(rig.fault_injection.update, {"drop_plc_link": False})
+    cli2 = Client(rig)
+    assert not cli2.mb.read_holding_registers(20, count=2, device_id=1).isError()
+
+
+def test_streamed_sweep_identifies_the_rig(rig):
+    """Acceptance: a sweep commanded over Modbus, recorded from the stream, gives back the rig's model."""
+    cli = Client(rig)
+    cli.sweep(1.0, 20.0, 40.0, 1.3)
+    port = serial.serial_for_url(rig.endpoints["stream"], timeout=0.2)
+    dec, frames = FrameDecoder(), []
+    cli.start_heartbeat()
+    cli.command(1)
+    cli.wait_state(State.RUNNING)
+    while cli.status()["state"] == State.RUNNING:
+        frames += dec.feed(port.read(65536))
+    end = time.time() + 2.0 / SPEED * 3  # settle: 6 s of rig time
+    while time.time() < end:
+        frames += dec.feed(port.read(65536))
+    cli.stop_heartbeat()
+    port.close()
+    assert dec.crc_errors == 0 and np.all(np.diff([f.seq for f in frames]) == 1)
+    acc = np.vstack([f.counts for f in frames]) / rig.sensitivity
+    rec = Recording(acc[:, 0], acc[:, 1], 2048.0, "base", source="stream")
+    model = SparseIdentifier(validate=False).fit(rec).model_
+    truth = rig.plc.model.equations["q1_dot"]
+    assert set(model.equations["q1_dot"]) == set(truth)
+    for term, c in truth.items():
+        assert abs(model.coefficient("q1_dot", term) / c - 1) < 0.03, term
+
+
+def test_shakeid_sim_command_serves_and_stops_on_sigterm():
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from sim.server import free_port
+
+    mb, st = free_port(), free_port()
+    proc = subprocess.Popen([str(Path(sys.executable).with_name("shakeid")), "sim", "--modbus-port", str(mb),
+                             "--stream-port", str(st), "--speed", "5"], stdout=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert f"127.0.0.1:{mb}" in line and f"socket://127.0.0.1:{st}" in line
+        client = ModbusTcpClient("127.0.0.1", port=mb, timeout=2)
+        assert client.connect() and client.read_holding_registers(20, count=2, device_id=1).registers[0] == 0
+        client.close()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=20)
+    assert proc.returncode == 0 and "stopped" in out
