@@ -163,8 +163,10 @@ def test_emergency_stop_mid_sweep(rig):
 def test_injected_faults_are_observable(rig):
     frames, dec = record(rig, 0.5, inject={"drop_frames": 3, "corrupt_frames": 2})
     seq = np.array([f.seq for f in frames])
-    assert dec.crc_errors == 2
-    assert np.sum(np.diff(seq) - 1) == 5  # 3 dropped + 2 corrupted frames show as sequence gaps
+    # resynchronising may also trip over a chance sync word inside a corrupted frame (~0.4 % per frame),
+    # so CRC failures are >= 2; the sequence numbers are exact: 3 dropped + 2 corrupted frames missing
+    assert dec.crc_errors >= 2
+    assert np.sum(np.diff(seq) - 1) == 5
     cli = Client(rig)
     rig.call(rig.fault_injection.update, {"drop_plc_link": True})
     with pytest.raises(Exception):  # the PLC answers with an exception and pymodbus drops the link
