@@ -1,4 +1,4 @@
-"""The simulated rig on the wire: PLC over Modbus TCP, accelerometers as a framed TCP byte stream.
+"""The simulated rig on the wire: PLC over Modbus TCP (and ADS), accelerometers as a framed TCP stream.
 
     rig = SimulatedRig(PLCConfig(), speed=10.0).start()   # background thread, free loopback ports
     rig.endpoints   # {"modbus": ("127.0.0.1", p1), "stream": "socket://127.0.0.1:p2", ...}
@@ -36,8 +36,10 @@ class SimulatedRig:
 
     def __init__(self, config: PLCConfig | None = None, host: str = "127.0.0.1", modbus_port: int = 0,
                  stream_port: int = 0, speed: float = 1.0, tick_s: float = 0.01, frame_samples: int = 64,
-                 sensitivity: float = SENSITIVITY):
+                 sensitivity: float = SENSITIVITY, ads_address: str | None = None):
         self.plc = RigPLC(config)
+        self.ads_address = ads_address  # loopback address for the ADS server (it always listens on 48898)
+        self.ads = None
         self.host = host
         self.modbus_port = modbus_port or free_port(host)
         self.stream_port = stream_port or free_port(host)
@@ -59,6 +61,7 @@ class SimulatedRig:
     @property
     def endpoints(self) -> dict:
         return {"modbus": (self.host, self.modbus_port), "stream": f"socket://{self.host}:{self.stream_port}",
+                "ads": (f"{self.ads_address}.1.1", 851, self.ads_address) if self.ads_address else None,
                 "fs_hz": self.plc.config.fs_hz, "sensitivity_counts_per_ms2": self.sensitivity,
                 "channels": ["table_acc", "mass_acc"]}
 
@@ -98,6 +101,11 @@ class SimulatedRig:
                              on_access=lambda *a: self.fault_injection["drop_plc_link"])
         modbus_task = asyncio.create_task(modbus.serve_forever())
         stream = await asyncio.start_server(self._on_stream_client, self.host, self.stream_port)
+        if self.ads_address:
+            from .ads import AdsFrontEnd
+
+            self.ads = AdsFrontEnd(self.plc, self.ads_address)
+            self.ads.start()
         physics = asyncio.create_task(self._physics())
         await asyncio.sleep(0.05)
         self._ready.set()
@@ -108,6 +116,8 @@ class SimulatedRig:
             w.close()
         await modbus.shutdown()
         modbus_task.cancel()
+        if self.ads is not None:
+            self.ads.stop()
 
     async def _on_stream_client(self, reader, writer) -> None:
         self._clients.add(writer)
@@ -127,6 +137,8 @@ class SimulatedRig:
             dt = target - rig_t
             if dt <= 0:
                 continue
+            if self.ads is not None:
+                self.ads.cycle()
             first, samples = self.plc.advance(dt)
             rig_t = target
             if samples.size:

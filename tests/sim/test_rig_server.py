@@ -225,3 +225,46 @@ def test_shakeid_sim_command_serves_and_stops_on_sigterm():
         proc.send_signal(signal.SIGTERM)
         out, _ = proc.communicate(timeout=20)
     assert proc.returncode == 0 and "stopped" in out
+
+
+def test_same_plc_over_ads():
+    """pyads client against the rig's AdsTestServer: configure, start, status, e-stop, refusal."""
+    import pyads
+
+    rig = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=1.0)), speed=SPEED, ads_address="127.0.0.5").start()
+    try:
+        net_id, ams_port, ip = rig.endpoints["ads"]
+        plc = pyads.Connection(net_id, ams_port, ip)
+        plc.open()
+        plc.set_timeout(2000)
+        for name, value in (("MAIN.fStartFreq", 2.0), ("MAIN.fEndFreq", 8.0), ("MAIN.fDuration", 30.0),
+                            ("MAIN.fAmplitude", 1.0)):
+            plc.write_by_name(name, value, pyads.PLCTYPE_REAL)
+        assert plc.read_by_name("MAIN.fMaxStroke", pyads.PLCTYPE_REAL) == pytest.approx(5.0)
+
+        def wait(state, timeout=5.0):
+            end, beat = time.time() + timeout, 0
+            while time.time() < end:
+                beat += 1
+                plc.write_by_name("MAIN.nHeartbeat", beat & 0xFFFF, pyads.PLCTYPE_UINT)
+                if plc.read_by_name("MAIN.nState", pyads.PLCTYPE_UINT) == state:
+                    return
+                time.sleep(0.02)
+            raise AssertionError(f"ADS state {state} not reached")
+
+        plc.write_by_name("MAIN.nCommand", 1, pyads.PLCTYPE_UINT)
+        wait(State.RUNNING)
+        wait(State.RUNNING)  # and heartbeats keep it running
+        assert 2.0 <= plc.read_by_name("MAIN.fFrequency", pyads.PLCTYPE_REAL) <= 8.0
+        assert rig.call(lambda: rig.plc.setpoints["f_end_hz"]) == 8.0  # one PLC behind both front ends
+        plc.write_by_name("MAIN.nCommand", 4, pyads.PLCTYPE_UINT)
+        wait(State.ESTOP)
+        plc.write_by_name("MAIN.nCommand", 3, pyads.PLCTYPE_UINT)
+        time.sleep(0.1)
+        plc.write_by_name("MAIN.fAmplitude", 9.0, pyads.PLCTYPE_REAL)
+        plc.write_by_name("MAIN.nCommand", 1, pyads.PLCTYPE_UINT)
+        wait(State.FAULT)
+        assert plc.read_by_name("MAIN.nFaultCode", pyads.PLCTYPE_UINT) == Fault.STROKE
+        plc.close()
+    finally:
+        rig.stop()
