@@ -244,10 +244,20 @@ def cmd_sim(args) -> int:
     from sim.plc import PLCConfig
     from sim.server import SimulatedRig
 
-    if args.speed <= 0:
+    from sim.config import RigConfig, load_config
+
+    cfg = load_config(args.config) if args.config else RigConfig()
+    speed = args.speed if args.speed is not None else cfg.speed
+    if speed <= 0:
         raise ShakeidError("--speed must be positive")
-    rig = SimulatedRig(PLCConfig(), host=args.host, modbus_port=args.modbus_port, stream_port=args.stream_port,
-                       speed=args.speed)
+    host = args.host or cfg.plc.get("host", "127.0.0.1")
+    modbus_port = args.modbus_port or int(cfg.plc.get("port", 5020))
+    url = cfg.stream["url"]
+    config_port = int(url.rsplit(":", 1)[-1]) if url.startswith("socket://") else 5021
+    stream_port = args.stream_port or config_port
+    rig = SimulatedRig(cfg.plc_config(), host=host, modbus_port=modbus_port, stream_port=stream_port, speed=speed,
+                       sensitivity=float(cfg.stream["sensitivity_counts_per_ms2"]))
+    args.speed = speed
     try:
         rig.start()
     except RuntimeError as exc:
@@ -292,10 +302,11 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     q.set_defaults(func=cmd_explain)
     q = sub.add_parser("sim", help="run the simulated rig: PLC over Modbus TCP, accelerometer stream over TCP")
-    q.add_argument("--host", default="127.0.0.1")
-    q.add_argument("--modbus-port", type=int, default=5020)
-    q.add_argument("--stream-port", type=int, default=5021)
-    q.add_argument("--speed", type=float, default=1.0, help="rig seconds per wall second (PLC and streams)")
+    q.add_argument("--config", metavar="RIG.toml", help="rig configuration (examples/sim-rig.toml)")
+    q.add_argument("--host", help="listen address (default: the config's, else 127.0.0.1)")
+    q.add_argument("--modbus-port", type=int, help="default: the config's [plc] port, else 5020")
+    q.add_argument("--stream-port", type=int, help="default: the config's [stream] url port, else 5021")
+    q.add_argument("--speed", type=float, help="rig seconds per wall second (PLC and streams; default 1)")
     q.set_defaults(func=cmd_sim)
     q = sub.add_parser("simulate", help="write a synthetic recording of the simulated rig (CSV + truth JSON)")
     q.add_argument("--out", required=True, metavar="FILE.csv")
