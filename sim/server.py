@@ -36,8 +36,13 @@ class SimulatedRig:
 
     def __init__(self, config: PLCConfig | None = None, host: str = "127.0.0.1", modbus_port: int = 0,
                  stream_port: int = 0, speed: float = 1.0, tick_s: float = 0.01, frame_samples: int = 64,
-                 sensitivity: float = SENSITIVITY, ads_address: str | None = None):
+                 sensitivity: float = SENSITIVITY, ads_address: str | None = None,
+                 can_interface: str | None = None, can_channel: str | None = None, can_node: int = 0):
         self.plc = RigPLC(config)
+        # CAN output (python-can): e.g. interface "virtual" (in-process) or "remote" (python-can-remote)
+        self.can_interface, self.can_channel, self.can_node = can_interface, can_channel, can_node
+        self.can_bus = None
+        self._can_counter = 0
         self.ads_address = ads_address  # loopback address for the ADS server (it always listens on 48898)
         self.ads = None
         self.host = host
@@ -74,7 +79,10 @@ class SimulatedRig:
         return self
 
     def stop(self, timeout: float = 10.0) -> None:
-        if self._loop is not None and self._stopping is not None:
+        """Stop the rig; safe to call more than once."""
+        if self._thread is None or not self._thread.is_alive():
+            return
+        if self._loop is not None and self._stopping is not None and not self._loop.is_closed():
             self._loop.call_soon_threadsafe(self._stopping.set)
         if self._thread is not None:
             self._thread.join(timeout)
@@ -101,6 +109,10 @@ class SimulatedRig:
                              on_access=lambda *a: self.fault_injection["drop_plc_link"])
         modbus_task = asyncio.create_task(modbus.serve_forever())
         stream = await asyncio.start_server(self._on_stream_client, self.host, self.stream_port)
+        if self.can_interface:
+            import can
+
+            self.can_bus = can.Bus(interface=self.can_interface, channel=self.can_channel)
         if self.ads_address:
             from .ads import AdsFrontEnd
 
@@ -118,6 +130,8 @@ class SimulatedRig:
         modbus_task.cancel()
         if self.ads is not None:
             self.ads.stop()
+        if self.can_bus is not None:
+            self.can_bus.shutdown()
 
     async def _on_stream_client(self, reader, writer) -> None:
         self._clients.add(writer)
@@ -147,6 +161,16 @@ class SimulatedRig:
                 self._pending = np.vstack([self._pending, samples])
             await self._send_frames()
 
+    def _send_can(self, counts: np.ndarray, flags: int) -> None:
+        import can
+
+        from . import can_frames
+
+        for payload in can_frames.encode(self._can_counter, counts, flags):
+            self.can_bus.send(can.Message(arbitration_id=can_frames.BASE_ID + self.can_node, data=payload,
+                                          is_extended_id=False))
+        self._can_counter = (self._can_counter + counts.shape[0]) & 0xFFFF
+
     async def _send_frames(self) -> None:
         n = self.frame_samples
         fs = self.plc.config.fs_hz
@@ -158,6 +182,8 @@ class SimulatedRig:
             counts, flags = frames.to_counts(block, self.sensitivity)
             data = frames.encode(self._seq, int(round(first / fs * 1e6)), counts, flags)
             self._seq += 1
+            if self.can_bus is not None:
+                self._send_can(counts, flags)
             if self.fault_injection["drop_frames"] > 0:
                 self.fault_injection["drop_frames"] -= 1
                 continue
