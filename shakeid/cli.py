@@ -246,6 +246,9 @@ def cmd_sim(args) -> int:
 
     from sim.config import RigConfig, load_config
 
+    done = threading.Event()
+    # before anything is printed: a supervisor may send SIGTERM as soon as it sees the endpoints
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
     cfg = load_config(args.config) if args.config else RigConfig()
     speed = args.speed if args.speed is not None else cfg.speed
     if speed <= 0:
@@ -266,8 +269,6 @@ def cmd_sim(args) -> int:
     print(f"simulated rig (speed {args.speed:g}x): PLC Modbus TCP {ep['modbus'][0]}:{ep['modbus'][1]} device 1; "
           f"accelerometers {ep['stream']} ({ep['fs_hz']:g} Hz, channels {', '.join(ep['channels'])}, "
           f"{ep['sensitivity_counts_per_ms2']:.2f} counts per m/s^2). Ctrl-C stops.", flush=True)
-    done = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
     try:
         while not done.wait(0.5):
             pass
