@@ -68,6 +68,13 @@ class Client:
         self.beating = False
         self.thread.join()
 
+    def run_sweep(self, f0, f1, duration, amplitude):
+        """Configure, keep the heartbeat, start, and return once the PLC reports RUNNING."""
+        self.sweep(f0, f1, duration, amplitude)
+        self.start_heartbeat()
+        self.command(1)
+        return self.wait_state(State.RUNNING)
+
     def wait_state(self, state, timeout=10.0):
         end = time.time() + timeout
         while time.time() < end:
@@ -129,10 +136,7 @@ def test_unsafe_setpoints_are_refused_by_the_plc(rig):
 
 def test_watchdog_stops_the_table_within_half_a_second(rig):
     cli = Client(rig)
-    cli.sweep(3.0, 6.0, 60.0, 1.0)
-    cli.start_heartbeat()
-    cli.command(1)
-    cli.wait_state(State.RUNNING)
+    cli.run_sweep(3.0, 6.0, 60.0, 1.0)
     time.sleep(0.5)
     cli.stop_heartbeat()
     silent_from = rig.call(lambda: rig.plc.heartbeat_seen_t)
@@ -146,10 +150,7 @@ def test_watchdog_stops_the_table_within_half_a_second(rig):
 
 def test_emergency_stop_mid_sweep(rig):
     cli = Client(rig)
-    cli.sweep(3.0, 6.0, 60.0, 1.0)
-    cli.start_heartbeat()
-    cli.command(1)
-    cli.wait_state(State.RUNNING)
+    cli.run_sweep(3.0, 6.0, 60.0, 1.0)
     time.sleep(0.3)
     cli.command(4)
     assert cli.status()["state"] == State.ESTOP
