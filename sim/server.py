@@ -52,7 +52,13 @@ class SimulatedRig:
         self.tick_s = tick_s
         self.frame_samples = frame_samples
         self.sensitivity = sensitivity
-        self.fault_injection = {"drop_plc_link": False, "drop_frames": 0, "corrupt_frames": 0, "stuck": False}
+        # drop_plc_link: Modbus requests fail; drop_frames / corrupt_frames: the next N stream frames;
+        # stuck: the sensors repeat one value; saturate: the mass sensor reads beyond full scale;
+        # disconnect_s: the stream drops its clients and refuses new ones for that long (rig time)
+        self.fault_injection = {"drop_plc_link": False, "drop_frames": 0, "corrupt_frames": 0, "stuck": False,
+                                "saturate": False, "disconnect_s": 0.0}
+        self._disconnected_until = -1.0
+        self._stuck_value = None
         self._clients: set[asyncio.StreamWriter] = set()
         self._pending = np.empty((0, 2))
         self._pending_first = 0
@@ -134,6 +140,9 @@ class SimulatedRig:
             self.can_bus.shutdown()
 
     async def _on_stream_client(self, reader, writer) -> None:
+        if self.plc.time_s < self._disconnected_until:  # a disconnected sensor: nobody answers
+            writer.close()
+            return
         self._clients.add(writer)
         try:
             await reader.read()  # until the client goes away
@@ -177,8 +186,21 @@ class SimulatedRig:
         while self._pending.shape[0] >= n:
             block, self._pending = self._pending[:n], self._pending[n:]
             first, self._pending_first = self._pending_first, self._pending_first + n
+            if self.fault_injection["disconnect_s"] > 0:
+                self._disconnected_until = self.plc.time_s + self.fault_injection["disconnect_s"]
+                self.fault_injection["disconnect_s"] = 0.0
+                for w in list(self._clients):
+                    w.close()
+                self._clients.clear()
             if self.fault_injection["stuck"]:
-                block = np.repeat(block[:1], n, axis=0)
+                if self._stuck_value is None:
+                    self._stuck_value = block[:1].copy()
+                block = np.repeat(self._stuck_value, n, axis=0)
+            else:
+                self._stuck_value = None
+            if self.fault_injection["saturate"]:
+                block = block.copy()
+                block[:, 1] = np.where(block[:, 1] >= 0, 2.0, -2.0) * 32767 / self.sensitivity
             counts, flags = frames.to_counts(block, self.sensitivity)
             data = frames.encode(self._seq, int(round(first / fs * 1e6)), counts, flags)
             self._seq += 1

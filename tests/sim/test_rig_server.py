@@ -306,3 +306,34 @@ def test_accelerometer_samples_as_can_frames():
     k = int(round(first.timestamp_us * 2048 / 1e6)) & 0xFFFF
     rows = np.flatnonzero(decoded[:, 0] == k)
     assert rows.size and np.array_equal(decoded[rows[0]:rows[0] + 64, 1:3], stream[first.timestamp_us])
+
+
+def test_sensor_faults_stuck_saturated_disconnected(rig):
+    frames, _ = record(rig, 0.3, inject={"stuck": True})
+    late = np.vstack([f.counts for f in frames[-5:]])
+    assert np.all(late == late[0])  # a stuck sensor repeats itself
+    rig.call(rig.fault_injection.update, {"stuck": False})
+    frames, _ = record(rig, 0.3, inject={"saturate": True})
+    assert frames[-1].flags & 1 and np.all(np.abs(frames[-1].counts[:, 1]) == 32767)
+    rig.call(rig.fault_injection.update, {"saturate": False})
+    port = serial.serial_for_url(rig.endpoints["stream"], timeout=0.2)
+    port.read(4096)
+    rig.call(rig.fault_injection.update, {"disconnect_s": 5.0})  # 0.5 s of wall time at SPEED
+    with pytest.raises(serial.SerialException):
+        for _ in range(20):
+            port.read(4096)
+    port.close()
+    time.sleep(0.6)
+    frames, _ = record(rig, 0.2)  # the sensor is back
+    assert frames
+
+
+def test_plc_fault_mid_sweep_is_seen_by_the_client(rig):
+    cli = Client(rig)
+    cli.run_sweep(3.0, 6.0, 60.0, 1.0)
+    rig.call(rig.plc.inject_fault)
+    st = cli.wait_state(State.FAULT)
+    assert st["fault"] == Fault.INJECTED
+    time.sleep(0.1)
+    assert cli.status()["position_mm"] == 0.0  # the drive stopped the table
+    cli.stop_heartbeat()
