@@ -256,10 +256,16 @@ def cmd_sim(args) -> int:
     host = args.host or cfg.plc.get("host", "127.0.0.1")
     modbus_port = args.modbus_port or int(cfg.plc.get("port", 5020))
     url = cfg.stream["url"]
-    config_port = int(url.rsplit(":", 1)[-1]) if url.startswith("socket://") else 5021
+    if url.startswith("socket://"):  # serve the stream where the configuration says it is
+        stream_host, config_port = url[len("socket://"):].rsplit(":", 1)[0], int(url.rsplit(":", 1)[-1])
+    else:
+        stream_host, config_port = host, 5021
     stream_port = args.stream_port or config_port
+    ads = cfg.plc.get("host", "127.0.0.5") if cfg.plc.get("transport") == "ads" else None
     rig = SimulatedRig(cfg.plc_config(), host=host, modbus_port=modbus_port, stream_port=stream_port, speed=speed,
-                       sensitivity=float(cfg.stream["sensitivity_counts_per_ms2"]))
+                       sensitivity=float(cfg.stream["sensitivity_counts_per_ms2"]), ads_address=ads,
+                       can_interface=cfg.can.get("interface"), can_channel=cfg.can.get("channel"),
+                       can_node=int(cfg.can.get("node", 0)), stream_host=stream_host)
     args.speed = speed
     try:
         rig.start()
@@ -268,7 +274,10 @@ def cmd_sim(args) -> int:
     ep = rig.endpoints
     print(f"simulated rig (speed {args.speed:g}x): PLC Modbus TCP {ep['modbus'][0]}:{ep['modbus'][1]} device 1; "
           f"accelerometers {ep['stream']} ({ep['fs_hz']:g} Hz, channels {', '.join(ep['channels'])}, "
-          f"{ep['sensitivity_counts_per_ms2']:.2f} counts per m/s^2). Ctrl-C stops.", flush=True)
+          f"{ep['sensitivity_counts_per_ms2']:.2f} counts per m/s^2)"
+          + (f"; PLC ADS {ep['ads'][2]} net id {ep['ads'][0]} port {ep['ads'][1]}" if ep["ads"] else "")
+          + (f"; CAN {rig.can_interface} {rig.can_channel}" if rig.can_interface else "")
+          + ". Ctrl-C stops.", flush=True)
     try:
         while not done.wait(0.5):
             pass

@@ -2,6 +2,7 @@
 
     [plc]      transport ("modbus" | "ads"), host, port (Modbus) / ams_net_id, ams_port (ADS)
     [stream]   url (a pyserial URL: socket://host:port or /dev/ttyUSB0), sensitivity_counts_per_ms2
+    [can]      interface, channel, node (python-can; optional: accelerometers on a CAN bus)
     [sampling] fs_hz, channels (names, in stream order)
     [limits]   max_stroke_mm, max_velocity_ms, max_acceleration_ms2, f_min_hz, f_max_hz,
                max_duration_s, watchdog_s
@@ -34,6 +35,7 @@ class RigConfig:
     plc: dict = field(default_factory=lambda: {"transport": "modbus", "host": "127.0.0.1", "port": 5020})
     stream: dict = field(default_factory=lambda: {"url": "socket://127.0.0.1:5021",
                                                    "sensitivity_counts_per_ms2": 32767 / 50.0})
+    can: dict = field(default_factory=dict)
     fs_hz: float = 2048.0
     channels: tuple[str, ...] = ("table_acc", "mass_acc")
     limits: Limits = field(default_factory=Limits)
@@ -69,7 +71,8 @@ def load_config(path) -> RigConfig:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
     cfg = RigConfig(source=str(path))
-    _take(doc, {"plc", "stream", "sampling", "limits", "rig", "sensors", "sim"}, "top level", path)
+    _take(doc, {"plc", "stream", "can", "sampling", "limits", "rig", "sensors", "sim"}, "top level", path)
+    cfg.can = dict(_take(doc.get("can", {}), {"interface", "channel", "node"}, "can", path))
     if "plc" in doc:
         cfg.plc = dict(_take(doc["plc"], {"transport", "host", "port", "ams_net_id", "ams_port"}, "plc", path))
         if cfg.plc.get("transport", "modbus") not in ("modbus", "ads"):

@@ -60,7 +60,8 @@ class Limits:
     f_min_hz: float = 0.2
     f_max_hz: float = 50.0
     max_duration_s: float = 600.0
-    watchdog_s: float = 0.3
+    # heartbeat timeout; + the 0.2 s ramp + one 10 ms PLC cycle keeps the table at rest within 0.5 s
+    watchdog_s: float = 0.25
 
     def check(self, sweep: SineSweep) -> tuple[Fault, str]:
         """(Fault.NONE, "") if the sweep is safe, else the first violated limit and a message naming it."""

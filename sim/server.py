@@ -37,8 +37,10 @@ class SimulatedRig:
     def __init__(self, config: PLCConfig | None = None, host: str = "127.0.0.1", modbus_port: int = 0,
                  stream_port: int = 0, speed: float = 1.0, tick_s: float = 0.01, frame_samples: int = 64,
                  sensitivity: float = SENSITIVITY, ads_address: str | None = None,
-                 can_interface: str | None = None, can_channel: str | None = None, can_node: int = 0):
+                 can_interface: str | None = None, can_channel: str | None = None, can_node: int = 0,
+                 stream_host: str | None = None):
         self.plc = RigPLC(config)
+        self.stream_host = stream_host or host
         # CAN output (python-can): e.g. interface "virtual" (in-process) or "remote" (python-can-remote)
         self.can_interface, self.can_channel, self.can_node = can_interface, can_channel, can_node
         self.can_bus = None
@@ -47,7 +49,7 @@ class SimulatedRig:
         self.ads = None
         self.host = host
         self.modbus_port = modbus_port or free_port(host)
-        self.stream_port = stream_port or free_port(host)
+        self.stream_port = stream_port or free_port(stream_host or host)
         self.speed = speed
         self.tick_s = tick_s
         self.frame_samples = frame_samples
@@ -71,7 +73,7 @@ class SimulatedRig:
 
     @property
     def endpoints(self) -> dict:
-        return {"modbus": (self.host, self.modbus_port), "stream": f"socket://{self.host}:{self.stream_port}",
+        return {"modbus": (self.host, self.modbus_port), "stream": f"socket://{self.stream_host}:{self.stream_port}",
                 "ads": (f"{self.ads_address}.1.1", 851, self.ads_address) if self.ads_address else None,
                 "fs_hz": self.plc.config.fs_hz, "sensitivity_counts_per_ms2": self.sensitivity,
                 "channels": ["table_acc", "mass_acc"]}
@@ -114,7 +116,7 @@ class SimulatedRig:
         modbus = make_server(self.plc, self.host, self.modbus_port,
                              on_access=lambda *a: self.fault_injection["drop_plc_link"])
         modbus_task = asyncio.create_task(modbus.serve_forever())
-        stream = await asyncio.start_server(self._on_stream_client, self.host, self.stream_port)
+        stream = await asyncio.start_server(self._on_stream_client, self.stream_host, self.stream_port)
         if self.can_interface:
             import can
 

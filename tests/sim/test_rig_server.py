@@ -18,8 +18,8 @@ SPEED = 10.0  # rig seconds per wall second
 
 @pytest.fixture
 def rig():
-    # watchdog 1 s of rig time = 0.1 s of wall time at SPEED: comfortably above a Python client's jitter
-    r = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=1.0)), speed=SPEED).start()
+    # watchdog 3 s of rig time = 0.3 s of wall time at SPEED: above a loaded 2-core machine's thread jitter
+    r = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=3.0)), speed=SPEED).start()
     yield r
     r.stop()
 
@@ -134,18 +134,23 @@ def test_unsafe_setpoints_are_refused_by_the_plc(rig):
     assert "start refused" in rig.call(lambda: rig.plc.fault_message)
 
 
-def test_watchdog_stops_the_table_within_half_a_second(rig):
-    cli = Client(rig)
-    cli.run_sweep(3.0, 6.0, 60.0, 1.0)
-    time.sleep(0.5)
-    cli.stop_heartbeat()
-    silent_from = rig.call(lambda: rig.plc.heartbeat_seen_t)
-    cli.wait_state(State.FAULT)
-    assert cli.status()["fault"] == Fault.WATCHDOG
-    stopped_at = rig.call(lambda: rig.plc.stop_t + rig.plc.stop_ramp)  # rig time the table is at rest
-    assert stopped_at - silent_from <= 1.0 + 0.5  # watchdog period + at most 0.5 s to rest
-    time.sleep(0.2)
-    assert cli.status()["position_mm"] == 0.0
+def test_watchdog_stops_the_table_within_half_a_second():
+    """Acceptance, with the default limits in real time: the table is at rest within 0.5 s of rig time
+    after the last heartbeat the PLC saw."""
+    rig = SimulatedRig(PLCConfig(), speed=1.0).start()
+    try:
+        cli = Client(rig)
+        cli.run_sweep(3.0, 6.0, 60.0, 1.0)
+        time.sleep(0.5)
+        cli.stop_heartbeat()
+        st = cli.wait_state(State.FAULT)
+        assert st["fault"] == Fault.WATCHDOG
+        silent_from, stopped_at = rig.call(lambda: (rig.plc.heartbeat_seen_t, rig.plc.stop_t + rig.plc.stop_ramp))
+        assert stopped_at - silent_from <= 0.5
+        time.sleep(0.5)
+        assert cli.status()["position_mm"] == 0.0
+    finally:
+        rig.stop()
 
 
 def test_emergency_stop_mid_sweep(rig):
@@ -232,7 +237,7 @@ def test_same_plc_over_ads():
     """pyads client against the rig's AdsTestServer: configure, start, status, e-stop, refusal."""
     import pyads
 
-    rig = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=1.0)), speed=SPEED, ads_address="127.0.0.5").start()
+    rig = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=3.0)), speed=SPEED, ads_address="127.0.0.5").start()
     try:
         net_id, ams_port, ip = rig.endpoints["ads"]
         plc = pyads.Connection(net_id, ams_port, ip)
@@ -279,7 +284,7 @@ def test_accelerometer_samples_as_can_frames():
     from sim import can_frames
 
     # 2x: 4096 frames/s, within what a 1 Mbit/s CAN bus carries (~8000 classic frames/s)
-    rig = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=1.0)), speed=2.0, can_interface="virtual",
+    rig = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=3.0)), speed=2.0, can_interface="virtual",
                        can_channel="shakeid-test").start()
     bus = can.Bus(interface="virtual", channel="shakeid-test")
     try:
@@ -337,3 +342,46 @@ def test_plc_fault_mid_sweep_is_seen_by_the_client(rig):
     time.sleep(0.1)
     assert cli.status()["position_mm"] == 0.0  # the drive stopped the table
     cli.stop_heartbeat()
+
+
+def test_can_across_processes_through_python_can_remote(tmp_path):
+    """`shakeid sim` in its own process sends CAN frames through a python-can-remote relay; a client in
+    this process receives them with consecutive counters."""
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import can
+
+    from sim import can_frames
+    from sim.server import free_port
+
+    relay_port, mb, st = free_port(), free_port(), free_port()
+    relay = subprocess.Popen([sys.executable, "-m", "can_remote", "-i", "virtual", "-c", "shakeid", "-H", "127.0.0.1",
+                              "-p", str(relay_port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    cfg = tmp_path / "rig.toml"
+    cfg.write_text(f'[plc]\nport = {mb}\n[stream]\nurl = "socket://127.0.0.1:{st}"\n'
+                   f'[can]\ninterface = "remote"\nchannel = "ws://127.0.0.1:{relay_port}/"\n')
+    sim = None
+    try:
+        time.sleep(1.0)  # the relay starts listening
+        sim = subprocess.Popen([str(Path(sys.executable).with_name("shakeid")), "sim", "--config", str(cfg)],
+                               stdout=subprocess.PIPE, text=True)
+        assert "CAN remote" in sim.stdout.readline()
+        bus = can.Bus(interface="remote", channel=f"ws://127.0.0.1:{relay_port}/")
+        msgs, end = [], time.time() + 1.0
+        while time.time() < end:
+            m = bus.recv(0.1)
+            if m is not None:
+                msgs.append(m)
+        bus.shutdown()
+    finally:
+        if sim is not None:
+            sim.send_signal(signal.SIGTERM)
+            sim.communicate(timeout=20)
+        relay.terminate()
+        relay.wait(10)
+    counters = np.array([can_frames.decode(m.data)[0] for m in msgs])
+    assert counters.size > 1000  # ~2048 per second of rig time
+    assert np.all(np.diff(counters) % 65536 == 1)
