@@ -131,7 +131,7 @@ def simulation_figures(repeat: int) -> dict:
     err_ivp = float(np.max(np.abs(sol - ref)) / scale)
     out = {"samples": n, "solve_ivp_rk45_s": t_ivp, "solve_ivp_rel_error": err_ivp, "shakeid": []}
     for substeps in (1, 2, 4, 8):
-        t_ours, res = best_of(lambda: simulate(m, 1 / FS, [0.0, 0.0], u, substeps=substeps, interpolation="cubic"),
+        t_ours, res = best_of(lambda s=substeps: simulate(m, 1 / FS, [0.0, 0.0], u, substeps=s, interpolation="cubic"),
                               repeat)
         err = float(np.max(np.abs(res.states[:, 1] - ref)) / scale)
         out["shakeid"].append({"substeps": substeps, "seconds": t_ours, "rel_error": err})

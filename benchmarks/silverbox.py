@@ -41,8 +41,9 @@ def score(model, u, y, substeps: int) -> dict:
         u_fine = fine_grid_input(uu[:, None], substeps)
         head = u_fine[: (N_INIT - 1) * 2 * substeps + 1]
 
-        def init_residual(x0):
-            return simulate(model, dt, x0, inputs_fine=head, substeps=substeps, n_samples=N_INIT).states[:, 1] - yy[:N_INIT]
+        def init_residual(x0, head=head, yy=yy):
+            sim = simulate(model, dt, x0, inputs_fine=head, substeps=substeps, n_samples=N_INIT)
+            return sim.states[:, 1] - yy[:N_INIT]
 
         x0 = least_squares(init_residual, [(yy[1] - yy[0]) / dt, yy[0]], x_scale=[1.0, 0.01]).x
         sim = simulate(model, dt, x0, inputs_fine=u_fine, substeps=substeps, n_samples=b - a, bound=1e4)

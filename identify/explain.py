@@ -34,7 +34,7 @@ from scipy.signal import welch
 from .chain import band_gain, reconstruct_states
 from .effects import CATALOG, Effect
 from .errors import IdentificationError
-from .gram import BlockGram
+from .gram import BlockGram, sandwich_covariance
 from .identifier import holdout_blocks
 from .library import Library
 from .localise import localise
@@ -129,14 +129,12 @@ class DiscrepancyAnalysis:
         AY = np.column_stack([sig.band_limit(c) for c in cols.T] + [sig.q1_dot[v]])
         gram = BlockGram(AY, 1, edges)
         train, heldout = gram.equations(~held), gram.equations(held)
-        ho_blocks = [gram.equations([b]) for b in np.flatnonzero(held)]
         b = train.B[:, 0]
 
         base_mask = np.zeros(len(lib), bool)
         base_mask[[idx[t] for t in base_terms]] = True
         x_base = least_squares(train.G, b, base_mask)
         mse_base = float(heldout.mse(x_base[:, None], 0)[0])
-        mse_base_blocks = np.array([ne.mse(x_base[:, None], 0)[0] for ne in ho_blocks])
 
         candidates = []
         for name, effect in effects.items():
@@ -151,17 +149,14 @@ class DiscrepancyAnalysis:
             x = least_squares(train.G, b, mask)
             mse = float(heldout.mse(x[:, None], 0)[0])
             S = np.flatnonzero(mask)
-            scores = gram.block_scores(~held, S, x[S], 0)
-            bread = np.linalg.pinv(train.G[np.ix_(S, S)])
-            k = scores.shape[0]
-            cov = bread @ (scores.T @ scores * k / max(k - 1, 1)) @ bread
+            cov = sandwich_covariance(gram, ~held, train.G, S, x[S], 0)
             pos = [int(np.flatnonzero(S == idx[t])[0]) for t in new]
             theta = x[S][pos]
             wald = float(theta @ np.linalg.pinv(cov[np.ix_(pos, pos)]) @ theta)
             candidates.append({**entry, "score": (mse_base - mse) / mse_base if mse_base > 0 else 0.0,
                                "p_value": float(stats.chi2.sf(wald, len(pos))), "wald": wald,
                                "coefficients": {t: float(x[idx[t]]) for t in new},
-                               "_x": x, "_blocks": np.array([ne.mse(x[:, None], 0)[0] for ne in ho_blocks])})
+                               "_x": x})
         candidates.sort(key=lambda c: -c["score"])
         self.library_, self.states_, self.heldout_rows_ = lib, sig, np.repeat(held, np.diff(edges))
         fit_rows = ~self.heldout_rows_

@@ -89,3 +89,16 @@ class BlockGram:
         G = C[:, support][:, :, support]
         b = C[:, support, self.m + eq]
         return b - G @ x
+
+
+def sandwich_covariance(gram: BlockGram, blocks, G: np.ndarray, support: np.ndarray, x: np.ndarray,
+                        eq: int) -> np.ndarray:
+    """Block-robust (cluster sandwich) covariance of least-squares coefficients x on `support`.
+
+    Residuals of a band-limited record are correlated over many samples, so the i.i.d. formula
+    understates the uncertainty; block scores (sums of a_t r_t over each block) are nearly independent.
+    G is the normal matrix of the fit (sum over the same blocks)."""
+    scores = gram.block_scores(blocks, support, x, eq)
+    k = scores.shape[0]
+    bread = np.linalg.pinv(G[np.ix_(support, support)])
+    return bread @ (scores.T @ scores * k / max(k - 1, 1)) @ bread

@@ -22,7 +22,7 @@ import numpy as np
 
 from .chain import StateSignals, reconstruct_states
 from .errors import IdentificationError
-from .gram import BlockGram
+from .gram import BlockGram, sandwich_covariance
 from .library import Library
 from .model import SparseModel
 from .optimizers import ADMMLasso, STLSQ
@@ -175,11 +175,7 @@ class SparseIdentifier:
         S = np.flatnonzero(sel.support)
         if S.size == 0:
             return {}
-        scores = gram.block_scores(blocks, S, sel.coef[S], eq)   # (k, |S|)
-        k = scores.shape[0]
-        bread = np.linalg.pinv(train.G[np.ix_(S, S)])
-        meat = scores.T @ scores * (k / max(k - 1, 1))
-        cov = bread @ meat @ bread
+        cov = sandwich_covariance(gram, blocks, train.G, S, sel.coef[S], eq)
         se = np.sqrt(np.maximum(np.diag(cov), 0))
         return {self.library_.names[j]: float(se[i]) for i, j in enumerate(S)}
 

@@ -127,7 +127,6 @@ def summary(result: dict, source: str) -> str:
 def cmd_explain(args) -> int:
     from identify.explain import DiscrepancyAnalysis
     from identify.model import SparseModel
-    from identify.recording import read_recording
 
     baseline = SparseModel.load(args.model) if args.model else None
     rec = _read(args)
@@ -241,7 +240,6 @@ def cmd_sim(args) -> int:
     import signal
     import threading
 
-    from sim.plc import PLCConfig
     from sim.server import SimulatedRig
 
     from sim.config import RigConfig, load_config

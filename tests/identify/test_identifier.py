@@ -3,7 +3,6 @@ import numpy as np
 import pytest
 
 from identify.identifier import SparseIdentifier
-from identify.physical import RigConstants
 from sim.sweep import SineSweep
 
 #: issue 2 acceptance: coefficients within 2 %, the weak q1*q2^2 within 5 %
