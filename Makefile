@@ -24,6 +24,7 @@ bench: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[bench]'
 	$(PY) benchmarks/identify_speed.py
 	$(PY) benchmarks/silverbox.py --data ../shared/data/silverbox/SNLS80mV.mat
+	$(PY) benchmarks/stream_throughput.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info demo-output
