@@ -350,6 +350,7 @@ def test_can_across_processes_through_python_can_remote(tmp_path):
     """`shakeid sim` in its own process sends CAN frames through a python-can-remote relay; a client in
     this process receives them with consecutive counters."""
     import signal
+    import socket
     import subprocess
     import sys
     from pathlib import Path
@@ -367,7 +368,14 @@ def test_can_across_processes_through_python_can_remote(tmp_path):
                    f'[can]\ninterface = "remote"\nchannel = "ws://127.0.0.1:{relay_port}/"\n')
     sim = None
     try:
-        time.sleep(1.0)  # the relay starts listening
+        end = time.time() + 15.0  # until the relay listens
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", relay_port), timeout=0.5).close()
+                break
+            except OSError:
+                assert time.time() < end, "python-can-remote relay did not start"
+                time.sleep(0.1)
         sim = subprocess.Popen([str(Path(sys.executable).with_name("shakeid")), "sim", "--config", str(cfg)],
                                stdout=subprocess.PIPE, text=True)
         assert "CAN remote" in sim.stdout.readline()
