@@ -54,11 +54,15 @@ class SimulatedRig:
         self.tick_s = tick_s
         self.frame_samples = frame_samples
         self.sensitivity = sensitivity
-        # drop_plc_link: Modbus requests fail; drop_frames / corrupt_frames: the next N stream frames;
+        # drop_plc_link: Modbus requests fail; cut_plc_link_s: the PLC's TCP server goes away for that
+        # long (rig time), connections drop and new ones are refused; drop_frames / corrupt_frames: the
+        # next N stream frames;
         # stuck: the sensors repeat one value; saturate: the mass sensor reads beyond full scale;
         # disconnect_s: the stream drops its clients and refuses new ones for that long (rig time)
-        self.fault_injection = {"drop_plc_link": False, "drop_frames": 0, "corrupt_frames": 0, "stuck": False,
-                                "saturate": False, "disconnect_s": 0.0}
+        self.fault_injection = {"drop_plc_link": False, "cut_plc_link_s": 0.0, "drop_frames": 0,
+                                "corrupt_frames": 0, "stuck": False, "saturate": False, "disconnect_s": 0.0}
+        self._modbus = None
+        self._plc_cut_until: float | None = None
         self._disconnected_until = -1.0
         self._stuck_value = None
         self._clients: set[asyncio.StreamWriter] = set()
@@ -113,9 +117,7 @@ class SimulatedRig:
     async def _main(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._stopping = asyncio.Event()
-        modbus = make_server(self.plc, self.host, self.modbus_port,
-                             on_access=lambda *a: self.fault_injection["drop_plc_link"])
-        modbus_task = asyncio.create_task(modbus.serve_forever())
+        self._start_modbus()
         stream = await asyncio.start_server(self._on_stream_client, self.stream_host, self.stream_port)
         if self.can_interface:
             import can
@@ -134,12 +136,28 @@ class SimulatedRig:
         stream.close()
         for w in list(self._clients):
             w.close()
-        await modbus.shutdown()
-        modbus_task.cancel()
+        if self._modbus is not None:
+            await self._modbus.shutdown()
         if self.ads is not None:
             self.ads.stop()
         if self.can_bus is not None:
             self.can_bus.shutdown()
+
+    def _start_modbus(self) -> None:
+        self._modbus = make_server(self.plc, self.host, self.modbus_port,
+                                   on_access=lambda *a: self.fault_injection["drop_plc_link"])
+        asyncio.get_running_loop().create_task(self._modbus.serve_forever())
+
+    async def _plc_link(self) -> None:
+        """Cut the PLC's TCP server when asked, and restore it when the cut is over."""
+        if self.fault_injection["cut_plc_link_s"] > 0 and self._modbus is not None:
+            self._plc_cut_until = self.plc.time_s + self.fault_injection["cut_plc_link_s"]
+            self.fault_injection["cut_plc_link_s"] = 0.0
+            server, self._modbus = self._modbus, None
+            await server.shutdown()
+        elif self._modbus is None and self._plc_cut_until is not None and self.plc.time_s >= self._plc_cut_until:
+            self._plc_cut_until = None
+            self._start_modbus()
 
     async def _on_stream_client(self, reader, writer) -> None:
         if self.plc.time_s < self._disconnected_until:  # a disconnected sensor: nobody answers
@@ -162,6 +180,7 @@ class SimulatedRig:
             dt = target - rig_t
             if dt <= 0:
                 continue
+            await self._plc_link()
             if self.ads is not None:
                 self.ads.cycle()
             first, samples = self.plc.advance(dt)

@@ -184,6 +184,16 @@ def test_injected_faults_are_observable(rig):
     rig.call(rig.fault_injection.update, {"drop_plc_link": False})
     cli2 = Client(rig)
     assert not cli2.mb.read_holding_registers(20, count=2, device_id=1).isError()
+    # a cut link: the PLC's server goes away for 5 s of rig time (0.5 s wall), then comes back
+    rig.call(rig.fault_injection.update, {"cut_plc_link_s": 5.0})
+    time.sleep(0.1)
+    with pytest.raises(ModbusException):
+        cli2.mb.read_holding_registers(20, count=2, device_id=1)
+    host, port = rig.endpoints["modbus"]
+    assert not ModbusTcpClient(host, port=port, timeout=0.5).connect()
+    time.sleep(0.8)
+    cli3 = Client(rig)
+    assert not cli3.mb.read_holding_registers(20, count=2, device_id=1).isError()
 
 
 def test_streamed_sweep_identifies_the_rig(rig):
