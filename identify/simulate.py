@@ -59,7 +59,7 @@ def fine_grid_input(inputs: np.ndarray, substeps: int, interpolation: str = "ban
     raise ValueError(f"unknown interpolation {interpolation!r} (bandlimited, cubic, linear)")
 
 
-def max_frequency(model: SparseModel, state_scale, inputs_scale=None, n_grid: int = 6) -> float:
+def max_frequency(model: SparseModel, state_scale, n_grid: int = 6) -> float:
     """Largest |eigenvalue| (rad/s) of the model's Jacobian over a grid of states within +-state_scale.
 
     The grid has an even number of points, so no point sits on a state's zero, where sign(q) and |q|

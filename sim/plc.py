@@ -120,7 +120,6 @@ class RigPLC:
         self.heartbeat = 0
         self.heartbeat_seen_t = 0.0
         self.x = np.zeros(2)         # rig state (q1, q2) at the last emitted sample
-        self.hidden_faults: set[str] = set()
 
     # -- interface of every front end --------------------------------------------------------------
     def set_setpoint(self, name: str, value: float) -> None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import PathOptimizer, least_squares
+from .base import PathOptimizer, SparsePath, least_squares
 
 
 class STLSQ(PathOptimizer):
@@ -28,7 +28,6 @@ class STLSQ(PathOptimizer):
             return super().fit_path(ne)
         # raw coefficients: run on the unscaled system, thresholds in the coefficients' own units
         coefs, params, iters = self._path(ne.G, ne.B)
-        from .base import SparsePath
         return SparsePath(coefs, params, self.param_name, iters)
 
     def _solve(self, G, b, thr):
