@@ -70,7 +70,12 @@ def _read(args):
     """The recording named on the command line, cut to --samples if given."""
     from identify.recording import Recording, read_recording
 
-    rec = read_recording(args.file, args.layout, args.input, args.output, args.time, args.fs)
+    if Path(args.file).suffix.lower() in (".h5", ".hdf5"):  # the DAQ's recordings
+        from daq.recorder import read_h5_recording
+
+        rec = read_h5_recording(args.file, args.input or "table_acc", args.output or "mass_acc")
+    else:
+        rec = read_recording(args.file, args.layout, args.input, args.output, args.time, args.fs)
     if getattr(args, "samples", None):
         a, b = args.samples
         if not 0 <= a < b <= rec.n_samples:
@@ -286,10 +291,29 @@ def cmd_sim(args) -> int:
     return 0
 
 
+def cmd_recordings(args) -> int:
+    """Metadata, status and gaps of HDF5 recordings; --recover marks crashed ones as aborted."""
+    from daq.recorder import describe, recover
+
+    for path in args.files:
+        if args.recover and recover(path):
+            print(f"{path}: was left running by a crash; marked aborted")
+        info = describe(path)
+        if args.json:
+            print(json.dumps(info, default=str))
+            continue
+        dur = info["samples"] / info["fs_hz"] if info.get("fs_hz") else 0
+        print(f"{path}: {info['status']}{' (' + info['status_reason'] + ')' if info['status_reason'] else ''}; "
+              f"{info['samples']} samples ({dur:.1f} s at {info['fs_hz']:g} Hz), channels {', '.join(info['channels'])}, "
+              f"{len(info['gaps'])} gap(s); started {info['start_time']} by {info['operator'] or '-'}; "
+              f"sweep {info['sweep'] or '-'}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="shakeid", description="Sparse nonlinear identification of shaker rigs")
     sub = p.add_subparsers(dest="command", required=True)
-    q = sub.add_parser("identify", help="identify a sparse ODE model from a recording (CSV, MAT)")
+    q = sub.add_parser("identify", help="identify a sparse ODE model from a recording (CSV, MAT, HDF5)")
     q.add_argument("file")
     _add_identify_options(q)
     q.add_argument("--report", metavar="DIR", help="write figures, coefficient table and model JSON here")
@@ -309,6 +333,11 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--report", metavar="DIR")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     q.set_defaults(func=cmd_explain)
+    q = sub.add_parser("recordings", help="inspect HDF5 recordings (metadata, status, gaps)")
+    q.add_argument("files", nargs="+")
+    q.add_argument("--recover", action="store_true", help="mark recordings left running by a crash as aborted")
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=cmd_recordings)
     q = sub.add_parser("sim", help="run the simulated rig: PLC over Modbus TCP, accelerometer stream over TCP")
     q.add_argument("--config", metavar="RIG.toml", help="rig configuration (examples/sim-rig.toml)")
     q.add_argument("--host", help="listen address (default: the config's, else 127.0.0.1)")

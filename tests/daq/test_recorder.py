@@ -1,0 +1,104 @@
+"""HDF5 recorder: layout and units, gaps, and survival of a SIGKILL mid-recording (real files, a real
+killed process)."""
+import json
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from daq.recorder import Recorder, describe, read_h5_recording, recover
+from identify.errors import RecordingError
+
+SHAKEID = str(Path(sys.executable).with_name("shakeid"))
+
+
+def test_layout_units_and_round_trip(tmp_path, table1_run):
+    path = tmp_path / "r.h5"
+    rec = table1_run.recording
+    block = np.column_stack([rec.input, rec.output])
+    r = Recorder(path, fs_hz=rec.fs_hz, operator="lab", sweep={"f_start_hz": 1.0, "amplitude_mm": 1.3},
+                 sensors={"mass_acc": {"sensitivity": 655.34, "position": "mass"}})
+    for a in range(0, block.shape[0], 1000):
+        r.append(a, block[a:a + 1000])
+    r.close()
+    with h5py.File(path) as f:
+        assert f["entry"].attrs["NX_class"] == "NXentry" and f["entry/data"].attrs["NX_class"] == "NXdata"
+        assert f["entry/instrument/mass_acc"].attrs["NX_class"] == "NXsensor"
+        assert f["entry/instrument/mass_acc"].attrs["sensitivity"] == pytest.approx(655.34)
+        assert f["entry/data/time"].attrs["units"] == "s" and f["entry/data/mass_acc"].attrs["units"] == "m/s^2"
+    info = describe(path)
+    assert info["status"] == "complete" and info["samples"] == rec.n_samples and info["gaps"] == []
+    back = read_h5_recording(path)
+    np.testing.assert_allclose(back.output, rec.output, rtol=1e-6, atol=1e-6)  # float32 storage
+    assert back.fs_hz == rec.fs_hz
+    with pytest.raises(RecordingError, match="never overwritten"):
+        Recorder(path)
+
+
+def test_gaps_are_listed_never_spliced(tmp_path):
+    path = tmp_path / "g.h5"
+    r = Recorder(path, fs_hz=100.0)
+    r.append(0, np.ones((300, 2)))
+    r.append(364, np.ones((300, 2)))  # 64 samples (one frame) lost
+    r.close("aborted", "sensor link lost")
+    info = describe(path)
+    assert info["gaps"] == [[300, 64]] and info["status"] == "aborted" and info["status_reason"] == "sensor link lost"
+    with h5py.File(path) as f:
+        t = f["entry/data/time"][()]
+    assert t[300] - t[299] == pytest.approx(65 / 100.0)  # the time axis jumps over the gap
+    with pytest.raises(RecordingError, match="1 gap.*64 samples missing at sample 300"):
+        read_h5_recording(path)
+
+
+WRITER = textwrap.dedent("""
+    import sys, time, numpy as np
+    from daq.recorder import Recorder
+    r = Recorder(sys.argv[1], fs_hz=1000.0)
+    k = 0
+    print("started", flush=True)
+    while True:  # 1000 samples/s in 100-sample blocks, values = sample index
+        idx = k + np.arange(100)
+        r.append(k, np.column_stack([idx, -idx]).astype(float))
+        k += 100
+        time.sleep(0.1)
+""")
+
+
+def test_sigkill_mid_recording_leaves_a_readable_file(tmp_path):
+    path = tmp_path / "killed.h5"
+    proc = subprocess.Popen([sys.executable, "-c", WRITER, str(path)], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "started"
+    time.sleep(2.6)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(10)
+    with h5py.File(path) as f:  # a plain open, no special mode
+        assert f["entry"].attrs["status"] == "running"
+        t = f["entry/data/time"][()]
+        table = f["entry/data/table_acc"][()]
+    assert t.size >= 1000  # flushed at least every second: no more than ~1 s of the 2.6 s lost
+    np.testing.assert_array_equal(table, np.arange(t.size))  # every flushed row intact
+    assert recover(path) and describe(path)["status"] == "aborted"
+    assert not recover(path)  # a second start finds nothing to do
+    out = subprocess.run([SHAKEID, "recordings", str(path)], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and "aborted" in out.stdout and "found running" in out.stdout
+
+
+def test_identify_reads_hdf5_directly(tmp_path, table1_run, table1_truth):
+    path = tmp_path / "sweep.h5"
+    rec = table1_run.recording
+    r = Recorder(path, fs_hz=rec.fs_hz)
+    r.append(0, np.column_stack([rec.input, rec.output]))
+    r.close()
+    proc = subprocess.run([SHAKEID, "identify", str(path), "--json"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert set(json.loads(proc.stdout)["model"]["q1_dot"]) == set(table1_truth["q1_dot"])
+    bad = tmp_path / "bad.h5"
+    bad.write_bytes(b"not hdf5 at all" * 10)
+    proc = subprocess.run([SHAKEID, "identify", str(bad)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and proc.stderr.startswith("shakeid: error:") and "Traceback" not in proc.stderr
