@@ -12,6 +12,8 @@ from pathlib import Path
 
 from identify.errors import ShakeidError
 
+from .lab import cmd_demo, cmd_recordings, cmd_sim, cmd_sweep
+
 EXIT_USAGE = 2
 
 
@@ -217,99 +219,6 @@ def cmd_simulate(args) -> int:
     return 0
 
 
-def cmd_demo(args) -> int:
-    """Simulate a sweep of the paper's rig, identify it and write the report."""
-    from identify.identifier import SparseIdentifier
-    from identify.recording import write_csv
-
-    from .report import write_report
-
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    print("simulating a 1-20 Hz sweep of the paper's rig (Table 1 model, 0.5 % sensor noise) ...", flush=True)
-    run = _synthesize(args)
-    write_csv(out / "recording.csv", run.recording)
-    (out / "truth.json").write_text(json.dumps(run.truth, indent=2))
-    print(f"identifying {out / 'recording.csv'} ...", flush=True)
-    ident = SparseIdentifier().fit(run.recording)
-    write_report(ident, out / "report")
-    result = ident.result()
-    print(summary(result, str(out / "recording.csv")))
-    print("true model: " + json.dumps(run.truth["model"]))
-    print(f"report: {out / 'report' / 'index.html'}")
-    return 0
-
-
-def cmd_sim(args) -> int:
-    """Run the simulated rig until Ctrl-C or SIGTERM."""
-    import signal
-    import threading
-
-    from sim.server import SimulatedRig
-
-    from sim.config import RigConfig, load_config
-
-    done = threading.Event()
-    # before anything is printed: a supervisor may send SIGTERM as soon as it sees the endpoints
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
-    cfg = load_config(args.config) if args.config else RigConfig()
-    speed = args.speed if args.speed is not None else cfg.speed
-    if speed <= 0:
-        raise ShakeidError("--speed must be positive")
-    host = args.host or cfg.plc.get("host", "127.0.0.1")
-    modbus_port = args.modbus_port or int(cfg.plc.get("port", 5020))
-    url = cfg.stream["url"]
-    if url.startswith("socket://"):  # serve the stream where the configuration says it is
-        stream_host, config_port = url[len("socket://"):].rsplit(":", 1)[0], int(url.rsplit(":", 1)[-1])
-    else:
-        stream_host, config_port = host, 5021
-    stream_port = args.stream_port or config_port
-    ads = cfg.plc.get("host", "127.0.0.5") if cfg.plc.get("transport") == "ads" else None
-    rig = SimulatedRig(cfg.plc_config(), host=host, modbus_port=modbus_port, stream_port=stream_port, speed=speed,
-                       sensitivity=float(cfg.stream["sensitivity_counts_per_ms2"]), ads_address=ads,
-                       can_interface=cfg.can.get("interface"), can_channel=cfg.can.get("channel"),
-                       can_node=int(cfg.can.get("node", 0)), stream_host=stream_host)
-    args.speed = speed
-    try:
-        rig.start()
-    except RuntimeError as exc:
-        raise ShakeidError(str(exc)) from None
-    ep = rig.endpoints
-    print(f"simulated rig (speed {args.speed:g}x): PLC Modbus TCP {ep['modbus'][0]}:{ep['modbus'][1]} device 1; "
-          f"accelerometers {ep['stream']} ({ep['fs_hz']:g} Hz, channels {', '.join(ep['channels'])}, "
-          f"{ep['sensitivity_counts_per_ms2']:.2f} counts per m/s^2)"
-          + (f"; PLC ADS {ep['ads'][2]} net id {ep['ads'][0]} port {ep['ads'][1]}" if ep["ads"] else "")
-          + (f"; CAN {rig.can_interface} {rig.can_channel}" if rig.can_interface else "")
-          + ". Ctrl-C stops.", flush=True)
-    try:
-        while not done.wait(0.5):
-            pass
-    except KeyboardInterrupt:
-        pass
-    rig.stop()
-    print("simulated rig stopped")
-    return 0
-
-
-def cmd_recordings(args) -> int:
-    """Metadata, status and gaps of HDF5 recordings; --recover marks crashed ones as aborted."""
-    from daq.recorder import describe, recover
-
-    for path in args.files:
-        if args.recover and recover(path):
-            print(f"{path}: was left running by a crash; marked aborted")
-        info = describe(path)
-        if args.json:
-            print(json.dumps(info, default=str))
-            continue
-        dur = info["samples"] / info["fs_hz"] if info.get("fs_hz") else 0
-        print(f"{path}: {info['status']}{' (' + info['status_reason'] + ')' if info['status_reason'] else ''}; "
-              f"{info['samples']} samples ({dur:.1f} s at {info['fs_hz']:g} Hz), channels {', '.join(info['channels'])}, "
-              f"{len(info['gaps'])} gap(s); started {info['start_time']} by {info['operator'] or '-'}; "
-              f"sweep {info['sweep'] or '-'}")
-    return 0
-
-
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="shakeid", description="Sparse nonlinear identification of shaker rigs")
     sub = p.add_subparsers(dest="command", required=True)
@@ -333,6 +242,17 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--report", metavar="DIR")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     q.set_defaults(func=cmd_explain)
+    q = sub.add_parser("sweep", help="run a sweep on the rig of --config and record it to HDF5")
+    q.add_argument("--config", required=True, metavar="RIG.toml")
+    q.add_argument("--f-start-hz", type=float, required=True)
+    q.add_argument("--f-end-hz", type=float, required=True)
+    q.add_argument("--duration-s", type=float, required=True)
+    q.add_argument("--amplitude-mm", type=float, required=True)
+    q.add_argument("--settle-s", type=float, default=2.0)
+    q.add_argument("--operator", default="")
+    q.add_argument("--note", default="")
+    q.add_argument("--out", required=True, metavar="FILE.h5")
+    q.set_defaults(func=cmd_sweep)
     q = sub.add_parser("recordings", help="inspect HDF5 recordings (metadata, status, gaps)")
     q.add_argument("files", nargs="+")
     q.add_argument("--recover", action="store_true", help="mark recordings left running by a crash as aborted")
@@ -349,9 +269,12 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--out", required=True, metavar="FILE.csv")
     _add_sweep_options(q)
     q.set_defaults(func=cmd_simulate)
-    q = sub.add_parser("demo", help="simulate a sweep, identify it, write the report")
+    q = sub.add_parser("demo", help="sweep the simulated rig over Modbus, record HDF5, identify, report")
     q.add_argument("--out", default="demo-output")
-    _add_sweep_options(q)
+    q.add_argument("--f-start-hz", type=float, default=1.0)
+    q.add_argument("--f-end-hz", type=float, default=20.0)
+    q.add_argument("--duration-s", type=float, default=60.0)
+    q.add_argument("--amplitude-mm", type=float, default=1.3)
     q.set_defaults(func=cmd_demo)
     return p
 

@@ -1,0 +1,137 @@
+"""Sweep orchestration: preflight, record, command, keep the heartbeat, follow, settle, finalise.
+
+Preflight refuses unsafe parameters before anything is written to the PLC (the same `Limits.check` the
+PLC runs again itself), and checks that the PLC answers and is idle and that the sensors stream. Every
+exit (done, operator abort, PLC fault, lost PLC link, lost sensors) leaves the table commanded to stop
+when the link allows it and the file closed with a status and the reason.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+
+from identify.errors import ShakeidError
+from sim.plc import Command, Fault, Limits, State
+from sim.sweep import SineSweep
+
+from .devices import PLC, DeviceError, SerialSource
+from .recorder import Recorder
+
+
+class SweepRefused(ShakeidError):
+    """The sweep was not started: unsafe parameters or a rig that is not ready (nothing was written)."""
+
+
+@dataclass
+class SweepRequest:
+    f_start_hz: float
+    f_end_hz: float
+    duration_s: float
+    amplitude_mm: float
+    settle_s: float = 2.0
+    operator: str = ""
+    note: str = ""
+
+
+class SweepRunner:
+    """plc, source: device backends; limits: the configured safety limits; sensitivity: counts per
+    m/s^2; on_progress(fraction, status) is called about ten times a second."""
+
+    def __init__(self, plc: PLC, source: SerialSource, limits: Limits, sensitivity: float,
+                 channels=("table_acc", "mass_acc"), heartbeat_s: float = 0.05, on_progress=None,
+                 rig_config: dict | None = None):
+        self.plc, self.source, self.limits = plc, source, limits
+        self.sensitivity, self.channels = sensitivity, tuple(channels)
+        self.heartbeat_s, self.on_progress, self.rig_config = heartbeat_s, on_progress, rig_config or {}
+        self.abort_requested = threading.Event()
+        self._lock = threading.Lock()
+
+    def preflight(self, req: SweepRequest) -> None:
+        try:
+            sweep = SineSweep(req.f_start_hz, req.f_end_hz, req.duration_s, req.amplitude_mm)
+        except ValueError as exc:
+            raise SweepRefused(f"sweep refused: {exc}") from None
+        fault, message = self.limits.check(sweep)
+        if fault != Fault.NONE:
+            raise SweepRefused(f"sweep refused: {message}")
+        try:
+            st = self.plc.status()
+        except DeviceError as exc:
+            raise SweepRefused(f"sweep refused: {exc}") from None
+        if st.state not in (State.IDLE, State.DONE):
+            raise SweepRefused(f"sweep refused: PLC is {State(st.state).name.lower()} (fault code {st.fault_code}); "
+                               "reset it first")
+        end = time.monotonic() + 2.0
+        while not self.source.read():
+            if time.monotonic() > end:
+                raise SweepRefused(f"sweep refused: no accelerometer frames from {self.source.url} within 2 s")
+
+    def run(self, req: SweepRequest, out_path) -> dict:
+        self.preflight(req)
+        rec = Recorder(out_path, self.channels, self.source.fs_hz, req.operator,
+                       sweep={"f_start_hz": req.f_start_hz, "f_end_hz": req.f_end_hz, "duration_s": req.duration_s,
+                              "amplitude_mm": req.amplitude_mm, "settle_s": req.settle_s, "note": req.note},
+                       rig_config=self.rig_config,
+                       sensors={c: {"sensitivity": self.sensitivity} for c in self.channels})
+        status, reason = "complete", ""
+        beat = threading.Thread(target=self._heartbeat, daemon=True)
+        self._beating = True
+        done_index = None
+        try:
+            with self._lock:
+                self.plc.configure(req.f_start_hz, req.f_end_hz, req.duration_s, req.amplitude_mm)
+                self.plc.command(Command.START)
+            beat.start()
+            last_poll = 0.0
+            while True:
+                for index, counts in self.source.read():
+                    rec.append(index, counts / self.sensitivity)
+                if time.monotonic() - last_poll >= 0.1:
+                    last_poll = time.monotonic()
+                    with self._lock:
+                        st = self.plc.status()
+                    if self.on_progress:
+                        self.on_progress(min(st.elapsed_s / req.duration_s, 1.0) if st.state == State.RUNNING
+                                         else float(st.state == State.DONE), st)
+                    if st.state in (State.FAULT, State.ESTOP):
+                        status, reason = "fault", f"PLC {State(st.state).name.lower()}, fault code {Fault(st.fault_code).name.lower()}"
+                        break
+                    if st.state == State.DONE and done_index is None:
+                        done_index = rec.next_index or 0
+                if done_index is not None and (rec.next_index or 0) - done_index >= req.settle_s * self.source.fs_hz:
+                    break
+                if self.abort_requested.is_set():
+                    status, reason = "aborted", "operator abort"
+                    with self._lock:
+                        self.plc.command(Command.STOP)
+                    break
+        except DeviceError as exc:
+            status, reason = ("aborted", str(exc))
+            self._safe_stop()
+        except KeyboardInterrupt:
+            status, reason = "aborted", "operator abort (Ctrl-C)"
+            self._safe_stop()
+        finally:
+            self._beating = False
+            n_gaps = int(rec.gaps.shape[0])
+            rec.close(status, reason)
+        return {"status": status, "reason": reason, "samples": rec.n, "gaps": n_gaps, "path": str(out_path)}
+
+    def _safe_stop(self):
+        try:
+            with self._lock:
+                self.plc.command(Command.STOP)
+        except DeviceError:
+            pass  # the link is gone: the PLC's own watchdog stops the table
+
+    def _heartbeat(self):
+        n = 0
+        while self._beating:
+            n += 1
+            try:
+                with self._lock:
+                    self.plc.heartbeat(n)
+            except DeviceError:
+                return
+            time.sleep(self.heartbeat_s)

@@ -1,0 +1,169 @@
+"""Commands that run the rig or its recordings: demo, sweep, sim, recordings (used by shakeid.cli)."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from identify.errors import ShakeidError
+
+
+def cmd_demo(args) -> int:
+    """The main job on the simulated rig: sweep over Modbus with the serial stream -> HDF5 ->
+    identification -> report."""
+    from daq.devices import ModbusPLC, SerialSource
+    from daq.recorder import read_h5_recording
+    from daq.sweep import SweepRequest, SweepRunner
+    from identify.identifier import SparseIdentifier
+    from sim.plc import Limits, PLCConfig
+    from sim.server import SENSITIVITY, SimulatedRig
+
+    from .cli import summary  # here, not at the top: cli imports this module
+    from .report import write_report
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    h5 = out / "recording.h5"
+    if h5.exists():
+        h5.unlink()  # the demo's own file from an earlier run
+    speed = 10.0
+    # at 10x the client's 50 ms heartbeat is 0.5 s of rig time: the demo rig's watchdog allows 2 s
+    rig = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=2.0)), speed=speed).start()
+    host, port = rig.endpoints["modbus"]
+    print(f"simulated rig at {speed:g}x: PLC Modbus TCP {host}:{port}, accelerometers {rig.endpoints['stream']}")
+    print(f"sweep {args.f_start_hz:g}-{args.f_end_hz:g} Hz over {args.duration_s:g} s at {args.amplitude_mm:g} mm "
+          f"(the paper's Table 1 rig) -> {h5}", flush=True)
+    try:
+        plc, source = ModbusPLC(host, port), SerialSource(rig.endpoints["stream"], rig.plc.config.fs_hz)
+        runner = SweepRunner(plc, source, Limits(), SENSITIVITY, on_progress=_progress_bar)
+        result = runner.run(SweepRequest(args.f_start_hz, args.f_end_hz, args.duration_s, args.amplitude_mm,
+                                         operator="demo"), h5)
+        sys.stderr.write("\n")
+        plc.close()
+        source.close()
+    finally:
+        truth = rig.plc.model.to_dict()["model"]
+        rig.stop()
+    print(f"recorded: {result['status']}, {result['samples']} samples, {result['gaps']} gap(s)")
+    if result["status"] != "complete":
+        raise ShakeidError(f"demo sweep ended {result['status']}: {result['reason']}")
+    print(f"identifying {h5} ...", flush=True)
+    ident = SparseIdentifier().fit(read_h5_recording(h5))
+    write_report(ident, out / "report")
+    print(summary(ident.result(), str(h5)))
+    print("true model: " + json.dumps(truth))
+    print(f"report: {out / 'report' / 'index.html'}")
+    return 0
+
+
+def _progress_bar(frac, st):
+    from sim.plc import State
+
+    bar = "#" * int(30 * frac)
+    sys.stderr.write(f"\r[{bar:<30s}] {100 * frac:5.1f} %  {State(st.state).name.lower():8s} "
+                     f"{st.frequency_hz:6.2f} Hz  table {st.position_mm:+6.2f} mm")
+    sys.stderr.flush()
+
+
+def _sweep_devices(cfg):
+    """PLC and accelerometer backends from a rig configuration."""
+    from daq.devices import AdsPLC, ModbusPLC, SerialSource
+
+    if cfg.plc.get("transport", "modbus") == "ads":
+        host = cfg.plc.get("host", "127.0.0.1")
+        plc = AdsPLC(cfg.plc.get("ams_net_id", f"{host}.1.1"), host, int(cfg.plc.get("ams_port", 851)))
+    else:
+        plc = ModbusPLC(cfg.plc.get("host", "127.0.0.1"), int(cfg.plc.get("port", 502)))
+    return plc, SerialSource(cfg.stream["url"], cfg.fs_hz)
+
+
+def cmd_sweep(args) -> int:
+    """Run one sweep on the rig of --config and record it."""
+    from daq.sweep import SweepRequest, SweepRunner
+    from sim.config import load_config
+
+    cfg = load_config(args.config)
+    req = SweepRequest(args.f_start_hz, args.f_end_hz, args.duration_s, args.amplitude_mm, args.settle_s,
+                       args.operator, args.note)
+    plc, source = _sweep_devices(cfg)
+    runner = SweepRunner(plc, source, cfg.limits, float(cfg.stream["sensitivity_counts_per_ms2"]), cfg.channels,
+                         on_progress=_progress_bar, rig_config={"source": cfg.source, "plc": cfg.plc})
+    try:
+        result = runner.run(req, args.out)
+    finally:
+        sys.stderr.write("\n")
+        plc.close()
+        source.close()
+    print(f"{result['path']}: {result['status']}{' (' + result['reason'] + ')' if result['reason'] else ''}, "
+          f"{result['samples']} samples, {result['gaps']} gap(s)")
+    return 0 if result["status"] == "complete" else 1
+
+
+def cmd_sim(args) -> int:
+    """Run the simulated rig until Ctrl-C or SIGTERM."""
+    import signal
+    import threading
+
+    from sim.server import SimulatedRig
+
+    from sim.config import RigConfig, load_config
+
+    done = threading.Event()
+    # before anything is printed: a supervisor may send SIGTERM as soon as it sees the endpoints
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    cfg = load_config(args.config) if args.config else RigConfig()
+    speed = args.speed if args.speed is not None else cfg.speed
+    if speed <= 0:
+        raise ShakeidError("--speed must be positive")
+    host = args.host or cfg.plc.get("host", "127.0.0.1")
+    modbus_port = args.modbus_port or int(cfg.plc.get("port", 5020))
+    url = cfg.stream["url"]
+    if url.startswith("socket://"):  # serve the stream where the configuration says it is
+        stream_host, config_port = url[len("socket://"):].rsplit(":", 1)[0], int(url.rsplit(":", 1)[-1])
+    else:
+        stream_host, config_port = host, 5021
+    stream_port = args.stream_port or config_port
+    ads = cfg.plc.get("host", "127.0.0.5") if cfg.plc.get("transport") == "ads" else None
+    rig = SimulatedRig(cfg.plc_config(), host=host, modbus_port=modbus_port, stream_port=stream_port, speed=speed,
+                       sensitivity=float(cfg.stream["sensitivity_counts_per_ms2"]), ads_address=ads,
+                       can_interface=cfg.can.get("interface"), can_channel=cfg.can.get("channel"),
+                       can_node=int(cfg.can.get("node", 0)), stream_host=stream_host)
+    args.speed = speed
+    try:
+        rig.start()
+    except RuntimeError as exc:
+        raise ShakeidError(str(exc)) from None
+    ep = rig.endpoints
+    print(f"simulated rig (speed {args.speed:g}x): PLC Modbus TCP {ep['modbus'][0]}:{ep['modbus'][1]} device 1; "
+          f"accelerometers {ep['stream']} ({ep['fs_hz']:g} Hz, channels {', '.join(ep['channels'])}, "
+          f"{ep['sensitivity_counts_per_ms2']:.2f} counts per m/s^2)"
+          + (f"; PLC ADS {ep['ads'][2]} net id {ep['ads'][0]} port {ep['ads'][1]}" if ep["ads"] else "")
+          + (f"; CAN {rig.can_interface} {rig.can_channel}" if rig.can_interface else "")
+          + ". Ctrl-C stops.", flush=True)
+    try:
+        while not done.wait(0.5):
+            pass
+    except KeyboardInterrupt:
+        pass
+    rig.stop()
+    print("simulated rig stopped")
+    return 0
+
+
+def cmd_recordings(args) -> int:
+    """Metadata, status and gaps of HDF5 recordings; --recover marks crashed ones as aborted."""
+    from daq.recorder import describe, recover
+
+    for path in args.files:
+        if args.recover and recover(path):
+            print(f"{path}: was left running by a crash; marked aborted")
+        info = describe(path)
+        if args.json:
+            print(json.dumps(info, default=str))
+            continue
+        dur = info["samples"] / info["fs_hz"] if info.get("fs_hz") else 0
+        print(f"{path}: {info['status']}{' (' + info['status_reason'] + ')' if info['status_reason'] else ''}; "
+              f"{info['samples']} samples ({dur:.1f} s at {info['fs_hz']:g} Hz), channels {', '.join(info['channels'])}, "
+              f"{len(info['gaps'])} gap(s); started {info['start_time']} by {info['operator'] or '-'}; "
+              f"sweep {info['sweep'] or '-'}")
+    return 0

@@ -1,0 +1,104 @@
+"""A sweep run by the DAQ against the simulated rig over loopback: Modbus PLC, pyserial socket:// stream."""
+import pytest
+
+from daq.devices import AdsPLC, ModbusPLC, SerialSource
+from daq.recorder import describe, read_h5_recording
+from daq.sweep import SweepRefused, SweepRequest, SweepRunner
+from identify.identifier import SparseIdentifier
+from sim.plc import Limits, PLCConfig
+from sim.server import SENSITIVITY, SimulatedRig
+
+SPEED = 10.0
+
+
+@pytest.fixture
+def rig():
+    r = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=3.0)), speed=SPEED, ads_address="127.0.0.5").start()
+    yield r
+    r.stop()
+
+
+def _runner(rig, plc):
+    return SweepRunner(plc, SerialSource(rig.endpoints["stream"], 2048.0), Limits(), SENSITIVITY)
+
+
+@pytest.mark.parametrize("transport", ["modbus", "ads"])
+def test_sweep_gives_a_complete_recording_that_identifies_the_rig(rig, tmp_path, transport):
+    if transport == "modbus":
+        plc = ModbusPLC(*rig.endpoints["modbus"])
+    else:
+        net_id, port, ip = rig.endpoints["ads"]
+        plc = AdsPLC(net_id, ip, port)
+    progress = []
+    runner = _runner(rig, plc)
+    runner.on_progress = lambda frac, st: progress.append(frac)
+    out = tmp_path / f"{transport}.h5"
+    result = runner.run(SweepRequest(1.0, 20.0, 40.0, 1.3, settle_s=3.0, operator="test"), out)
+    assert result["status"] == "complete" and result["gaps"] == 0, result
+    assert progress and max(progress) == 1.0
+    info = describe(out)
+    assert info["status"] == "complete" and info["sweep"]["amplitude_mm"] == 1.3
+    model = SparseIdentifier(validate=False).fit(read_h5_recording(out)).model_
+    truth = rig.plc.model.equations["q1_dot"]
+    assert set(model.equations["q1_dot"]) == set(truth)
+    for term, c in truth.items():
+        assert abs(model.coefficient("q1_dot", term) / c - 1) < 0.03, term
+
+
+def test_unsafe_parameters_are_refused_before_any_plc_write(rig, tmp_path):
+    plc = ModbusPLC(*rig.endpoints["modbus"])
+    before = rig.call(lambda: dict(rig.plc.setpoints))
+    with pytest.raises(SweepRefused, match="amplitude 9 mm above the stroke limit 5 mm"):
+        _runner(rig, plc).run(SweepRequest(1.0, 20.0, 60.0, 9.0), tmp_path / "x.h5")
+    with pytest.raises(SweepRefused, match="peak acceleration"):
+        _runner(rig, plc).run(SweepRequest(1.0, 45.0, 60.0, 0.6), tmp_path / "y.h5")
+    assert rig.call(lambda: dict(rig.plc.setpoints)) == before  # the PLC saw no write
+    assert not (tmp_path / "x.h5").exists()
+
+
+def test_cut_plc_link_ends_the_recording_with_the_reason(rig, tmp_path):
+    plc = ModbusPLC(*rig.endpoints["modbus"])
+    runner = _runner(rig, plc)
+    cut = {"done": False}
+
+    def progress(frac, st):
+        if frac > 0.1 and not cut["done"]:
+            cut["done"] = True
+            rig.call(rig.fault_injection.update, {"cut_plc_link_s": 30.0})
+
+    runner.on_progress = progress
+    result = runner.run(SweepRequest(2.0, 10.0, 30.0, 1.0), tmp_path / "cut.h5")
+    assert result["status"] == "aborted" and "PLC link lost" in result["reason"]
+    info = describe(tmp_path / "cut.h5")
+    assert info["status"] == "aborted" and "PLC link lost" in info["status_reason"] and info["samples"] > 0
+
+
+def test_shakeid_sweep_against_shakeid_sim(tmp_path):
+    """Two real processes: `shakeid sim` (the rig) and `shakeid sweep` (the DAQ) on loopback."""
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from sim.server import free_port
+
+    exe = str(Path(sys.executable).with_name("shakeid"))
+    mb, st = free_port(), free_port()
+    cfg = tmp_path / "rig.toml"
+    cfg.write_text(f'[plc]\nport = {mb}\n[stream]\nurl = "socket://127.0.0.1:{st}"\n[limits]\nwatchdog_s = 2.0\n')
+    sim = subprocess.Popen([exe, "sim", "--config", str(cfg), "--speed", "10"], stdout=subprocess.PIPE, text=True)
+    try:
+        assert "Modbus" in sim.stdout.readline()
+        out = tmp_path / "sweep.h5"
+        proc = subprocess.run([exe, "sweep", "--config", str(cfg), "--f-start-hz", "2", "--f-end-hz", "10",
+                               "--duration-s", "10", "--amplitude-mm", "1", "--out", str(out)],
+                              capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        assert "complete" in proc.stdout and "0 gap(s)" in proc.stdout and "100.0 %" in proc.stderr
+        bad = subprocess.run([exe, "sweep", "--config", str(cfg), "--f-start-hz", "2", "--f-end-hz", "10",
+                              "--duration-s", "10", "--amplitude-mm", "7", "--out", str(tmp_path / "no.h5")],
+                             capture_output=True, text=True, timeout=60)
+        assert bad.returncode == 2 and "stroke limit" in bad.stderr and not (tmp_path / "no.h5").exists()
+    finally:
+        sim.send_signal(signal.SIGTERM)
+        sim.communicate(timeout=20)
