@@ -82,7 +82,11 @@ def cmd_sweep(args) -> int:
     from daq.sweep import SweepRequest, SweepRunner
     from sim.config import load_config
 
+    from daq.recorder import recover_directory
+
     cfg = load_config(args.config)
+    for path in recover_directory(Path(args.out).resolve().parent):  # crashed recordings, found on start
+        print(f"{path}: was left running by a crash; marked aborted, its data kept")
     req = SweepRequest(args.f_start_hz, args.f_end_hz, args.duration_s, args.amplitude_mm, args.settle_s,
                        args.operator, args.note)
     plc, source = _sweep_devices(cfg)

@@ -86,6 +86,12 @@ def test_shakeid_sweep_against_shakeid_sim(tmp_path):
     mb, st = free_port(), free_port()
     cfg = tmp_path / "rig.toml"
     cfg.write_text(f'[plc]\nport = {mb}\n[stream]\nurl = "socket://127.0.0.1:{st}"\n[limits]\nwatchdog_s = 2.0\n')
+    from daq.recorder import Recorder, describe
+
+    crashed = Recorder(tmp_path / "crashed.h5", fs_hz=100.0)  # left "running", as after a crash
+    crashed.append(0, [[1.0, 2.0]] * 10)
+    crashed.flush()
+    crashed.f.close()
     sim = subprocess.Popen([exe, "sim", "--config", str(cfg), "--speed", "10"], stdout=subprocess.PIPE, text=True)
     try:
         assert "Modbus" in sim.stdout.readline()
@@ -95,6 +101,7 @@ def test_shakeid_sweep_against_shakeid_sim(tmp_path):
                               capture_output=True, text=True, timeout=120)
         assert proc.returncode == 0, proc.stderr
         assert "complete" in proc.stdout and "0 gap(s)" in proc.stdout and "100.0 %" in proc.stderr
+        assert "crashed.h5: was left running" in proc.stdout and describe(tmp_path / "crashed.h5")["status"] == "aborted"
         bad = subprocess.run([exe, "sweep", "--config", str(cfg), "--f-start-hz", "2", "--f-end-hz", "10",
                               "--duration-s", "10", "--amplitude-mm", "7", "--out", str(tmp_path / "no.h5")],
                              capture_output=True, text=True, timeout=60)
