@@ -25,6 +25,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/identify_speed.py
 	$(PY) benchmarks/silverbox.py --data ../shared/data/silverbox/SNLS80mV.mat
 	$(PY) benchmarks/stream_throughput.py
+	$(PY) benchmarks/daq_throughput.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info demo-output
