@@ -113,10 +113,10 @@ class SparseIdentifier:
                          normalize=self.normalize_threshold)
         raise IdentificationError(f"unknown method {self.method!r} (admm or stlsq)")
 
-    def _blocks(self, sig: StateSignals):
-        return holdout_blocks(sig, self.holdout_fraction, self.holdout_samples)
-
     def fit(self, recording: Recording) -> "SparseIdentifier":
+        if self.refine not in (None, "free-run"):  # refused before any work, like an unknown method
+            raise IdentificationError(f"unknown refine {self.refine!r} (free-run)")
+        self._optimizer()
         timings = {}
         t0 = time.perf_counter()
         sig = reconstruct_states(recording, self.band_hz, self.harmonics, self.taper_s)
@@ -130,7 +130,7 @@ class SparseIdentifier:
         lib = self.library_
         v = sig.valid
         t0 = time.perf_counter()
-        edges, held = self._blocks(sig)
+        edges, held = holdout_blocks(sig, self.holdout_fraction, self.holdout_samples)
         # q2_dot = q1 by construction of the chain, so the second target is q1 itself
         gram = BlockGram.from_library(lib, (sig.q1[v], sig.q2[v]), sig.input[v][:, None],
                                       (sig.q1_dot[v], sig.q1[v]), edges)
@@ -154,8 +154,6 @@ class SparseIdentifier:
         self.heldout_rows_ = np.repeat(held, np.diff(edges))
         self.refinement_ = None
         if self.refine is not None:
-            if self.refine != "free-run":
-                raise IdentificationError(f"unknown refine {self.refine!r} (free-run)")
             t0 = time.perf_counter()
             refined, self.refinement_ = refine_free_run(self.model_, sig, ~self.heldout_rows_)
             self.model_ = SparseModel(refined.equations, refined.states, refined.inputs, self.standard_errors_)

@@ -44,12 +44,11 @@ def refine_free_run(model: SparseModel, sig: StateSignals, fit_rows: np.ndarray 
     def residuals(theta):
         res = simulate(with_coefs(theta), dt, states[0], inputs_fine=u_fine, substeps=substeps, n_samples=n,
                        bound=bound)
-        if res.diverged:
+        if res.diverged:  # a large but finite penalty: the trust region backs off instead of failing
             return np.full(rows.sum() * len(signals), 1e3 / np.sqrt(rows.sum()))
         # compared like with like: the simulation through the same band as the measured states
         sim = {"q1": sig.band_limit(res.states[:, 0]), "q2": sig.band_limit(res.states[:, 1])}
         r = np.concatenate([(sim[s][rows] - measured[s][rows]) / norms[s] for s in signals])
-        # a diverged run is a large but finite penalty, so the trust region backs off instead of failing
         return np.where(np.isfinite(r), r, 1e3) / np.sqrt(rows.sum())
 
     r0 = residuals(theta0)

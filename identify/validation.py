@@ -40,8 +40,10 @@ def free_run(model: SparseModel, sig: StateSignals, substeps: int | None = None)
     return sim, qdot, res.substeps, res.diverged
 
 
-def validate(model: SparseModel, sig: StateSignals, heldout_rows: np.ndarray, substeps: int | None = None) -> dict:
-    """Free-run metrics on the held-out rows (mask over the valid rows) and on all valid rows."""
+def validate(model: SparseModel, sig: StateSignals, heldout_rows: np.ndarray, substeps: int | None = None):
+    """Free-run metrics on the held-out rows (mask over the valid rows) and on all valid rows.
+
+    Returns (metrics dict, simulated states (n, 2), simulated q1_dot (n,)), as free_run()."""
     sim_states, sim_qdot, used, diverged = free_run(model, sig, substeps)
     v = sig.valid
     measured = {"q1_dot": sig.q1_dot[v], "q1": sig.q1[v], "q2": sig.q2[v]}

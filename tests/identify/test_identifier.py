@@ -93,3 +93,13 @@ def test_free_run_refit_keeps_an_accurate_model(fitted, table1_run):
     assert ident.refinement_["cost_after"] <= ident.refinement_["cost_before"]
     assert (ident.validation_["heldout"]["q2"]["nrmse"]
             <= fitted.validation_["heldout"]["q2"]["nrmse"] * 1.05)
+
+
+@pytest.mark.parametrize("kw,match", [({"refine": "magic"}, "unknown refine"), ({"method": "lars"}, "unknown method")])
+def test_unknown_options_are_refused_before_any_work(table1_run, kw, match):
+    from identify.errors import IdentificationError
+
+    ident = SparseIdentifier(**kw)
+    with pytest.raises(IdentificationError, match=match):
+        ident.fit(table1_run.recording)
+    assert not hasattr(ident, "states_")  # refused before the measurement chain ran
