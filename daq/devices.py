@@ -2,18 +2,14 @@
 
 PLC (configure sweep, start, stop, emergency stop, status, heartbeat, limits): ModbusPLC (pymodbus
 client) and AdsPLC (pyads), both for the register map / symbols of docs/rig-protocols.md, which the
-simulated rig serves too. Accelerometers: SerialSource (any pyserial URL: a device path or socket://)
-decoding the documented frames. A sensor with another format is one more small class with `read()`.
+simulated rig serves too. The accelerometer sources are in daq/sources.py.
 """
 from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
 
-import numpy as np
-
 from identify.errors import ShakeidError
-from sim.frames import FrameDecoder
 
 
 class DeviceError(ShakeidError):
@@ -133,30 +129,3 @@ class AdsPLC(PLC):
 
     def close(self):
         self.conn.close()
-
-
-class SerialSource:
-    """Accelerometer frames from any pyserial URL. read() -> list of (first sample index, counts (n, c))
-    for the frames received since the last call; lost frames show as jumps of the sample index."""
-
-    def __init__(self, url: str, fs_hz: float, timeout_s: float = 0.05):
-        import serial
-
-        self.serial_mod = serial
-        try:
-            self.port = serial.serial_for_url(url, timeout=timeout_s)
-        except (serial.SerialException, ValueError) as exc:
-            raise DeviceError(f"accelerometers at {url}: {exc}") from None
-        self.fs_hz = fs_hz
-        self.decoder = FrameDecoder()
-        self.url = url
-
-    def read(self) -> list[tuple[int, np.ndarray]]:
-        try:
-            data = self.port.read(65536)
-        except self.serial_mod.SerialException as exc:
-            raise DeviceError(f"accelerometer stream {self.url} lost: {exc}") from None
-        return [(int(round(f.timestamp_us * self.fs_hz / 1e6)), f.counts) for f in self.decoder.feed(data)]
-
-    def close(self):
-        self.port.close()

@@ -2,7 +2,8 @@
 
     /entry                NXentry: @start_time @end_time @operator @software_version
                           @status (running | complete | aborted | fault) @status_reason
-                          @samples_written @fs_hz, sweep/ (NXcollection, attributes), @rig_config (JSON)
+                          @samples_written @fs_hz, sweep/ (NXcollection, attributes), @rig_config (JSON),
+                          @link_frames @link_frames_lost @link_frames_corrupt (sensor link counters)
     /entry/instrument     NXinstrument, one NXsensor per channel: @units, @sensitivity, @position
     /entry/data           NXdata @signal @axes="time": time (s), one dataset per channel (m/s^2),
                           chunked and appended in blocks
@@ -119,10 +120,13 @@ class Recorder:
         self.f.flush()
         self.last_flush = time.monotonic()
 
-    def close(self, status: str = "complete", reason: str = "") -> None:
+    def close(self, status: str = "complete", reason: str = "", link_stats: dict | None = None) -> None:
+        """Final status and reason; link_stats (frames received / lost / corrupt, from the source) are
+        kept as `link_*` attributes so a recording says how clean its sensor link was."""
         if status not in STATUSES[1:]:
             raise ValueError(f"final status must be one of {STATUSES[1:]}")
         e = self.f["entry"]
+        e.attrs.update({f"link_{k}": int(v) for k, v in (link_stats or {}).items()})
         e.attrs.update(status=status, status_reason=reason, end_time=_now(), samples_written=self.n)
         self.f.close()
 
@@ -152,24 +156,44 @@ def describe(path) -> dict:
             e = f["entry"]
             return {"path": str(path), **{k: (v.item() if hasattr(v, "item") else v) for k, v in e.attrs.items()},
                     "sweep": dict(e["sweep"].attrs), "channels": [k for k in e["data"] if k != "time"],
-                    "samples": int(e["data/time"].shape[0]), "gaps": e["gaps"][()].tolist()}
+                    "samples": int(e["data/time"].shape[0]), "gaps": e["gaps"][()].tolist(),
+                    "processed": [k for k in e["processed"] if k != "time"] if "processed" in e else []}
     except (OSError, KeyError) as exc:
         raise RecordingError(f"{path}: not a shakeid HDF5 recording ({exc})") from None
 
 
-def read_h5_recording(path, input: str = "table_acc", output: str = "mass_acc") -> Recording:
-    """The recording as identify's Recording; refuses one with gaps (never spliced) by name."""
+def segments(time_s: np.ndarray, fs_hz: float) -> list[tuple[int, int]]:
+    """Row ranges [a, b) of the gap-free stretches of a time axis (a gap: the index jumps by > 1)."""
+    index = np.round(np.asarray(time_s) * fs_hz).astype(np.int64)
+    breaks = np.flatnonzero(np.diff(index) != 1) + 1
+    edges = np.concatenate([[0], breaks, [index.size]])
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def read_h5_recording(path, input: str = "table_acc", output: str = "mass_acc",
+                      samples: tuple[int, int] | None = None) -> Recording:
+    """The recording (or rows samples=[a, b)) as identify's Recording. Samples are never spliced: a
+    stretch that spans a gap is refused, naming the gap-free stretches to choose from."""
     info = describe(path)
-    if info["gaps"]:
-        first, count = info["gaps"][0]
-        raise RecordingError(f"{path}: {len(info['gaps'])} gap(s) in the samples (first: {count} samples missing "
-                             f"at sample {first}); identify a gap-free stretch with --samples")
     with h5py.File(path, "r") as f:
         d = f["entry/data"]
         missing = [c for c in (input, output) if c not in d]
         if missing:
             raise RecordingError(f"{path}: missing channel(s) {missing}; found {info['channels']}")
-        rec = Recording(d[input][()], d[output][()], float(f["entry"].attrs["fs_hz"]), "base", input, output,
+        fs = float(f["entry"].attrs["fs_hz"])
+        a, b = samples or (0, info["samples"])
+        if not 0 <= a < b <= info["samples"]:
+            raise RecordingError(f"{path}: rows {a}-{b} requested, the recording has {info['samples']}")
+        if info["gaps"]:
+            segs = segments(d["time"][()], fs)
+            if not any(sa <= a and b <= sb for sa, sb in segs):
+                first, count = info["gaps"][0]
+                longest = max(segs, key=lambda s: s[1] - s[0])
+                raise RecordingError(
+                    f"{path}: {len(info['gaps'])} gap(s) in the samples (first: {count} samples missing at "
+                    f"sample {first}); identify a gap-free stretch with --samples A B (longest: rows "
+                    f"{longest[0]} {longest[1]})")
+        rec = Recording(d[input][a:b], d[output][a:b], fs, "base", input, output,
                         (d[input].attrs.get("units", ""), d[output].attrs.get("units", "")), str(path),
                         {"status": info["status"]})
     return rec

@@ -15,7 +15,8 @@ from identify.errors import ShakeidError
 from sim.plc import Command, Fault, Limits, State
 from sim.sweep import SineSweep
 
-from .devices import PLC, DeviceError, SerialSource
+from .devices import PLC, DeviceError
+from .sources import AccelerometerSource
 from .recorder import Recorder
 
 
@@ -38,7 +39,7 @@ class SweepRunner:
     """plc, source: device backends; limits: the configured safety limits; sensitivity: counts per
     m/s^2; on_progress(fraction, status) is called about ten times a second."""
 
-    def __init__(self, plc: PLC, source: SerialSource, limits: Limits, sensitivity: float,
+    def __init__(self, plc: PLC, source: AccelerometerSource, limits: Limits, sensitivity: float,
                  channels=("table_acc", "mass_acc"), heartbeat_s: float = 0.05, on_progress=None,
                  rig_config: dict | None = None):
         self.plc, self.source, self.limits = plc, source, limits
@@ -69,6 +70,8 @@ class SweepRunner:
 
     def run(self, req: SweepRequest, out_path) -> dict:
         self.preflight(req)
+        if hasattr(self.source, "reset_stats"):
+            self.source.reset_stats()
         rec = Recorder(out_path, self.channels, self.source.fs_hz, req.operator,
                        sweep={"f_start_hz": req.f_start_hz, "f_end_hz": req.f_end_hz, "duration_s": req.duration_s,
                               "amplitude_mm": req.amplitude_mm, "settle_s": req.settle_s, "note": req.note},
@@ -115,8 +118,9 @@ class SweepRunner:
         finally:
             self._beating = False
             n_gaps = int(rec.gaps.shape[0])
-            rec.close(status, reason)
-        return {"status": status, "reason": reason, "samples": rec.n, "gaps": n_gaps, "path": str(out_path)}
+            rec.close(status, reason, link_stats=getattr(self.source, "stats", None))
+        return {"status": status, "reason": reason, "samples": rec.n, "gaps": n_gaps, "path": str(out_path),
+                **{f"link_{k}": v for k, v in getattr(self.source, "stats", {}).items()}}
 
     def _safe_stop(self):
         try:

@@ -75,9 +75,9 @@ def _read(args):
     if Path(args.file).suffix.lower() in (".h5", ".hdf5"):  # the DAQ's recordings
         from daq.recorder import read_h5_recording
 
-        rec = read_h5_recording(args.file, args.input or "table_acc", args.output or "mass_acc")
-    else:
-        rec = read_recording(args.file, args.layout, args.input, args.output, args.time, args.fs)
+        return read_h5_recording(args.file, args.input or "table_acc", args.output or "mass_acc",
+                                 tuple(args.samples) if getattr(args, "samples", None) else None)
+    rec = read_recording(args.file, args.layout, args.input, args.output, args.time, args.fs)
     if getattr(args, "samples", None):
         a, b = args.samples
         if not 0 <= a < b <= rec.n_samples:
@@ -256,6 +256,8 @@ def build_parser() -> argparse.ArgumentParser:
     q = sub.add_parser("recordings", help="inspect HDF5 recordings (metadata, status, gaps)")
     q.add_argument("files", nargs="+")
     q.add_argument("--recover", action="store_true", help="mark recordings left running by a crash as aborted")
+    q.add_argument("--process", action="store_true",
+                   help="add processed signals: relative acceleration, velocity, displacement (/entry/processed)")
     q.add_argument("--json", action="store_true")
     q.set_defaults(func=cmd_recordings)
     q = sub.add_parser("sim", help="run the simulated rig: PLC over Modbus TCP, accelerometer stream over TCP")

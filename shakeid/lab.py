@@ -11,7 +11,8 @@ from identify.errors import ShakeidError
 def cmd_demo(args) -> int:
     """The main job on the simulated rig: sweep over Modbus with the serial stream -> HDF5 ->
     identification -> report."""
-    from daq.devices import ModbusPLC, SerialSource
+    from daq.devices import ModbusPLC
+    from daq.sources import SerialSource
     from daq.recorder import read_h5_recording
     from daq.sweep import SweepRequest, SweepRunner
     from identify.identifier import SparseIdentifier
@@ -67,14 +68,19 @@ def _progress_bar(frac, st):
 
 def _sweep_devices(cfg):
     """PLC and accelerometer backends from a rig configuration."""
-    from daq.devices import AdsPLC, ModbusPLC, SerialSource
+    from daq.devices import AdsPLC, ModbusPLC
+    from daq.sources import open_source
 
     if cfg.plc.get("transport", "modbus") == "ads":
         host = cfg.plc.get("host", "127.0.0.1")
         plc = AdsPLC(cfg.plc.get("ams_net_id", f"{host}.1.1"), host, int(cfg.plc.get("ams_port", 851)))
     else:
         plc = ModbusPLC(cfg.plc.get("host", "127.0.0.1"), int(cfg.plc.get("port", 502)))
-    return plc, SerialSource(cfg.stream["url"], cfg.fs_hz)
+    try:
+        return plc, open_source(cfg.stream, cfg.can, cfg.fs_hz, cfg.accelerometers)
+    except Exception:
+        plc.close()
+        raise
 
 
 def cmd_sweep(args) -> int:
@@ -161,6 +167,13 @@ def cmd_recordings(args) -> int:
     for path in args.files:
         if args.recover and recover(path):
             print(f"{path}: was left running by a crash; marked aborted")
+        if args.process:
+            from daq.processing import add_processed
+
+            p = add_processed(path)
+            print(f"{path}: processed signals added (/entry/processed: relative acceleration, velocity, "
+                  f"displacement; band {p['band_hz'][0]:.3g}-{p['band_hz'][1]:.3g} Hz, {p['segments']} segment(s), "
+                  f"{100 * p['valid_fraction']:.1f} % of rows valid)")
         info = describe(path)
         if args.json:
             print(json.dumps(info, default=str))

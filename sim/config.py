@@ -3,7 +3,8 @@
     [plc]      transport ("modbus" | "ads"), host, port (Modbus) / ams_net_id, ams_port (ADS)
     [stream]   url (a pyserial URL: socket://host:port or /dev/ttyUSB0), sensitivity_counts_per_ms2
     [can]      interface, channel, node (python-can; optional: accelerometers on a CAN bus)
-    [sampling] fs_hz, channels (names, in stream order)
+    [sampling] fs_hz, channels (names, in stream order), source ("stream" | "can": where the DAQ
+               reads the accelerometers; the simulated rig always serves both when [can] is set)
     [limits]   max_stroke_mm, max_velocity_ms, max_acceleration_ms2, f_min_hz, f_max_hz,
                max_duration_s, watchdog_s
     [rig]      mass_kg, damping_ns_per_m, stiffness_n_per_m, cubic_stiffness_n_per_m3, input_gain,
@@ -38,6 +39,7 @@ class RigConfig:
     can: dict = field(default_factory=dict)
     fs_hz: float = 2048.0
     channels: tuple[str, ...] = ("table_acc", "mass_acc")
+    accelerometers: str = "stream"  # [sampling] source
     limits: Limits = field(default_factory=Limits)
     rig: RigParameters = field(default_factory=RigParameters.paper_table1)
     sensor_noise_ms2: float = 0.02
@@ -79,7 +81,10 @@ def load_config(path) -> RigConfig:
             raise ConfigError(f"{path}: [plc] transport must be 'modbus' or 'ads'")
     if "stream" in doc:
         cfg.stream.update(_take(doc["stream"], {"url", "sensitivity_counts_per_ms2"}, "stream", path))
-    sampling = _take(doc.get("sampling", {}), {"fs_hz", "channels"}, "sampling", path)
+    sampling = _take(doc.get("sampling", {}), {"fs_hz", "channels", "source"}, "sampling", path)
+    cfg.accelerometers = sampling.get("source", "stream")
+    if cfg.accelerometers not in ("stream", "can") or (cfg.accelerometers == "can" and not cfg.can.get("interface")):
+        raise ConfigError(f"{path}: [sampling] source must be 'stream' or 'can' (which needs [can] interface)")
     cfg.fs_hz = float(sampling.get("fs_hz", cfg.fs_hz))
     cfg.channels = tuple(sampling.get("channels", cfg.channels))
     limits = _take(doc.get("limits", {}), {f.name for f in fields(Limits)}, "limits", path)

@@ -56,11 +56,11 @@ class SimulatedRig:
         self.sensitivity = sensitivity
         # drop_plc_link: Modbus requests fail; cut_plc_link_s: the PLC's TCP server goes away for that
         # long (rig time), connections drop and new ones are refused; drop_frames / corrupt_frames: the
-        # next N stream frames;
+        # next N stream frames; drop_can_frames: the next N CAN frames (samples);
         # stuck: the sensors repeat one value; saturate: the mass sensor reads beyond full scale;
         # disconnect_s: the stream drops its clients and refuses new ones for that long (rig time)
         self.fault_injection = {"drop_plc_link": False, "cut_plc_link_s": 0.0, "drop_frames": 0,
-                                "corrupt_frames": 0, "stuck": False, "saturate": False, "disconnect_s": 0.0}
+                                "corrupt_frames": 0, "drop_can_frames": 0, "stuck": False, "saturate": False, "disconnect_s": 0.0}
         self._modbus = None
         self._plc_cut_until: float | None = None
         self._disconnected_until = -1.0
@@ -197,6 +197,9 @@ class SimulatedRig:
         from . import can_frames
 
         for payload in can_frames.encode(self._can_counter, counts, flags):
+            if self.fault_injection["drop_can_frames"] > 0:
+                self.fault_injection["drop_can_frames"] -= 1
+                continue
             self.can_bus.send(can.Message(arbitration_id=can_frames.BASE_ID + self.can_node, data=payload,
                                           is_extended_id=False))
         self._can_counter = (self._can_counter + counts.shape[0]) & 0xFFFF

@@ -1,7 +1,9 @@
 """A sweep run by the DAQ against the simulated rig over loopback: Modbus PLC, pyserial socket:// stream."""
+import numpy as np
 import pytest
 
-from daq.devices import AdsPLC, ModbusPLC, SerialSource
+from daq.devices import AdsPLC, ModbusPLC
+from daq.sources import SerialSource
 from daq.recorder import describe, read_h5_recording
 from daq.sweep import SweepRefused, SweepRequest, SweepRunner
 from identify.identifier import SparseIdentifier
@@ -109,3 +111,58 @@ def test_shakeid_sweep_against_shakeid_sim(tmp_path):
     finally:
         sim.send_signal(signal.SIGTERM)
         sim.communicate(timeout=20)
+
+
+def test_sigkill_of_the_sweep_process_the_watchdog_stops_the_table(tmp_path):
+    """`shakeid sweep` killed with SIGKILL mid-sweep: the PLC's watchdog stops the table (no client is left
+    to do it), the file opens with its samples up to the last flush, and the next start marks it."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    import h5py
+
+    from sim.plc import Fault, State
+
+    rig = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=2.0)), speed=SPEED).start()
+    exe = str(Path(sys.executable).with_name("shakeid"))
+    cfg = tmp_path / "rig.toml"
+    host, port = rig.endpoints["modbus"]
+    cfg.write_text(f'[plc]\nport = {port}\n[stream]\nurl = "{rig.endpoints["stream"]}"\n')
+    out = tmp_path / "killed.h5"
+    proc = subprocess.Popen([exe, "sweep", "--config", str(cfg), "--f-start-hz", "1", "--f-end-hz", "20",
+                             "--duration-s", "120", "--amplitude-mm", "1.3", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        end = time.monotonic() + 60
+        while rig.call(lambda: rig.plc.status()["elapsed_s"]) < 30.0:  # 30 s of rig time into the sweep
+            assert proc.poll() is None and time.monotonic() < end, proc.stderr.read() if proc.poll() else "timeout"
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+        killed_at = rig.call(lambda: rig.plc.time_s)
+        assert rig.call(lambda: rig.plc.state) == State.RUNNING  # nobody stopped it yet
+        while not rig.call(lambda: rig.plc.state == State.FAULT and rig.plc._table_at_rest()):
+            assert rig.call(lambda: rig.plc.time_s) - killed_at < 10.0, "the watchdog did not stop the table"
+            time.sleep(0.05)
+        assert rig.call(lambda: rig.plc.fault) == Fault.WATCHDOG
+        # heartbeat silent > 2 s, then the 0.2 s ramp: the table is at rest within 2 s + ramp + ticks
+        stopped = rig.call(lambda: rig.plc.stop_t + rig.plc.stop_ramp) - killed_at
+        assert stopped < 2.0 + 0.2 + 1.0 + 0.1 * SPEED, stopped
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        rig.stop()
+    with h5py.File(out, "r") as f:  # a plain open, no recovery needed
+        assert f["entry"].attrs["status"] == "running"
+        n = f["entry/data/time"].shape[0]
+        # 30 s of rig time had been recorded at the kill; at 10x one flush interval (1 s wall) is 10 s of
+        # rig time, so >= 10 s must be on disk even with a lagging reader (the precise bound is
+        # tests/daq/test_recorder.py's SIGKILL test)
+        assert n >= 10 * 2048
+        t = f["entry/data/time"][()]
+        assert np.allclose(np.diff(t), 1 / 2048) and np.all(np.isfinite(f["entry/data/mass_acc"][()]))
+    p = subprocess.run([exe, "recordings", "--recover", str(out)], capture_output=True, text=True)
+    assert p.returncode == 0 and "marked aborted" in p.stdout and describe(out)["status"] == "aborted"

@@ -22,6 +22,7 @@ def test_shipped_examples_load():
     ("[rig.effects]\nwarp = 1.0\n", "unknown effect"),
     ("[sampling\nfs_hz = 1\n", "not valid TOML"),
     ("[sim]\nspeed = -1\n", "positive"),
+    ("[sampling]\nsource = 'can'\n", "source must be"),
 ])
 def test_bad_configs_are_refused_by_name(tmp_path, text, message):
     path = tmp_path / "rig.toml"

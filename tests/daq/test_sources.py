@@ -1,0 +1,159 @@
+"""Accelerometer sources against the simulated rig: the framed TCP stream through pyserial socket:// and
+CAN through a python-can bus. Lost and corrupted frames must arrive in the file as counted gaps."""
+import numpy as np
+import pytest
+
+from daq.devices import ModbusPLC
+from daq.recorder import describe, read_h5_recording
+from daq.sources import CanSource, SerialSource
+from daq.sweep import SweepRequest, SweepRunner
+from identify.errors import RecordingError
+from identify.identifier import SparseIdentifier
+from sim.plc import Limits, PLCConfig
+from sim.server import SENSITIVITY, SimulatedRig
+
+FRAME = 64  # samples per stream frame (the simulated rig's default)
+
+
+@pytest.fixture
+def can_rig(request):
+    channel = f"shakeid-{request.node.name}"
+    r = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=3.0)), speed=10.0, can_interface="virtual",
+                     can_channel=channel).start()
+    r.test_can_channel = channel
+    yield r
+    r.stop()
+
+
+def test_sweep_recorded_over_can_identifies_the_rig(can_rig, tmp_path):
+    plc = ModbusPLC(*can_rig.endpoints["modbus"])
+    source = CanSource("virtual", can_rig.test_can_channel, 2048.0)
+    try:
+        result = SweepRunner(plc, source, Limits(), SENSITIVITY).run(SweepRequest(1.0, 20.0, 40.0, 1.3, 3.0),
+                                                                      tmp_path / "can.h5")
+    finally:
+        plc.close()
+        source.close()
+    assert result["status"] == "complete" and result["gaps"] == 0, result
+    assert result["link_frames"] == result["samples"] and result["link_frames_lost"] == 0
+    info = describe(tmp_path / "can.h5")
+    assert info["link_frames"] == info["samples"] > 40 * 2048
+    model = SparseIdentifier(validate=False).fit(read_h5_recording(tmp_path / "can.h5")).model_
+    truth = can_rig.plc.model.equations["q1_dot"]
+    assert set(model.equations["q1_dot"]) == set(truth)
+    for term, c in truth.items():
+        assert abs(model.coefficient("q1_dot", term) / c - 1) < 0.03, term
+
+
+def _sweep_with_faults(rig, source, tmp_path, faults: list[dict]):
+    """Run a short sweep; inject faults[k] at successive progress points; return (result, describe)."""
+    plc = ModbusPLC(*rig.endpoints["modbus"])
+    runner = SweepRunner(plc, source, Limits(), SENSITIVITY)
+    pending = list(faults)
+
+    def progress(frac, st):
+        if pending and frac > 0.2 * (len(faults) - len(pending) + 1):
+            rig.call(rig.fault_injection.update, pending.pop(0))
+
+    runner.on_progress = progress
+    try:
+        result = runner.run(SweepRequest(2.0, 10.0, 20.0, 1.0, 1.0), tmp_path / "faults.h5")
+    finally:
+        plc.close()
+        source.close()
+    assert not pending
+    return result, describe(tmp_path / "faults.h5")
+
+
+def test_dropped_and_corrupted_stream_frames_are_counted_gaps(tmp_path):
+    rig = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=3.0)), speed=10.0).start()
+    try:
+        result, info = _sweep_with_faults(rig, SerialSource(rig.endpoints["stream"], 2048.0), tmp_path,
+                                          [{"drop_frames": 3}, {"corrupt_frames": 2}])
+    finally:
+        rig.stop()
+    assert result["status"] == "complete"
+    assert [count for _, count in info["gaps"]] == [3 * FRAME, 2 * FRAME]  # two gaps, exact lengths
+    assert info["link_frames_lost"] == 5 and info["link_frames_corrupt"] == 2
+    assert info["gaps"][0][0] < info["gaps"][1][0]  # listed in order
+    with pytest.raises(RecordingError, match="2 gap"):
+        read_h5_recording(tmp_path / "faults.h5")  # never spliced into one record
+
+
+def test_lost_can_frames_are_counted_gaps(can_rig, tmp_path):
+    source = CanSource("virtual", can_rig.test_can_channel, 2048.0)
+    result, info = _sweep_with_faults(can_rig, source, tmp_path, [{"drop_can_frames": 100}])
+    assert result["status"] == "complete"
+    assert [count for _, count in info["gaps"]] == [100] and info["link_frames_lost"] == 100
+    assert info["samples"] == info["link_frames"]
+
+
+def test_can_counter_wraps_without_a_false_gap(can_rig):
+    """The 16-bit counter wraps every 32 s at 2048 Hz: the index keeps counting up."""
+    source = CanSource("virtual", can_rig.test_can_channel, 2048.0)
+    try:
+        blocks, n = [], 0
+        while n < 70000:  # ~3.5 s of wall time at 10x: more than one full turn of the counter
+            got = source.read()
+            blocks += got
+            n += sum(b.shape[0] for _, b in got)
+    finally:
+        source.close()
+    index = np.concatenate([first + np.arange(b.shape[0]) for first, b in blocks])
+    assert index[-1] >= 65536  # the counter wrapped during the run
+    assert np.all(np.diff(index) == 1) and source.stats["frames_lost"] == 0
+
+
+def test_missing_can_bus_is_a_clear_error():
+    from daq.devices import DeviceError
+
+    with pytest.raises(DeviceError, match="accelerometers on CAN nosuchinterface"):
+        CanSource("nosuchinterface", "x", 2048.0)
+
+
+def test_shakeid_sweep_over_can_across_processes(tmp_path):
+    """Three real processes on loopback: a python-can-remote relay, `shakeid sim` sending the samples as
+    CAN frames through it, and `shakeid sweep` with [sampling] source = "can" recording them."""
+    import signal
+    import socket
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    from sim.server import free_port
+
+    exe = str(Path(sys.executable).with_name("shakeid"))
+    relay_port, mb, st = free_port(), free_port(), free_port()
+    relay = subprocess.Popen([sys.executable, "-m", "can_remote", "-i", "virtual", "-c", "daq", "-H", "127.0.0.1",
+                              "-p", str(relay_port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    cfg = tmp_path / "rig.toml"
+    # 4x: 8192 frames/s, inside the relay's measured lossless range (shared notes: 2-10 kHz)
+    cfg.write_text(f'[plc]\nport = {mb}\n[stream]\nurl = "socket://127.0.0.1:{st}"\n'
+                   f'[can]\ninterface = "remote"\nchannel = "ws://127.0.0.1:{relay_port}/"\n'
+                   f'[sampling]\nsource = "can"\n[limits]\nwatchdog_s = 1.0\n[sim]\nspeed = 4\n')
+    sim = None
+    try:
+        end = time.time() + 15.0
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", relay_port), timeout=0.5).close()
+                break
+            except OSError:
+                assert time.time() < end, "python-can-remote relay did not start"
+                time.sleep(0.1)
+        sim = subprocess.Popen([exe, "sim", "--config", str(cfg)], stdout=subprocess.PIPE, text=True)
+        assert "CAN remote" in sim.stdout.readline()
+        out = tmp_path / "can.h5"
+        p = subprocess.run([exe, "sweep", "--config", str(cfg), "--f-start-hz", "2", "--f-end-hz", "10",
+                            "--duration-s", "8", "--amplitude-mm", "1", "--settle-s", "1", "--out", str(out)],
+                           capture_output=True, text=True, timeout=120)
+        assert p.returncode == 0 and "complete" in p.stdout and "0 gap(s)" in p.stdout, p.stdout + p.stderr
+    finally:
+        if sim is not None:
+            sim.send_signal(signal.SIGTERM)
+            sim.communicate(timeout=20)
+        relay.terminate()
+        relay.wait(10)
+    info = describe(out)
+    assert info["link_frames"] == info["samples"] >= 9 * 2048 and info["link_frames_lost"] == 0
