@@ -38,8 +38,12 @@ class SimulatedRig:
                  stream_port: int = 0, speed: float = 1.0, tick_s: float = 0.01, frame_samples: int = 64,
                  sensitivity: float = SENSITIVITY, ads_address: str | None = None,
                  can_interface: str | None = None, can_channel: str | None = None, can_node: int = 0,
-                 stream_host: str | None = None):
+                 stream_host: str | None = None, redundant_sensors: bool = False):
         self.plc = RigPLC(config)
+        # a second accelerometer beside each of the two (own noise): 4 stream channels, as on rigs that
+        # carry redundant sensors; the CAN frames keep the first two
+        self.redundant_sensors = redundant_sensors
+        self._rng = np.random.default_rng(1)
         self.stream_host = stream_host or host
         # CAN output (python-can): e.g. interface "virtual" (in-process) or "remote" (python-can-remote)
         self.can_interface, self.can_channel, self.can_node = can_interface, can_channel, can_node
@@ -80,7 +84,7 @@ class SimulatedRig:
         return {"modbus": (self.host, self.modbus_port), "stream": f"socket://{self.stream_host}:{self.stream_port}",
                 "ads": (f"{self.ads_address}.1.1", 851, self.ads_address) if self.ads_address else None,
                 "fs_hz": self.plc.config.fs_hz, "sensitivity_counts_per_ms2": self.sensitivity,
-                "channels": ["table_acc", "mass_acc"]}
+                "channels": ["table_acc", "mass_acc"] + (["table_acc_2", "mass_acc_2"] if self.redundant_sensors else [])}
 
     # -- lifecycle ------------------------------------------------------------------------------------
     def start(self, timeout: float = 10.0) -> "SimulatedRig":
@@ -226,7 +230,13 @@ class SimulatedRig:
                 block = block.copy()
                 block[:, 1] = np.where(block[:, 1] >= 0, 2.0, -2.0) * 32767 / self.sensitivity
             counts, flags = frames.to_counts(block, self.sensitivity)
-            data = frames.encode(self._seq, int(round(first / fs * 1e6)), counts, flags)
+            if self.redundant_sensors:
+                noise = self.plc.config.mass_sensor.noise_ms2
+                second = block + self._rng.normal(0.0, noise, block.shape)
+                data_counts = np.hstack([counts, frames.to_counts(second, self.sensitivity)[0]])
+            else:
+                data_counts = counts
+            data = frames.encode(self._seq, int(round(first / fs * 1e6)), data_counts, flags)
             self._seq += 1
             if self.can_bus is not None:
                 self._send_can(counts, flags)
