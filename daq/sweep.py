@@ -37,14 +37,16 @@ class SweepRequest:
 
 class SweepRunner:
     """plc, source: device backends; limits: the configured safety limits; sensitivity: counts per
-    m/s^2; on_progress(fraction, status) is called about ten times a second."""
+    m/s^2; on_progress(fraction, status) is called about ten times a second; on_samples(first index,
+    block (n, channels) in m/s^2) with every block recorded (live views)."""
 
     def __init__(self, plc: PLC, source: AccelerometerSource, limits: Limits, sensitivity: float,
                  channels=("table_acc", "mass_acc"), heartbeat_s: float = 0.05, on_progress=None,
-                 rig_config: dict | None = None):
+                 rig_config: dict | None = None, on_samples=None):
         self.plc, self.source, self.limits = plc, source, limits
         self.sensitivity, self.channels = sensitivity, tuple(channels)
         self.heartbeat_s, self.on_progress, self.rig_config = heartbeat_s, on_progress, rig_config or {}
+        self.on_samples = on_samples
         self.abort_requested = threading.Event()
         self._lock = threading.Lock()
 
@@ -89,7 +91,10 @@ class SweepRunner:
             last_poll = 0.0
             while True:
                 for index, counts in self.source.read():
-                    rec.append(index, counts / self.sensitivity)
+                    block = counts / self.sensitivity
+                    rec.append(index, block)
+                    if self.on_samples:
+                        self.on_samples(index, block)
                 if time.monotonic() - last_poll >= 0.1:
                     last_poll = time.monotonic()
                     with self._lock:

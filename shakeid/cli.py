@@ -12,7 +12,7 @@ from pathlib import Path
 
 from identify.errors import ShakeidError
 
-from .lab import cmd_demo, cmd_recordings, cmd_sim, cmd_sweep
+from .lab import cmd_demo, cmd_recordings, cmd_serve, cmd_sim, cmd_sweep
 
 EXIT_USAGE = 2
 
@@ -267,6 +267,15 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--stream-port", type=int, help="default: the config's [stream] url port, else 5021")
     q.add_argument("--speed", type=float, help="rig seconds per wall second (PLC and streams; default 1)")
     q.set_defaults(func=cmd_sim)
+    q = sub.add_parser("serve", help="the HTTP service: sweeps, recordings, models (FastAPI + uvicorn)")
+    q.add_argument("--config", metavar="RIG.toml", help="rig + [server] configuration; none: embedded simulated rig")
+    q.add_argument("--host", default="127.0.0.1")
+    q.add_argument("--port", type=int, default=8000)
+    q.add_argument("--data-dir", help="recordings, models, catalog (default: [server] data_dir, SHAKEID_DATA_DIR, "
+                                      "./shakeid-data)")
+    q.add_argument("--sim-speed", type=float, help="embedded simulated rig: rig seconds per wall second")
+    q.add_argument("--log-level", default="warning", choices=("debug", "info", "warning", "error"))
+    q.set_defaults(func=cmd_serve)
     q = sub.add_parser("simulate", help="write a synthetic recording of the simulated rig (CSV + truth JSON)")
     q.add_argument("--out", required=True, metavar="FILE.csv")
     _add_sweep_options(q)

@@ -184,3 +184,23 @@ def cmd_recordings(args) -> int:
               f"{len(info['gaps'])} gap(s); started {info['start_time']} by {info['operator'] or '-'}; "
               f"sweep {info['sweep'] or '-'}")
     return 0
+
+
+def cmd_serve(args) -> int:
+    """The HTTP service (FastAPI under uvicorn); an embedded simulated rig when there is no --config."""
+    import uvicorn
+
+    from server.app import create_app
+    from server.settings import Settings
+
+    settings = Settings.load(args.config, data_dir=args.data_dir)
+    if args.sim_speed is not None:
+        settings.sim_speed = args.sim_speed
+    app = create_app(settings)  # prepares the data directory (and the generated token, if any)
+    rig = f"rig of {args.config}" if args.config else f"embedded simulated rig at {settings.sim_speed:g}x"
+    print(f"shakeid serve: http://{args.host}:{args.port}/ ({rig}); data in {settings.data_dir.resolve()}", flush=True)
+    if settings.generated_token:
+        print(f"shakeid serve: no tokens configured; operator token: {settings.generated_token} "
+              f"(kept in {settings.data_dir / 'operator-token'})", flush=True)
+    uvicorn.run(app, host=args.host, port=args.port, log_level=args.log_level)
+    return 0

@@ -1,0 +1,328 @@
+"""The FastAPI application: `create_app(settings)`; served by uvicorn (`shakeid serve`).
+
+Sync route functions run in the server's thread pool, async ones on the event loop; nothing here
+computes: identification runs in the job pool (server/jobs.py), sweeps in their own thread
+(server/rig.py), and emergency stop has a thread of its own so it never waits behind other requests.
+"""
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import asynccontextmanager
+from pathlib import Path as FsPath
+
+from fastapi import Depends, FastAPI, HTTPException, Path, Query, Request
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, StreamingResponse
+
+from daq.devices import DeviceError
+from daq.recorder import recover_directory
+from daq.sweep import SweepRequest
+
+from . import schemas
+from .auth import require
+from .catalog import ID_PATTERN, Catalog, new_id
+from .jobs import JobQueue
+from .rig import RigBusy, RigService
+from .settings import Settings
+from .uploads import store_upload
+
+def Id():  # noqa: N802 - a fresh parameter object per route (FastAPI binds each to its own name)
+    return Path(pattern=ID_PATTERN, description="12 hex digits")
+PLOT_NAME = r"^[a-z0-9_]{1,40}\.png$"
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("shakeid")
+    except Exception:
+        return "unknown"
+
+
+def create_app(settings: Settings) -> FastAPI:
+    settings.prepare()
+    state: dict = {}
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        catalog = Catalog(settings.data_dir / "catalog.sqlite")
+        for note in catalog.recover_after_restart():
+            print(f"shakeid serve: {note}", flush=True)
+        for path in recover_directory(settings.data_dir / "recordings"):  # files a dead service left running
+            catalog.update("recordings", path.stem, status="aborted")
+            print(f"shakeid serve: recording {path.stem}: was left running; marked aborted, data kept", flush=True)
+        jobs = JobQueue(catalog, settings.data_dir / "results", settings.identify_workers)
+        jobs.start()
+        rig = RigService(settings.rig, settings.data_dir, settings.sim_speed)
+        rig.start()
+        state.update(catalog=catalog, jobs=jobs, rig=rig, estop_pool=ThreadPoolExecutor(1, "estop"))
+        yield
+        rig.stop()
+        jobs.stop()
+        state["estop_pool"].shutdown(wait=False)
+        catalog.close()
+
+    app = FastAPI(title="shakeid", version=_version(), lifespan=lifespan,
+                  description="Sine sweeps on the shaker rig, HDF5 recordings, sparse nonlinear models.")
+    viewer, operator = Depends(require(settings, "viewer")), Depends(require(settings, "operator"))
+    errors = {401: {"model": schemas.Problem}, 403: {"model": schemas.Problem}}
+
+    def catalog() -> Catalog:
+        return state["catalog"]
+
+    def recording_or_404(rec_id: str) -> dict:
+        rec = catalog().get("recordings", rec_id)
+        if rec is None:
+            raise HTTPException(404, f"no recording {rec_id}")
+        return rec
+
+    # -- health, rig ----------------------------------------------------------------------------------
+    @app.get("/api/health", response_model=schemas.Health, tags=["service"])
+    def health():
+        """Liveness, without a token (for supervisors and compose health checks)."""
+        return {"status": "ok", "version": _version(), "rig_simulated": state["rig"].sim is not None,
+                "jobs_queued": len(catalog().list("jobs", "state = 'queued'"))}
+
+    @app.get("/api/rig", tags=["rig"], responses=errors, dependencies=[viewer])
+    def rig_status() -> dict:
+        """PLC state, accelerometers, safety limits, the active sweep."""
+        return state["rig"].status()
+
+    @app.post("/api/rig/estop", response_model=schemas.EstopOut, tags=["rig"], dependencies=[operator],
+              responses={**errors, 503: {"model": schemas.Problem}})
+    async def estop():
+        """Emergency stop: the table ramps to rest at once; an active sweep ends aborted."""
+        loop = asyncio.get_running_loop()
+        try:
+            return await loop.run_in_executor(state["estop_pool"], state["rig"].emergency_stop)
+        except DeviceError as exc:
+            raise HTTPException(503, f"emergency stop not delivered: {exc}; use the hardware stop") from None
+
+    @app.post("/api/rig/reset", status_code=204, tags=["rig"], dependencies=[operator], responses=errors)
+    def reset():
+        """Clear a fault or an emergency stop once the table is at rest."""
+        try:
+            state["rig"].reset()
+        except DeviceError as exc:
+            raise HTTPException(503, str(exc)) from None
+
+    # -- sweeps -----------------------------------------------------------------------------------------
+    @app.post("/api/sweeps", status_code=202, response_model=schemas.Accepted, tags=["sweeps"],
+              responses={**errors, 409: {"model": schemas.Problem}, 422: {"model": schemas.Problem}})
+    def start_sweep(body: schemas.SweepIn, who: str = operator):
+        """Start a sweep: refused with 422 naming the limit when unsafe, 409 while another runs."""
+        rig = state["rig"]
+        problem = rig.check(body.f_start_hz, body.f_end_hz, body.duration_s, body.amplitude_mm)
+        if problem:
+            return JSONResponse({"detail": f"sweep refused: {problem}"}, status_code=422)
+        if rig.active is not None:
+            return JSONResponse({"detail": f"another sweep is running ({rig.active['id']}); abort it or wait"},
+                                status_code=409)
+        sweep_id, rec_id = new_id(), new_id()
+        path = settings.data_dir / "recordings" / f"{rec_id}.h5"
+        now = time.time()
+        last = {"t": 0.0}
+
+        def on_progress(frac, st):
+            if time.monotonic() - last["t"] >= 0.2 or frac >= 1.0:
+                last["t"] = time.monotonic()
+                catalog().update("sweeps", sweep_id, state="running", progress=round(frac, 4))
+
+        def on_end(result, error):
+            _sweep_ended(sweep_id, rec_id, result, error)
+
+        req = SweepRequest(body.f_start_hz, body.f_end_hz, body.duration_s, body.amplitude_mm, body.settle_s,
+                           operator=who, note=body.note)
+        catalog().insert("sweeps", id=sweep_id, created=now, updated=now, state="queued", progress=0.0,
+                         request=body.model_dump(), recording_id=rec_id, error=None, operator=who)
+        try:
+            rig.begin_sweep(sweep_id, req, path, on_progress, on_end)
+        except RigBusy as busy:  # lost a race with another request: as if it had come first
+            catalog().delete("sweeps", sweep_id)
+            return JSONResponse({"detail": f"another sweep is running ({busy}); abort it or wait"}, status_code=409)
+        except DeviceError as exc:
+            catalog().update("sweeps", sweep_id, state="failed", error=str(exc), recording_id=None)
+            return JSONResponse({"detail": f"rig not reachable: {exc}"}, status_code=503)
+        catalog().insert("recordings", id=rec_id, created=now, origin="sweep", filename=path.name, path=str(path),
+                         status="running", sweep_id=sweep_id, info={"sweep": body.model_dump()})
+        return {"id": sweep_id, "state": "queued"}
+
+    def _sweep_ended(sweep_id, rec_id, result, error):
+        if result is None:  # refused at preflight or failed before recording
+            catalog().update("sweeps", sweep_id, state="failed", error=error, recording_id=None)
+            if catalog().get("recordings", rec_id):
+                catalog().update("recordings", rec_id, status="failed")
+            return
+        sweep_state = {"complete": "completed"}.get(result["status"], "aborted")
+        catalog().update("sweeps", sweep_id, state=sweep_state, error=result["reason"] or None,
+                         progress=1.0 if sweep_state == "completed" else None)
+        info = {k: v for k, v in result.items() if k != "path"}
+        catalog().update("recordings", rec_id, status=result["status"], info={**recording_or_404(rec_id)["info"], **info})
+        if sweep_state == "completed" and settings.auto_identify:
+            state["jobs"].submit("identify", rec_id, {})
+
+    @app.get("/api/sweeps", response_model=list[schemas.SweepOut], tags=["sweeps"], dependencies=[viewer],
+             responses=errors)
+    def list_sweeps(limit: int = Query(50, ge=1, le=500)):
+        return catalog().list("sweeps", limit=limit)
+
+    @app.get("/api/sweeps/{sweep_id}", response_model=schemas.SweepOut, tags=["sweeps"], dependencies=[viewer],
+             responses={**errors, 404: {"model": schemas.Problem}})
+    def get_sweep(sweep_id: str = Id()):
+        sweep = catalog().get("sweeps", sweep_id)
+        if sweep is None:
+            raise HTTPException(404, f"no sweep {sweep_id}")
+        return sweep
+
+    @app.post("/api/sweeps/{sweep_id}/abort", status_code=202, response_model=schemas.Accepted, tags=["sweeps"],
+              dependencies=[operator], responses={**errors, 404: {"model": schemas.Problem},
+                                                   409: {"model": schemas.Problem}})
+    def abort_sweep(sweep_id: str = Id()):
+        """Operator abort: the table is commanded to stop, the recording ends 'aborted'."""
+        sweep = catalog().get("sweeps", sweep_id)
+        if sweep is None:
+            raise HTTPException(404, f"no sweep {sweep_id}")
+        if not state["rig"].abort(sweep_id):
+            raise HTTPException(409, f"sweep {sweep_id} is {sweep['state']}, not running")
+        return {"id": sweep_id, "state": "aborting"}
+
+    # -- recordings -------------------------------------------------------------------------------------
+    @app.get("/api/recordings", response_model=list[schemas.RecordingOut], tags=["recordings"],
+             dependencies=[viewer], responses=errors)
+    def list_recordings(limit: int = Query(50, ge=1, le=500)):
+        return catalog().list("recordings", limit=limit)
+
+    @app.get("/api/recordings/{rec_id}", response_model=schemas.RecordingOut, tags=["recordings"],
+             dependencies=[viewer], responses={**errors, 404: {"model": schemas.Problem}})
+    def get_recording(rec_id: str = Id()):
+        return recording_or_404(rec_id)
+
+    @app.get("/api/recordings/{rec_id}/file", tags=["recordings"], dependencies=[viewer],
+             response_class=FileResponse, responses={**errors, 404: {"model": schemas.Problem}})
+    def recording_file(rec_id: str = Id()):
+        """The recording as stored (HDF5 from sweeps; CSV, MAT or HDF5 as uploaded)."""
+        rec = recording_or_404(rec_id)
+        return FileResponse(rec["path"], filename=rec["filename"], media_type="application/octet-stream")
+
+    @app.post("/api/recordings", status_code=201, response_model=schemas.RecordingOut, tags=["recordings"],
+              responses={**errors, 413: {"model": schemas.Problem}, 422: {"model": schemas.Problem}})
+    async def upload_recording(request: Request, who: str = operator,
+                               filename: str = Query(..., pattern=r"^[\w.\-]{1,100}\.(csv|mat|h5|hdf5)$",
+                                                     description="name with its type: .csv, .mat, .h5"),
+                               layout: str = Query("base", pattern="^(base|force)$"),
+                               input: str | None = Query(None, max_length=64),
+                               output: str | None = Query(None, max_length=64),
+                               time_column: str | None = Query(None, max_length=64),
+                               fs_hz: float | None = Query(None, gt=0, le=1e7)):
+        """Upload a recording from elsewhere as the request body (raw bytes); it is read once to check it,
+        and refused with 422 naming the problem if it is not a usable recording."""
+        options = {k: v for k, v in {"layout": layout, "input": input, "output": output, "time": time_column,
+                                     "fs_hz": fs_hz}.items() if v is not None}
+        rec_id = new_id()
+        path, info = await store_upload(request, settings.data_dir / "recordings", rec_id, filename, options,
+                                        int(settings.max_upload_mb * 2**20))
+        return catalog().insert("recordings", id=rec_id, created=time.time(), origin="upload", filename=filename,
+                                path=str(path), status="complete", sweep_id=None,
+                                info={"read_options": options, "uploaded_by": who, **info})
+
+    @app.get("/api/recordings/{rec_id}/live", tags=["recordings"], dependencies=[viewer],
+             responses={**errors, 404: {"model": schemas.Problem}, 200: {"content": {"text/event-stream": {}}}})
+    async def live(rec_id: str = Id(), after: int = Query(0, ge=0, description="last sequence number seen")):
+        """Server-sent events while recording: `samples` events with decimated samples (about 200 per
+        second: t in s, one list per channel in m/s^2), then `end` with the recording's status."""
+        rec = recording_or_404(rec_id)
+        buffer = state["rig"].live(rec_id)
+
+        async def events():
+            seq = after
+            while buffer is not None:
+                points = buffer.since(seq)
+                if points:
+                    seq = points[-1][0]
+                    cols = list(zip(*points))
+                    payload = {"seq": seq, "t": cols[1], **{c: cols[2 + j] for j, c in enumerate(buffer.channels)}}
+                    yield f"event: samples\nid: {seq}\ndata: {json.dumps(payload)}\n\n"
+                elif buffer.done:
+                    break
+                await asyncio.sleep(0.1)
+            status = (catalog().get("recordings", rec_id) or rec)["status"]
+            yield f"event: end\ndata: {json.dumps({'recording_id': rec_id, 'status': status})}\n\n"
+
+        return StreamingResponse(events(), media_type="text/event-stream", headers={"Cache-Control": "no-cache"})
+
+    # -- jobs, models, plots ------------------------------------------------------------------------------
+    def _submit(kind: str, rec_id: str, options: dict):
+        rec = recording_or_404(rec_id)
+        if rec["status"] == "running":
+            raise HTTPException(409, f"recording {rec_id} is still being recorded")
+        return state["jobs"].submit(kind, rec_id, {**rec["info"].get("read_options", {}), **options})
+
+    @app.post("/api/recordings/{rec_id}/identify", status_code=202, response_model=schemas.JobOut,
+              tags=["jobs"], dependencies=[operator], responses={**errors, 404: {"model": schemas.Problem}})
+    def identify(body: schemas.IdentifyIn, rec_id: str = Id()):
+        """Queue an identification with the CLI's options; poll GET /api/jobs/{id}."""
+        return _submit("identify", rec_id, body.model_dump(exclude_none=True))
+
+    @app.post("/api/recordings/{rec_id}/explain", status_code=202, response_model=schemas.JobOut,
+              tags=["jobs"], dependencies=[operator], responses={**errors, 404: {"model": schemas.Problem}})
+    def explain(body: schemas.ExplainIn, rec_id: str = Id()):
+        """Queue a discrepancy analysis (`shakeid explain`): missing effect, gap before/after."""
+        return _submit("explain", rec_id, body.model_dump(exclude_none=True))
+
+    @app.get("/api/jobs", response_model=list[schemas.JobOut], tags=["jobs"], dependencies=[viewer],
+             responses=errors)
+    def list_jobs(limit: int = Query(50, ge=1, le=500)):
+        return catalog().list("jobs", limit=limit)
+
+    @app.get("/api/jobs/{job_id}", response_model=schemas.JobOut, tags=["jobs"], dependencies=[viewer],
+             responses={**errors, 404: {"model": schemas.Problem}})
+    def get_job(job_id: str = Id()):
+        job = catalog().get("jobs", job_id)
+        if job is None:
+            raise HTTPException(404, f"no job {job_id}")
+        return job
+
+    def _latest_result(rec_id: str, kind: str, name: str) -> FsPath:
+        recording_or_404(rec_id)
+        for job in catalog().list("jobs", "recording_id = ? AND kind = ? AND state IN ('running', 'completed')",
+                                  (rec_id, kind)):
+            path = FsPath(job["result_dir"]) / name
+            if path.exists():
+                return path
+        raise HTTPException(404, f"no {kind} result for recording {rec_id} yet")
+
+    @app.get("/api/recordings/{rec_id}/model", tags=["jobs"], dependencies=[viewer],
+             responses={**errors, 404: {"model": schemas.Problem}})
+    def model(rec_id: str = Id()) -> dict:
+        """The latest identified model: the same JSON as `shakeid identify --json`."""
+        return json.loads(_latest_result(rec_id, "identify", "model.json").read_text())
+
+    @app.get("/api/recordings/{rec_id}/explanation", tags=["jobs"], dependencies=[viewer],
+             responses={**errors, 404: {"model": schemas.Problem}})
+    def explanation(rec_id: str = Id()) -> dict:
+        """The latest discrepancy analysis: the same JSON as `shakeid explain --json`."""
+        return json.loads(_latest_result(rec_id, "explain", "explain.json").read_text())
+
+    @app.get("/api/recordings/{rec_id}/plots", tags=["jobs"], dependencies=[viewer],
+             responses={**errors, 404: {"model": schemas.Problem}})
+    def plots(rec_id: str = Id()) -> list[str]:
+        """Names of the report's figures (PNG) of the latest identification."""
+        report = _latest_result(rec_id, "identify", "report")
+        return sorted(p.name for p in report.glob("*.png"))
+
+    @app.get("/api/recordings/{rec_id}/plots/{name}", tags=["jobs"], dependencies=[viewer],
+             response_class=FileResponse, responses={**errors, 404: {"model": schemas.Problem}})
+    def plot(rec_id: str = Id(), name: str = Path(pattern=PLOT_NAME)):
+        report = _latest_result(rec_id, "identify", "report")
+        if name not in {p.name for p in report.glob("*.png")}:  # only files that are there, by exact name
+            raise HTTPException(404, f"no figure {name}")
+        return FileResponse(report / name, media_type="image/png")
+
+    @app.get("/", response_class=HTMLResponse, include_in_schema=False)
+    def dashboard():
+        return (FsPath(__file__).with_name("dashboard.html")).read_text()
+
+    return app

@@ -1,0 +1,34 @@
+"""Bearer tokens from the configuration, with roles: `viewer` reads; `operator` also acts.
+
+No or unknown token: 401 (with WWW-Authenticate); a known token without the role: 403. Browsers'
+EventSource and <img> cannot send headers, so GET requests may carry the token as `?access_token=`
+instead (it then shows in access logs: keep the service on the lab network).
+"""
+from __future__ import annotations
+
+import hashlib
+import hmac
+
+from fastapi import HTTPException, Request
+
+from .settings import ROLES, Settings
+
+
+def require(settings: Settings, role: str):
+    """A dependency that returns who calls ("operator 3fa0c2d1": role and a token fingerprint) or raises."""
+    rank = ROLES.index(role)
+
+    def check(request: Request) -> str:
+        header = request.headers.get("authorization", "")
+        token = header[7:].strip() if header.lower().startswith("bearer ") else ""
+        if not token and request.method == "GET":
+            token = request.query_params.get("access_token", "")
+        found = next((r for t, r in settings.tokens.items() if hmac.compare_digest(t.encode(), token.encode())), None)
+        if found is None:
+            raise HTTPException(401, "a valid bearer token is needed (Authorization: Bearer <token>)",
+                                headers={"WWW-Authenticate": "Bearer"})
+        if ROLES.index(found) < rank:
+            raise HTTPException(403, f"this needs the {role} role; the token is {found}")
+        return f"{found} {hashlib.sha256(token.encode()).hexdigest()[:8]}"  # who, without the secret
+
+    return check

@@ -1,0 +1,84 @@
+"""Identification jobs: queued in the catalog, run in a process pool, outside the event loop.
+
+A dispatcher thread takes queued jobs in order and keeps up to `workers` of them in the pool; each job
+writes into <data_dir>/results/<job id>/. Jobs outlive the service: the queue is the catalog, and on
+start `Catalog.recover_after_restart` puts jobs a dead service left running back in the queue.
+"""
+from __future__ import annotations
+
+import multiprocessing
+import threading
+import time
+from concurrent.futures import Future, ProcessPoolExecutor
+from pathlib import Path
+
+from identify.errors import ShakeidError
+
+from . import worker
+from .catalog import Catalog, new_id
+
+
+class JobQueue:
+    def __init__(self, catalog: Catalog, results_dir: Path, workers: int = 1):
+        self.catalog, self.results_dir, self.workers = catalog, Path(results_dir), workers
+        # spawn, not fork: the service has threads (uvicorn, rig, dispatcher) a fork would copy mid-flight
+        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        self._wake = threading.Event()
+        self._stop = False
+        self._running: dict[str, Future] = {}
+        self._thread = threading.Thread(target=self._dispatch, name="job-dispatcher", daemon=True)
+
+    def start(self) -> None:
+        for _ in range(self.workers):
+            self.pool.submit(worker.warm_up)  # imports numpy/scipy/matplotlib now, not in the first job
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop = True
+        self._wake.set()
+        self._thread.join(5)
+        self.pool.shutdown(wait=False, cancel_futures=True)
+
+    def submit(self, kind: str, recording_id: str, options: dict | None = None) -> dict:
+        job_id = new_id()
+        job = self.catalog.insert("jobs", id=job_id, created=time.time(), updated=time.time(), kind=kind,
+                                  recording_id=recording_id, options=options or {}, state="queued", attempts=0,
+                                  error=None, result_dir=str(self.results_dir / job_id))
+        self._wake.set()
+        return job
+
+    def _dispatch(self) -> None:
+        while not self._stop:
+            job = self.catalog.next_queued_job() if len(self._running) < self.workers else None
+            if job is None:
+                self._wake.wait(0.5)
+                self._wake.clear()
+                continue
+            rec = self.catalog.get("recordings", job["recording_id"])
+            if rec is None:
+                self.catalog.update("jobs", job["id"], state="failed", error="recording no longer in the catalog")
+                continue
+            self.catalog.update("jobs", job["id"], state="running", attempts=job["attempts"] + 1)
+            fut = self.pool.submit(worker.run_job, job["kind"], rec["path"], job["options"], job["result_dir"])
+            self._running[job["id"]] = fut
+            fut.add_done_callback(lambda f, jid=job["id"], rid=rec["id"], kind=job["kind"]: self._done(jid, rid, kind, f))
+
+    def _done(self, job_id: str, recording_id: str, kind: str, fut: Future) -> None:
+        self._running.pop(job_id, None)
+        if fut.cancelled():
+            return  # the service is stopping: the job stays "running" and is re-queued on the next start
+        exc = fut.exception()
+        if exc is None:
+            summary = fut.result()
+            self.catalog.update("jobs", job_id, state="completed", error=None)
+            rec = self.catalog.get("recordings", recording_id)
+            if rec is not None:
+                info = dict(rec["info"])
+                info[f"last_{kind}_job"] = job_id
+                info[kind] = summary
+                self.catalog.update("recordings", recording_id, info=info)
+        elif isinstance(exc, ShakeidError):
+            self.catalog.update("jobs", job_id, state="failed", error=str(exc))
+        else:
+            self.catalog.update("jobs", job_id, state="failed", error=f"internal error: {type(exc).__name__}: {exc}")
+        self._wake.set()

@@ -1,0 +1,203 @@
+"""The rig as the service sees it: one sweep at a time, progress, a live view, emergency stop.
+
+A sweep runs in its own thread with its own PLC and accelerometer connections (daq.SweepRunner, the
+same code as `shakeid sweep`), so the HDF5 file it writes is as crash-safe as the CLI's. A second PLC
+connection, used by nothing else and behind its own lock, serves status and emergency stop, so a stop
+is never queued behind the sweep's traffic. With no rig configuration an embedded simulated rig
+(sim.server.SimulatedRig) plays the hardware over loopback Modbus and the TCP stream.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+
+from daq.devices import AdsPLC, DeviceError, ModbusPLC
+from daq.sources import open_source
+from daq.sweep import SweepRefused, SweepRequest, SweepRunner
+from sim.config import RigConfig
+from sim.plc import Command, Fault, Limits, PLCConfig, State
+from sim.sweep import SineSweep
+
+#: samples per second kept for the live view (decimated by block means; enough for a browser plot)
+LIVE_RATE_HZ = 200.0
+
+
+class RigBusy(Exception):
+    """Another sweep is queued or running."""
+
+
+class LiveBuffer:
+    """Decimated samples of the running recording, numbered so each SSE client can follow on."""
+
+    def __init__(self, recording_id: str, channels, fs_hz: float, maxlen: int = 20000):
+        self.recording_id, self.channels, self.fs_hz = recording_id, list(channels), fs_hz
+        self.step = max(1, int(round(fs_hz / LIVE_RATE_HZ)))
+        self.points: deque = deque(maxlen=maxlen)  # (seq, t_s, values...)
+        self.seq = 0
+        self.done = False
+
+    def add(self, first_index: int, block: np.ndarray) -> None:
+        # keep every step-th sample (aligned to the sample index, so decimation is the same across blocks)
+        k0 = (-first_index) % self.step
+        for k in range(k0, block.shape[0], self.step):
+            self.seq += 1
+            self.points.append((self.seq, (first_index + k) / self.fs_hz, *map(float, block[k])))
+
+    def since(self, seq: int) -> list[tuple]:
+        return [p for p in list(self.points) if p[0] > seq]
+
+
+class RigService:
+    def __init__(self, rig: RigConfig | None, data_dir: Path, sim_speed: float = 1.0):
+        self.cfg = rig or RigConfig()
+        self.data_dir = Path(data_dir)
+        self.sim = None
+        if rig is None:
+            from sim.server import SimulatedRig
+
+            # the client heartbeat is every 50 ms of wall time: the watchdog allows that in rig time
+            watchdog = max(self.cfg.limits.watchdog_s, 0.5 * sim_speed)
+            self.cfg.limits = Limits(**{**self.cfg.limits.__dict__, "watchdog_s": watchdog})
+            self.sim = SimulatedRig(PLCConfig(limits=self.cfg.limits), speed=sim_speed)
+            self.sim_speed = sim_speed
+        self._control_lock = threading.Lock()
+        self._control: ModbusPLC | AdsPLC | None = None
+        self.active: dict | None = None  # {"id", "runner", "thread", "live"}
+        self._lock = threading.Lock()
+
+    # -- lifecycle ----------------------------------------------------------------------------------
+    def start(self) -> None:
+        if self.sim is not None:
+            self.sim.start()
+            host, port = self.sim.endpoints["modbus"]
+            self.cfg.plc = {"transport": "modbus", "host": host, "port": port}
+            self.cfg.stream = {**self.cfg.stream, "url": self.sim.endpoints["stream"]}
+
+    def stop(self) -> None:
+        act = self.active
+        if act is not None:
+            act["runner"].abort_requested.set()
+            act["thread"].join(10)
+        if self._control is not None:
+            self._control.close()
+        if self.sim is not None:
+            self.sim.stop()
+
+    def _plc(self):
+        p = self.cfg.plc
+        if p.get("transport", "modbus") == "ads":
+            host = p.get("host", "127.0.0.1")
+            return AdsPLC(p.get("ams_net_id", f"{host}.1.1"), host, int(p.get("ams_port", 851)))
+        return ModbusPLC(p.get("host", "127.0.0.1"), int(p.get("port", 502)))
+
+    def _with_control(self, fn):
+        """Run fn(plc) on the control connection, reconnecting once if the link dropped."""
+        with self._control_lock:
+            for attempt in (0, 1):
+                try:
+                    if self._control is None:
+                        self._control = self._plc()
+                    return fn(self._control)
+                except DeviceError:
+                    if self._control is not None:
+                        self._control.close()
+                    self._control = None
+                    if attempt:
+                        raise
+
+    # -- what the API offers -------------------------------------------------------------------------
+    def status(self) -> dict:
+        try:
+            st = self._with_control(lambda plc: plc.status())
+            plc = {"reachable": True, "state": State(st.state).name.lower(), "fault": Fault(st.fault_code).name.lower(),
+                   "elapsed_s": st.elapsed_s, "frequency_hz": st.frequency_hz, "position_mm": st.position_mm}
+        except DeviceError as exc:
+            plc = {"reachable": False, "error": str(exc)}
+        return {"plc": plc, "simulated": self.sim is not None, "transport": self.cfg.plc.get("transport", "modbus"),
+                "accelerometers": {"source": self.cfg.accelerometers, "fs_hz": self.cfg.fs_hz,
+                                   "channels": list(self.cfg.channels)},
+                "limits": dict(self.cfg.limits.__dict__),
+                "active_sweep": self.active["id"] if self.active else None}
+
+    def check(self, f_start_hz, f_end_hz, duration_s, amplitude_mm) -> str | None:
+        """The violated limit's message, or None: the same check the PLC runs, before anything is sent."""
+        try:
+            sweep = SineSweep(f_start_hz, f_end_hz, duration_s, amplitude_mm)
+        except ValueError as exc:
+            return str(exc)
+        fault, message = self.cfg.limits.check(sweep)
+        return message if fault != Fault.NONE else None
+
+    def emergency_stop(self) -> dict:
+        act = self.active
+        if act is not None:
+            act["runner"].abort_requested.set()
+        self._with_control(lambda plc: plc.command(Command.ESTOP))
+        return {"state": "estop", "aborted_sweep": act["id"] if act else None}
+
+    def reset(self) -> None:
+        self._with_control(lambda plc: plc.command(Command.RESET))
+
+    def begin_sweep(self, sweep_id: str, req: SweepRequest, out_path: Path, on_progress, on_end) -> LiveBuffer:
+        """Start a sweep thread. Raises RigBusy if one is active. on_end(result | None, error | None)."""
+        with self._lock:
+            if self.active is not None:
+                raise RigBusy(self.active["id"])
+            live = LiveBuffer(out_path.stem, self.cfg.channels, self.cfg.fs_hz)
+            plc = source = None
+            try:
+                plc = self._plc()
+                source = open_source(self.cfg.stream, self.cfg.can, self.cfg.fs_hz, self.cfg.accelerometers)
+            except DeviceError:
+                if plc is not None:
+                    plc.close()
+                raise
+            runner = SweepRunner(plc, source, self.cfg.limits, float(self.cfg.stream["sensitivity_counts_per_ms2"]),
+                                 self.cfg.channels, on_progress=on_progress, on_samples=live.add,
+                                 rig_config={"source": self.cfg.source, "plc": self.cfg.plc,
+                                             "simulated": self.sim is not None})
+            thread = threading.Thread(target=self._run, args=(runner, plc, source, req, out_path, live, on_end),
+                                      name=f"sweep-{sweep_id}", daemon=True)
+            self.active = {"id": sweep_id, "runner": runner, "thread": thread, "live": live}
+            thread.start()
+            return live
+
+    def _run(self, runner, plc, source, req, out_path, live, on_end) -> None:
+        result, error = None, None
+        try:
+            result = runner.run(req, out_path)
+        except SweepRefused as exc:
+            error = str(exc)
+        except Exception as exc:  # reported on the sweep, never lost in a thread
+            error = f"internal error: {type(exc).__name__}: {exc}"
+        finally:
+            live.done = True
+            for dev in (plc, source):
+                try:
+                    dev.close()
+                except Exception:
+                    pass
+            with self._lock:
+                self.active = None
+            on_end(result, error)
+
+    def abort(self, sweep_id: str) -> bool:
+        act = self.active
+        if act is None or act["id"] != sweep_id:
+            return False
+        act["runner"].abort_requested.set()
+        return True
+
+    def live(self, recording_id: str) -> LiveBuffer | None:
+        act = self.active
+        return act["live"] if act and act["live"].recording_id == recording_id else None
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        end = time.monotonic() + timeout_s
+        while self.active is not None and time.monotonic() < end:
+            time.sleep(0.05)
+        return self.active is None

@@ -1,0 +1,107 @@
+"""Request and response bodies of the HTTP API (pydantic: validated in, documented in the OpenAPI)."""
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+SweepState = Literal["queued", "running", "completed", "aborted", "failed"]
+JobState = Literal["queued", "running", "completed", "failed"]
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class SweepIn(Strict):
+    f_start_hz: float = Field(gt=0, le=1e4, description="start frequency, Hz")
+    f_end_hz: float = Field(gt=0, le=1e4, description="end frequency, Hz")
+    duration_s: float = Field(gt=0, le=1e5, description="sweep duration, s")
+    amplitude_mm: float = Field(gt=0, le=1e3, description="table displacement amplitude, mm")
+    settle_s: float = Field(2.0, ge=0, le=60, description="recording after the sweep ends, s")
+    note: str = Field("", max_length=500)
+
+
+class SweepOut(BaseModel):
+    id: str
+    state: SweepState
+    progress: float = Field(description="0..1")
+    recording_id: str | None = None
+    error: str | None = None
+    request: dict = {}
+    operator: str | None = None
+    created: float
+    updated: float
+
+
+class Accepted(BaseModel):
+    id: str
+    state: str
+
+
+class Health(BaseModel):
+    status: Literal["ok"]
+    version: str
+    rig_simulated: bool
+    jobs_queued: int
+
+
+class RecordingOut(BaseModel):
+    id: str
+    created: float
+    origin: Literal["sweep", "upload"]
+    filename: str
+    status: str
+    sweep_id: str | None = None
+    info: dict = {}
+
+
+class IdentifyIn(Strict):
+    """The options of `shakeid identify`; all optional."""
+    degree: int | None = Field(None, ge=1, le=7)
+    method: Literal["admm", "stlsq"] | None = None
+    selection: Literal["heldout", "paper", "bic"] | None = None
+    tolerance: float | None = Field(None, gt=0, le=10)
+    max_terms: int | None = Field(None, ge=1, le=100)
+    refine: Literal["free-run"] | None = None
+    holdout_fraction: float | None = Field(None, gt=0, lt=0.9)
+    n_lambdas: int | None = Field(None, ge=2, le=1000)
+    extra_terms: list[str] | None = Field(None, max_length=20)
+    band_hz: tuple[float, float] | None = None
+    samples: tuple[int, int] | None = Field(None, description="rows [a, b) of the recording")
+    layout: Literal["base", "force"] | None = None
+    input: str | None = Field(None, max_length=64)
+    output: str | None = Field(None, max_length=64)
+    time: str | None = Field(None, max_length=64)
+    fs_hz: float | None = Field(None, gt=0, le=1e7)
+
+
+class ExplainIn(Strict):
+    band_hz: tuple[float, float] | None = None
+    samples: tuple[int, int] | None = None
+    layout: Literal["base", "force"] | None = None
+    input: str | None = Field(None, max_length=64)
+    output: str | None = Field(None, max_length=64)
+    time: str | None = Field(None, max_length=64)
+    fs_hz: float | None = Field(None, gt=0, le=1e7)
+
+
+class JobOut(BaseModel):
+    id: str
+    kind: Literal["identify", "explain"]
+    recording_id: str
+    state: JobState
+    attempts: int
+    error: str | None = None
+    options: dict = {}
+    created: float
+    updated: float
+
+
+class EstopOut(BaseModel):
+    state: Literal["estop"]
+    aborted_sweep: str | None = None
+
+
+class Problem(BaseModel):
+    detail: str

@@ -1,0 +1,93 @@
+"""Settings of the HTTP service: the rig configuration's [server] section, then the environment.
+
+    [server]
+    data_dir = "/var/lib/shakeid"          # recordings, models, the SQLite catalog
+    tokens = { "k3y-of-anna" = "operator", "k3y-of-ben" = "viewer" }
+    sim_speed = 10.0                         # embedded simulated rig only (no --config)
+    identify_workers = 1                     # processes for identification jobs
+    auto_identify = true                     # identify every completed sweep
+
+Environment (wins over the file): SHAKEID_DATA_DIR, SHAKEID_TOKENS ("token:role,token:role"),
+SHAKEID_SIM_SPEED. With no configuration file the service starts an embedded simulated rig; with no
+token configured it makes one operator token, prints it and keeps it in <data_dir>/operator-token so a
+new user can log in without reading anything first.
+"""
+from __future__ import annotations
+
+import os
+import secrets
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from identify.errors import ShakeidError
+from sim.config import RigConfig, load_config
+
+ROLES = ("viewer", "operator")
+KEYS = {"data_dir", "tokens", "sim_speed", "identify_workers", "auto_identify", "max_upload_mb"}
+
+
+class SettingsError(ShakeidError):
+    """The service's configuration is unusable (named)."""
+
+
+@dataclass
+class Settings:
+    data_dir: Path = Path("shakeid-data")
+    tokens: dict[str, str] = field(default_factory=dict)  # token -> role
+    rig: RigConfig | None = None                         # None: embedded simulated rig
+    sim_speed: float = 1.0
+    identify_workers: int = 1
+    auto_identify: bool = True
+    max_upload_mb: float = 512.0
+    generated_token: str | None = None                   # set when no token was configured
+
+    @classmethod
+    def load(cls, config_path=None, env=None, data_dir=None) -> "Settings":
+        env = os.environ if env is None else env
+        s = cls()
+        if config_path:
+            s.rig = load_config(config_path)
+            section = s.rig.server
+            unknown = set(section) - KEYS
+            if unknown:
+                raise SettingsError(f"{config_path}: unknown key(s) in [server]: {', '.join(sorted(unknown))}; "
+                                    f"known: {', '.join(sorted(KEYS))}")
+            s.data_dir = Path(section.get("data_dir", s.data_dir))
+            s.tokens = dict(section.get("tokens", {}))
+            s.sim_speed = float(section.get("sim_speed", s.sim_speed))
+            s.identify_workers = int(section.get("identify_workers", s.identify_workers))
+            s.auto_identify = bool(section.get("auto_identify", s.auto_identify))
+            s.max_upload_mb = float(section.get("max_upload_mb", s.max_upload_mb))
+        if env.get("SHAKEID_DATA_DIR"):
+            s.data_dir = Path(env["SHAKEID_DATA_DIR"])
+        if data_dir:
+            s.data_dir = Path(data_dir)
+        if env.get("SHAKEID_TOKENS"):
+            try:
+                s.tokens = dict(item.strip().rsplit(":", 1) for item in env["SHAKEID_TOKENS"].split(",") if item.strip())
+            except ValueError:
+                raise SettingsError("SHAKEID_TOKENS must read token:role,token:role") from None
+        if env.get("SHAKEID_SIM_SPEED"):
+            s.sim_speed = float(env["SHAKEID_SIM_SPEED"])
+        bad = {t: r for t, r in s.tokens.items() if r not in ROLES}
+        if bad:
+            raise SettingsError(f"token role(s) {sorted(set(bad.values()))} unknown: roles are {', '.join(ROLES)}")
+        short = [t for t in s.tokens if len(t) < 8]
+        if short:
+            raise SettingsError(f"{len(short)} token(s) shorter than 8 characters: use long random tokens")
+        if s.sim_speed <= 0 or s.identify_workers < 1:
+            raise SettingsError("sim_speed must be positive and identify_workers at least 1")
+        return s
+
+    def prepare(self) -> None:
+        """Create the data directory; make and keep an operator token when none is configured."""
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        (self.data_dir / "recordings").mkdir(exist_ok=True)
+        (self.data_dir / "results").mkdir(exist_ok=True)
+        if not self.tokens:
+            path = self.data_dir / "operator-token"
+            if not path.exists():
+                path.write_text(secrets.token_urlsafe(24) + "\n")
+                path.chmod(0o600)
+            self.generated_token = path.read_text().strip()
+            self.tokens = {self.generated_token: "operator"}

@@ -1,0 +1,83 @@
+"""What an identification or explanation job does, in a worker process (no service state here).
+
+The model JSON (the same object `shakeid identify --json` prints) is written first and atomically, so it
+is available as soon as the fit ends; the report's figures follow in the same job.
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from identify.errors import ShakeidError
+
+
+def warm_up() -> bool:
+    """Import the numerical stack once, so the first real job does not pay for it."""
+    import matplotlib  # noqa: F401
+
+    import identify.identifier  # noqa: F401
+    import shakeid.report  # noqa: F401
+    return True
+
+
+def _write_json(path: Path, obj) -> None:
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(obj, indent=2))
+    os.replace(tmp, path)  # readers see the old file or the whole new one, never half of it
+
+
+def read(path: str, options: dict):
+    """The recording at path: the DAQ's HDF5 (optionally rows `samples`), else CSV / MAT."""
+    samples = tuple(options["samples"]) if options.get("samples") else None
+    if Path(path).suffix.lower() in (".h5", ".hdf5"):
+        from daq.recorder import read_h5_recording
+
+        return read_h5_recording(path, options.get("input") or "table_acc", options.get("output") or "mass_acc",
+                                 samples)
+    from identify.recording import Recording, read_recording
+
+    rec = read_recording(path, options.get("layout", "base"), options.get("input"), options.get("output"),
+                         options.get("time"), options.get("fs_hz"))
+    if samples:
+        rec = rec.slice(*samples)
+        Recording.__post_init__(rec)
+    return rec
+
+
+IDENTIFY_KEYS = ("degree", "method", "selection", "tolerance", "max_terms", "refine", "holdout_fraction",
+                 "n_lambdas", "threshold", "extra_terms")
+
+
+def run_job(kind: str, path: str, options: dict, out_dir: str) -> dict:
+    """Run one job; returns a short summary for the catalog. ShakeidError -> a message for the user."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        rec = read(path, options)
+        if kind == "identify":
+            from identify.identifier import SparseIdentifier
+            from shakeid.report import write_report
+
+            params = {k: options[k] for k in IDENTIFY_KEYS if options.get(k) is not None}
+            if options.get("band_hz"):
+                params["band_hz"] = tuple(options["band_hz"])
+            ident = SparseIdentifier(**params).fit(rec)
+            result = ident.result()
+            _write_json(out / "model.json", result)
+            write_report(ident, out / "report")
+            val = (result.get("validation") or {}).get("heldout", {}).get("q1_dot", {})
+            return {"terms": {eq: sorted(terms) for eq, terms in result["model"].items()},
+                    "fit_percent": val.get("fit_percent")}
+        if kind == "explain":
+            from identify.explain import DiscrepancyAnalysis
+            from shakeid.explain_report import write_explain_report
+
+            analysis = DiscrepancyAnalysis(band_hz=tuple(options["band_hz"]) if options.get("band_hz") else None)
+            result = analysis.fit(rec).result()
+            _write_json(out / "explain.json", result)
+            write_explain_report(analysis, out / "report")
+            return {"effect": result["effect"], "gap_before": result["gap_before"], "gap_after": result["gap_after"]}
+        raise ShakeidError(f"unknown job kind {kind!r}")
+    except (ShakeidError, ValueError) as exc:  # the user's input: a message, not a traceback
+        raise ShakeidError(str(exc)) from None
