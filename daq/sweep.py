@@ -48,6 +48,7 @@ class SweepRunner:
         self.heartbeat_s, self.on_progress, self.rig_config = heartbeat_s, on_progress, rig_config or {}
         self.on_samples = on_samples
         self.abort_requested = threading.Event()
+        self.abort_reason = "operator abort"
         self._lock = threading.Lock()
 
     def preflight(self, req: SweepRequest) -> None:
@@ -110,7 +111,7 @@ class SweepRunner:
                 if done_index is not None and (rec.next_index or 0) - done_index >= req.settle_s * self.source.fs_hz:
                     break
                 if self.abort_requested.is_set():
-                    status, reason = "aborted", "operator abort"
+                    status, reason = "aborted", self.abort_reason
                     with self._lock:
                         self.plc.command(Command.STOP)
                     break
@@ -126,6 +127,11 @@ class SweepRunner:
             rec.close(status, reason, link_stats=getattr(self.source, "stats", None))
         return {"status": status, "reason": reason, "samples": rec.n, "gaps": n_gaps, "path": str(out_path),
                 **{f"link_{k}": v for k, v in getattr(self.source, "stats", {}).items()}}
+
+    def abort(self, reason: str = "operator abort") -> None:
+        """Ask the running sweep to stop the table and end its recording "aborted" with `reason`."""
+        self.abort_reason = reason
+        self.abort_requested.set()
 
     def _safe_stop(self):
         try:

@@ -158,7 +158,7 @@ def create_app(settings: Settings) -> FastAPI:
             return
         sweep_state = {"complete": "completed"}.get(result["status"], "aborted")
         catalog().update("sweeps", sweep_id, state=sweep_state, error=result["reason"] or None,
-                         progress=1.0 if sweep_state == "completed" else None)
+                         **({"progress": 1.0} if sweep_state == "completed" else {}))
         info = {k: v for k, v in result.items() if k != "path"}
         catalog().update("recordings", rec_id, status=result["status"], info={**recording_or_404(rec_id)["info"], **info})
         if sweep_state == "completed" and settings.auto_identify:

@@ -80,7 +80,7 @@ class RigService:
     def stop(self) -> None:
         act = self.active
         if act is not None:
-            act["runner"].abort_requested.set()
+            act["runner"].abort("the service is shutting down")
             act["thread"].join(10)
         if self._control is not None:
             self._control.close()
@@ -134,9 +134,11 @@ class RigService:
 
     def emergency_stop(self) -> dict:
         act = self.active
-        if act is not None:
-            act["runner"].abort_requested.set()
-        self._with_control(lambda plc: plc.command(Command.ESTOP))
+        try:
+            self._with_control(lambda plc: plc.command(Command.ESTOP))  # the table first, bookkeeping after
+        finally:
+            if act is not None:
+                act["runner"].abort("emergency stop")
         return {"state": "estop", "aborted_sweep": act["id"] if act else None}
 
     def reset(self) -> None:
@@ -175,21 +177,23 @@ class RigService:
         except Exception as exc:  # reported on the sweep, never lost in a thread
             error = f"internal error: {type(exc).__name__}: {exc}"
         finally:
-            live.done = True
             for dev in (plc, source):
                 try:
                     dev.close()
                 except Exception:
                     pass
-            with self._lock:
-                self.active = None
-            on_end(result, error)
+            try:
+                on_end(result, error)  # the catalog first: a live client that sees the end finds the status
+            finally:
+                live.done = True
+                with self._lock:
+                    self.active = None
 
     def abort(self, sweep_id: str) -> bool:
         act = self.active
         if act is None or act["id"] != sweep_id:
             return False
-        act["runner"].abort_requested.set()
+        act["runner"].abort("operator abort (HTTP)")
         return True
 
     def live(self, recording_id: str) -> LiveBuffer | None:

@@ -1,0 +1,83 @@
+"""A real `shakeid serve` process (uvicorn) with its embedded simulated rig, on a free loopback port."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+from sim.server import free_port
+
+SHAKEID = str(Path(sys.executable).with_name("shakeid"))
+OPERATOR, VIEWER = "operator-token-for-tests", "viewer-token-for-tests"
+
+
+class Service:
+    """One service process; start() again on the same data_dir is a restart."""
+
+    def __init__(self, data_dir: Path, speed: float = 10.0, env: dict | None = None):
+        self.data_dir, self.speed, self.extra_env = data_dir, speed, env or {}
+        self.proc: subprocess.Popen | None = None
+        self.port = 0
+
+    def start(self) -> "Service":
+        self.port = free_port()
+        env = {**os.environ, "SHAKEID_TOKENS": f"{OPERATOR}:operator,{VIEWER}:viewer", **self.extra_env}
+        self.log = open(self.data_dir.parent / f"serve-{self.port}.log", "w")
+        self.proc = subprocess.Popen([SHAKEID, "serve", "--data-dir", str(self.data_dir), "--port", str(self.port),
+                                      "--sim-speed", str(self.speed)], stdout=self.log, stderr=subprocess.STDOUT,
+                                     env=env)
+        end = time.monotonic() + 60
+        while True:
+            try:
+                if httpx.get(self.url + "/api/health", timeout=1).status_code == 200:
+                    return self
+            except httpx.HTTPError:
+                pass
+            assert self.proc.poll() is None, self.output()
+            assert time.monotonic() < end, "service did not start: " + self.output()
+            time.sleep(0.1)
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    def output(self) -> str:
+        self.log.flush()
+        return Path(self.log.name).read_text()
+
+    def client(self, token: str | None = OPERATOR) -> httpx.Client:
+        headers = {"Authorization": f"Bearer {token}"} if token else {}
+        return httpx.Client(base_url=self.url, headers=headers, timeout=10)
+
+    def stop(self, sig=signal.SIGTERM) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(20)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.log.close()
+
+
+def wait_for(fn, timeout_s: float = 60.0, what: str = "condition"):
+    end = time.monotonic() + timeout_s
+    while True:
+        value = fn()
+        if value:
+            return value
+        assert time.monotonic() < end, f"timed out waiting for {what}"
+        time.sleep(0.1)
+
+
+@pytest.fixture
+def service(tmp_path):
+    s = Service(tmp_path / "data").start()
+    yield s
+    s.stop()

@@ -1,0 +1,191 @@
+"""End to end over loopback: `shakeid serve` (uvicorn, embedded simulated rig at 10x) and HTTP clients."""
+from __future__ import annotations
+
+import json
+import signal
+import threading
+
+import h5py
+import httpx
+import numpy as np
+import pytest
+
+from sim.rig import RigParameters
+
+from .conftest import OPERATOR, VIEWER, Service, wait_for
+
+SWEEP = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 40.0, "amplitude_mm": 1.3, "settle_s": 2.0}
+
+
+def _read_live(url: str, rec_id: str, out: list, stop: threading.Event):
+    with httpx.stream("GET", f"{url}/api/recordings/{rec_id}/live", headers={"Authorization": f"Bearer {VIEWER}"},
+                      timeout=30) as r:
+        event = None
+        for line in r.iter_lines():
+            if line.startswith("event: "):
+                event = line[7:]
+            elif line.startswith("data: "):
+                out.append((event, json.loads(line[6:])))
+                if event == "end" or stop.is_set():
+                    return
+
+
+def test_sweep_live_model_and_the_rules_around_it(service):
+    op, viewer, anon = service.client(), service.client(VIEWER), service.client(None)
+    assert anon.get("/api/rig").status_code == 401
+    assert viewer.post("/api/sweeps", json=SWEEP).status_code == 403
+    unsafe = op.post("/api/sweeps", json={**SWEEP, "amplitude_mm": 9.0})
+    assert unsafe.status_code == 422 and "stroke limit 5 mm" in unsafe.json()["detail"]
+    r = op.post("/api/sweeps", json=SWEEP)
+    assert r.status_code == 202, r.text
+    sweep_id = r.json()["id"]
+    busy = op.post("/api/sweeps", json=SWEEP)
+    assert busy.status_code == 409 and sweep_id in busy.json()["detail"]
+    rec_id = viewer.get(f"/api/sweeps/{sweep_id}").json()["recording_id"]
+    events, stop = [], threading.Event()
+    reader = threading.Thread(target=_read_live, args=(service.url, rec_id, events, stop))
+    reader.start()
+    progress = wait_for(lambda: viewer.get(f"/api/sweeps/{sweep_id}").json()["progress"] > 0.3, 60, "progress")
+    assert progress
+    reader.join(60)
+    samples = [d for e, d in events if e == "samples"]
+    assert samples and events[-1][0] == "end" and events[-1][1]["status"] == "complete"
+    t = np.concatenate([d["t"] for d in samples])
+    assert t.size > 40 * 150 and np.all(np.diff(t) > 0)  # ~200 points per second, in order, none twice
+    assert max(abs(v) for d in samples for v in d["mass_acc"]) > 1.0  # the mass moves
+    sweep = viewer.get(f"/api/sweeps/{sweep_id}").json()
+    assert sweep["state"] == "completed" and sweep["progress"] == 1.0
+    # the model appears with no further call: identification runs after every completed sweep
+    model = wait_for(lambda: (m := viewer.get(f"/api/recordings/{rec_id}/model")).status_code == 200 and m.json(),
+                     60, "model")
+    truth = RigParameters.paper_table1().model().equations["q1_dot"]
+    assert set(model["model"]["q1_dot"]) == set(truth)
+    for term, c in truth.items():
+        assert abs(model["model"]["q1_dot"][term] / c - 1) < 0.03, term
+    plots = wait_for(lambda: (p := viewer.get(f"/api/recordings/{rec_id}/plots")).status_code == 200 and
+                     "validation.png" in p.json() and p.json(), 60, "plots")
+    png = viewer.get(f"/api/recordings/{rec_id}/plots/validation.png")
+    assert png.headers["content-type"] == "image/png" and png.content[:8] == b"\x89PNG\r\n\x1a\n" and plots
+    f = viewer.get(f"/api/recordings/{rec_id}/file")
+    assert f.status_code == 200 and f.content[:8] == b"\x89HDF\r\n\x1a\n"
+    assert viewer.get("/api/recordings/zzz/model").status_code == 422  # ids are checked before any lookup
+    assert viewer.get("/api/recordings/0123456789ab").status_code == 404
+
+
+def test_abort_mid_sweep_leaves_an_aborted_recording(service):
+    op = service.client()
+    sweep_id = op.post("/api/sweeps", json={**SWEEP, "duration_s": 120.0}).json()["id"]
+    wait_for(lambda: op.get(f"/api/sweeps/{sweep_id}").json()["progress"] > 0.1, 60, "progress")
+    assert op.post(f"/api/sweeps/{sweep_id}/abort").status_code == 202
+    sweep = wait_for(lambda: (s := op.get(f"/api/sweeps/{sweep_id}").json())["state"] != "running" and s, 30, "end")
+    assert sweep["state"] == "aborted" and "operator abort" in sweep["error"]
+    rec = op.get(f"/api/recordings/{sweep['recording_id']}").json()
+    assert rec["status"] == "aborted" and rec["info"]["samples"] > 0
+    assert op.post(f"/api/sweeps/{sweep_id}/abort").status_code == 409  # nothing left to abort
+    assert op.get(f"/api/recordings/{rec['id']}/model").status_code == 404  # aborted: not identified
+
+
+def test_emergency_stop_stops_the_simulated_table(service):
+    op, viewer = service.client(), service.client(VIEWER)
+    sweep_id = op.post("/api/sweeps", json={**SWEEP, "duration_s": 120.0}).json()["id"]
+    wait_for(lambda: op.get("/api/rig").json()["plc"]["state"] == "running", 30, "running")
+    assert viewer.post("/api/rig/estop").status_code == 403
+    # emergency stop while other requests keep the service busy
+    busy = [threading.Thread(target=lambda: [viewer.get("/api/rig") for _ in range(20)]) for _ in range(4)]
+    for b in busy:
+        b.start()
+    r = op.post("/api/rig/estop")
+    assert r.status_code == 200 and r.json()["aborted_sweep"] == sweep_id
+    for b in busy:
+        b.join()
+    rig = wait_for(lambda: (p := op.get("/api/rig").json()["plc"])["position_mm"] == 0.0 and p, 10, "table at rest")
+    assert rig["state"] == "estop"
+    sweep = wait_for(lambda: (s := op.get(f"/api/sweeps/{sweep_id}").json())["state"] != "running" and s, 30, "end")
+    assert sweep["state"] == "aborted" and "emergency stop" in sweep["error"]
+    assert op.post("/api/rig/reset").status_code == 204
+    assert wait_for(lambda: op.get("/api/rig").json()["plc"]["state"] == "idle", 10, "idle")
+
+
+def test_uploads_jobs_and_clear_errors(service, tmp_path, table1_run):
+    from identify.recording import write_csv
+
+    op, viewer = service.client(), service.client(VIEWER)
+    csv = tmp_path / "sweep.csv"
+    write_csv(csv, table1_run.recording)
+    assert viewer.post("/api/recordings", params={"filename": "sweep.csv"}, content=csv.read_bytes()).status_code == 403
+    r = op.post("/api/recordings", params={"filename": "sweep.csv"}, content=csv.read_bytes())
+    assert r.status_code == 201, r.text
+    rec = r.json()
+    assert rec["origin"] == "upload" and rec["info"]["samples"] == table1_run.recording.n_samples
+    job = op.post(f"/api/recordings/{rec['id']}/identify", json={"selection": "heldout", "max_terms": 8}).json()
+    done = wait_for(lambda: (j := viewer.get(f"/api/jobs/{job['id']}").json())["state"] in ("completed", "failed") and j,
+                    60, "job")
+    assert done["state"] == "completed", done
+    model = viewer.get(f"/api/recordings/{rec['id']}/model").json()
+    assert set(model["model"]["q1_dot"]) == {"q1", "q2", "q1*q2^2", "q2^3", "zdd"}
+    bad = op.post("/api/recordings", params={"filename": "junk.csv"}, content=b"t,foo\n0,1\n1,2\n")
+    assert bad.status_code == 422 and "junk.csv" in bad.json()["detail"]
+    assert op.post("/api/recordings", params={"filename": "../etc/passwd.csv"}, content=b"x").status_code == 422
+    assert op.post(f"/api/recordings/{rec['id']}/identify", json={"selection": "magic"}).status_code == 422
+    failing = op.post(f"/api/recordings/{rec['id']}/identify", json={"extra_terms": ["warp(q1)"]}).json()
+    failed = wait_for(lambda: (j := viewer.get(f"/api/jobs/{failing['id']}").json())["state"] in ("completed", "failed")
+                      and j, 60, "job")
+    assert failed["state"] == "failed" and "warp" in failed["error"]  # the user's mistake, named
+    listed = {r["id"] for r in viewer.get("/api/recordings").json()}
+    assert rec["id"] in listed and len(listed) == 1  # refused uploads left nothing behind
+    assert sorted(p.name for p in (service.data_dir / "recordings").iterdir()) == [f"{rec['id']}.csv"]
+
+
+def test_service_killed_mid_sweep_loses_nothing_and_recovers(tmp_path):
+    svc = Service(tmp_path / "data").start()
+    op = svc.client()
+    sweep_id = op.post("/api/sweeps", json={**SWEEP, "duration_s": 120.0}).json()["id"]
+    wait_for(lambda: op.get(f"/api/sweeps/{sweep_id}").json()["progress"] > 0.2, 60, "progress")
+    rec_id = op.get(f"/api/sweeps/{sweep_id}").json()["recording_id"]
+    svc.stop(signal.SIGKILL)  # the service, its sweep thread and its simulated rig die together
+    path = svc.data_dir / "recordings" / f"{rec_id}.h5"
+    with h5py.File(path) as f:
+        assert f["entry"].attrs["status"] == "running" and f["entry/data/time"].shape[0] > 2048
+    svc.start()  # restart on the same data directory
+    try:
+        op = svc.client()
+        sweep = op.get(f"/api/sweeps/{sweep_id}").json()
+        assert sweep["state"] == "aborted" and "service stopped" in sweep["error"]
+        rec = op.get(f"/api/recordings/{rec_id}").json()
+        assert rec["status"] == "aborted"
+        with h5py.File(path) as f:
+            assert f["entry"].attrs["status"] == "aborted" and f["entry/data/time"].shape[0] > 2048
+        assert op.post("/api/sweeps", json={**SWEEP, "duration_s": 5.0}).status_code == 202  # usable again
+    finally:
+        svc.stop()
+
+
+def test_queued_and_interrupted_jobs_run_after_a_restart(tmp_path, table1_run):
+    """Jobs live in the catalog: one queued and one left 'running' by a dead service both complete."""
+    import time
+
+    from identify.recording import write_csv
+    from server.catalog import Catalog
+
+    svc = Service(tmp_path / "data").start()
+    csv = tmp_path / "s.csv"
+    write_csv(csv, table1_run.recording)
+    rec = svc.client().post("/api/recordings", params={"filename": "s.csv"}, content=csv.read_bytes()).json()
+    svc.stop()
+    cat = Catalog(svc.data_dir / "catalog.sqlite")
+    for jid, st in (("00000000000a", "queued"), ("00000000000b", "running")):
+        cat.insert("jobs", id=jid, created=time.time(), updated=time.time(), kind="identify", recording_id=rec["id"],
+                   options={}, state=st, attempts=int(st == "running"), error=None,
+                   result_dir=str(svc.data_dir / "results" / jid))
+    cat.close()
+    svc.start()
+    try:
+        op = svc.client()
+        for jid in ("00000000000a", "00000000000b"):
+            job = wait_for(lambda: (j := op.get(f"/api/jobs/{jid}").json())["state"] in ("completed", "failed") and j,
+                           60, f"job {jid}")
+            assert job["state"] == "completed", job
+        assert op.get("/api/jobs/00000000000b").json()["attempts"] == 2  # re-run, counted
+        assert "re-queued" in svc.output()
+    finally:
+        svc.stop()
