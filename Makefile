@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench venv clean
+.PHONY: demo test bench venv clean tools
 
 $(STAMP): pyproject.toml setup.py identify/_simkernel.c
 	$(PYTHON) -m venv $(VENV)
@@ -17,7 +17,17 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/shakeid demo --out demo-output
 
-test: $(STAMP)
+# Debian's docker-compose validates docker-compose.yml in the tests (no Docker engine needed); installed
+# from the Debian registry when missing and we may (root), else the test says how to get it.
+tools:
+	@command -v docker-compose >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing Debian's docker-compose (validates docker-compose.yml in the tests)"; \
+	    apt-get update -qq >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+	      --no-install-recommends docker-compose >/dev/null; \
+	  else echo "note: docker-compose is missing; tests/test_deploy.py will say how to install it"; fi; }
+
+test: $(STAMP) tools
 	$(PY) -m pytest -q
 
 bench: $(STAMP)

@@ -66,6 +66,7 @@ def create_app(settings: Settings) -> FastAPI:
         catalog.close()
 
     app = FastAPI(title="shakeid", version=_version(), lifespan=lifespan,
+                  responses={400: {"model": schemas.Problem}, 422: {"model": schemas.Problem}},
                   description="Sine sweeps on the shaker rig, HDF5 recordings, sparse nonlinear models.")
     viewer, operator = Depends(require(settings, "viewer")), Depends(require(settings, "operator"))
     errors = {401: {"model": schemas.Problem}, 403: {"model": schemas.Problem}}

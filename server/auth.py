@@ -9,7 +9,8 @@ from __future__ import annotations
 import hashlib
 import hmac
 
-from fastapi import HTTPException, Request
+from fastapi import Depends, HTTPException, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from .settings import ROLES, Settings
 
@@ -17,10 +18,10 @@ from .settings import ROLES, Settings
 def require(settings: Settings, role: str):
     """A dependency that returns who calls ("operator 3fa0c2d1": role and a token fingerprint) or raises."""
     rank = ROLES.index(role)
+    bearer = HTTPBearer(auto_error=False, description=f"a token with the {role} role (or above)")
 
-    def check(request: Request) -> str:
-        header = request.headers.get("authorization", "")
-        token = header[7:].strip() if header.lower().startswith("bearer ") else ""
+    def check(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> str:
+        token = creds.credentials if creds else ""
         if not token and request.method == "GET":
             token = request.query_params.get("access_token", "")
         found = next((r for t, r in settings.tokens.items() if hmac.compare_digest(t.encode(), token.encode())), None)

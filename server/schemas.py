@@ -104,4 +104,5 @@ class EstopOut(BaseModel):
 
 
 class Problem(BaseModel):
-    detail: str
+    """An error: `detail` says what is wrong (a list of field errors when the request did not validate)."""
+    detail: str | list[dict]

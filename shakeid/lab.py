@@ -132,6 +132,7 @@ def cmd_sim(args) -> int:
         stream_host, config_port = url[len("socket://"):].rsplit(":", 1)[0], int(url.rsplit(":", 1)[-1])
     else:
         stream_host, config_port = host, 5021
+    stream_host = args.host or stream_host  # --host (e.g. 0.0.0.0 in a container) binds both servers
     stream_port = args.stream_port or config_port
     ads = cfg.plc.get("host", "127.0.0.5") if cfg.plc.get("transport") == "ads" else None
     rig = SimulatedRig(cfg.plc_config(), host=host, modbus_port=modbus_port, stream_port=stream_port, speed=speed,

@@ -1,0 +1,115 @@
+"""docker-compose.yml: validated by Debian's docker-compose (no engine needed), checked against what the
+services run, and its rig configuration exercised for real with both services as local processes."""
+from __future__ import annotations
+
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import yaml
+
+from shakeid.cli import build_parser
+
+REPO = Path(__file__).resolve().parents[1]
+COMPOSE = shutil.which("docker-compose")
+
+
+def _config(path: Path) -> subprocess.CompletedProcess:
+    assert COMPOSE, ("Debian's docker-compose is needed to validate docker-compose.yml: `make test` installs it "
+                     "(apt-get install docker-compose) when run as root; otherwise install it once")
+    return subprocess.run([COMPOSE, "-f", str(path), "config"], capture_output=True, text=True, cwd=path.parent,
+                          env={"PATH": "/usr/bin:/bin", "SHAKEID_TOKENS": "t" * 12 + ":operator"})
+
+
+def _mount(v) -> tuple[str, str]:
+    """(source, target) of a volume entry, short ("src:dst:mode", compose v1) or long syntax."""
+    if isinstance(v, dict):
+        return v.get("source", ""), v["target"]
+    parts = v.split(":")
+    return parts[0], parts[1]
+
+
+def test_compose_file_is_valid_and_runs_what_exists():
+    p = _config(REPO / "docker-compose.yml")
+    assert p.returncode == 0, p.stderr
+    doc = yaml.safe_load(p.stdout)
+    services = doc["services"]
+    assert set(services) == {"rig-sim", "server"}
+    server, rig = services["server"], services["rig-sim"]
+    assert "rig-sim" in server["depends_on"]
+    assert any(src == "shakeid-data" and dst == "/data" for src, dst in map(_mount, server["volumes"]))
+    assert "shakeid-data" in doc["volumes"]
+    assert server["environment"]["SHAKEID_TOKENS"] == "t" * 12 + ":operator"  # interpolated from the environment
+    for svc in (server, rig):
+        assert (Path(svc["build"]["context"]) / "Dockerfile").exists()
+        assert svc["command"][0] == "shakeid"
+        build_parser().parse_args(svc["command"][1:])  # a real subcommand with real options (exits if not)
+        for src, _ in map(_mount, svc["volumes"]):
+            if src.startswith("/"):  # a bind mount: the file must be in the repository
+                assert Path(src).exists(), src
+    from server.settings import Settings
+
+    settings = Settings.load(REPO / "deploy" / "compose-rig.toml", env={})
+    assert settings.rig.plc["host"] == "rig-sim" and str(settings.data_dir) == "/data"
+
+
+def test_a_broken_compose_file_is_caught(tmp_path):
+    """The validator itself: a typo in a key and a service without an image or build both fail."""
+    text = (REPO / "docker-compose.yml").read_text()
+    (tmp_path / "typo.yml").write_text(text.replace("depends_on:", "depend_on:"))
+    (tmp_path / "nobuild.yml").write_text(text.replace("    build: .\n    image: shakeid:latest\n", "", 1))
+    for name in ("typo.yml", "nobuild.yml"):
+        p = _config(tmp_path / name)
+        assert p.returncode != 0, name
+
+
+def test_compose_rig_configuration_drives_a_sweep_through_the_service(tmp_path):
+    """The compose wiring without Docker: `shakeid sim` and `shakeid serve --config` as two processes with
+    the compose rig configuration (hosts pointed at loopback): the service drives the separate rig."""
+    import httpx
+
+    from sim.server import free_port
+
+    from .server.conftest import wait_for
+
+    mb, st, http = free_port(), free_port(), free_port()
+    text = (REPO / "deploy" / "compose-rig.toml").read_text().replace("rig-sim", "127.0.0.1")
+    text = text.replace("port = 5020", f"port = {mb}").replace(":5021", f":{st}")
+    text = text.replace('data_dir = "/data"', f'data_dir = "{tmp_path / "data"}"').replace("speed = 1.0", "speed = 10.0")
+    text = text.replace("watchdog_s = 0.5", "watchdog_s = 5.0")  # 50 ms heartbeats are 0.5 s of rig time at 10x
+    cfg = tmp_path / "rig.toml"
+    cfg.write_text(text)
+    exe = str(Path(sys.executable).with_name("shakeid"))
+    rig = subprocess.Popen([exe, "sim", "--config", str(cfg)], stdout=subprocess.PIPE, text=True)
+    env = {"PATH": "/usr/bin:/bin", "SHAKEID_TOKENS": "compose-operator-token:operator"}
+    serve = subprocess.Popen([exe, "serve", "--config", str(cfg), "--port", str(http)], env=env,
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert "Modbus" in rig.stdout.readline()
+        client = httpx.Client(base_url=f"http://127.0.0.1:{http}", timeout=10,
+                              headers={"Authorization": "Bearer compose-operator-token"})
+
+        def up():
+            try:
+                return client.get("/api/health").status_code == 200
+            except httpx.HTTPError:
+                return False
+
+        wait_for(up, 60, "service")
+        status = client.get("/api/rig").json()
+        assert status["simulated"] is False and status["plc"]["reachable"] and status["limits"]["watchdog_s"] == 5.0
+        sweep = client.post("/api/sweeps", json={"f_start_hz": 2, "f_end_hz": 10, "duration_s": 10,
+                                                 "amplitude_mm": 1.0, "settle_s": 1.0})
+        assert sweep.status_code == 202, sweep.text
+        sid = sweep.json()["id"]
+        done = wait_for(lambda: (s := client.get(f"/api/sweeps/{sid}").json())["state"] not in ("queued", "running")
+                        and s, 60, "sweep end")
+        assert done["state"] == "completed", done
+        rec = client.get(f"/api/recordings/{done['recording_id']}").json()
+        assert rec["info"]["gaps"] == 0 and rec["info"]["samples"] > 11 * 2048
+    finally:
+        for proc in (serve, rig):
+            proc.send_signal(signal.SIGTERM)
+            proc.wait(20)
