@@ -172,7 +172,8 @@ def create_app(settings: Settings) -> FastAPI:
 
     @app.get("/api/sweeps/{sweep_id}", response_model=schemas.SweepOut, tags=["sweeps"], dependencies=[viewer],
              responses={**errors, 404: {"model": schemas.Problem}})
-    def get_sweep(sweep_id: str = Id()):
+    async def get_sweep(sweep_id: str = Id()):
+        """Polled by dashboards: answered on the event loop (one indexed SQLite read, no thread hop)."""
         sweep = catalog().get("sweeps", sweep_id)
         if sweep is None:
             raise HTTPException(404, f"no sweep {sweep_id}")
@@ -280,7 +281,7 @@ def create_app(settings: Settings) -> FastAPI:
 
     @app.get("/api/jobs/{job_id}", response_model=schemas.JobOut, tags=["jobs"], dependencies=[viewer],
              responses={**errors, 404: {"model": schemas.Problem}})
-    def get_job(job_id: str = Id()):
+    async def get_job(job_id: str = Id()):  # polled: on the event loop, like get_sweep
         job = catalog().get("jobs", job_id)
         if job is None:
             raise HTTPException(404, f"no job {job_id}")

@@ -16,11 +16,11 @@ from .settings import ROLES, Settings
 
 
 def require(settings: Settings, role: str):
-    """A dependency that returns who calls ("operator 3fa0c2d1": role and a token fingerprint) or raises."""
+    """A dependency (async: it runs on the event loop, no thread hop) that returns who calls ("operator 3fa0c2d1": role and a token fingerprint) or raises."""
     rank = ROLES.index(role)
     bearer = HTTPBearer(auto_error=False, description=f"a token with the {role} role (or above)")
 
-    def check(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> str:
+    async def check(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> str:
         token = creds.credentials if creds else ""
         if not token and request.method == "GET":
             token = request.query_params.get("access_token", "")

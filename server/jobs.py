@@ -10,6 +10,7 @@ import multiprocessing
 import threading
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 from identify.errors import ShakeidError
@@ -21,16 +22,21 @@ from .catalog import Catalog, new_id
 class JobQueue:
     def __init__(self, catalog: Catalog, results_dir: Path, workers: int = 1):
         self.catalog, self.results_dir, self.workers = catalog, Path(results_dir), workers
-        # spawn, not fork: the service has threads (uvicorn, rig, dispatcher) a fork would copy mid-flight
-        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        self.pool = self._new_pool()
         self._wake = threading.Event()
         self._stop = False
         self._running: dict[str, Future] = {}
+        self._pool_lock = threading.Lock()
         self._thread = threading.Thread(target=self._dispatch, name="job-dispatcher", daemon=True)
 
-    def start(self) -> None:
+    def _new_pool(self) -> ProcessPoolExecutor:
+        # spawn, not fork: the service has threads (uvicorn, rig, dispatcher) a fork would copy mid-flight
+        pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"))
         for _ in range(self.workers):
-            self.pool.submit(worker.warm_up)  # imports numpy/scipy/matplotlib now, not in the first job
+            pool.submit(worker.warm_up)  # imports numpy/scipy/matplotlib now, not in the first job
+        return pool
+
+    def start(self) -> None:
         self._thread.start()
 
     def stop(self) -> None:
@@ -59,11 +65,14 @@ class JobQueue:
                 self.catalog.update("jobs", job["id"], state="failed", error="recording no longer in the catalog")
                 continue
             self.catalog.update("jobs", job["id"], state="running", attempts=job["attempts"] + 1)
-            fut = self.pool.submit(worker.run_job, job["kind"], rec["path"], job["options"], job["result_dir"])
+            with self._pool_lock:
+                pool = self.pool
+            fut = pool.submit(worker.run_job, job["kind"], rec["path"], job["options"], job["result_dir"])
             self._running[job["id"]] = fut
-            fut.add_done_callback(lambda f, jid=job["id"], rid=rec["id"], kind=job["kind"]: self._done(jid, rid, kind, f))
+            fut.add_done_callback(lambda f, jid=job["id"], rid=rec["id"], kind=job["kind"], p=pool:
+                                  self._done(jid, rid, kind, f, p))
 
-    def _done(self, job_id: str, recording_id: str, kind: str, fut: Future) -> None:
+    def _done(self, job_id: str, recording_id: str, kind: str, fut: Future, broken_pool=None) -> None:
         self._running.pop(job_id, None)
         if fut.cancelled():
             return  # the service is stopping: the job stays "running" and is re-queued on the next start
@@ -77,6 +86,15 @@ class JobQueue:
                 info[f"last_{kind}_job"] = job_id
                 info[kind] = summary
                 self.catalog.update("recordings", recording_id, info=info)
+        elif isinstance(exc, BrokenProcessPool):
+            # a worker died (killed, out of memory, a crash in native code): this job fails with that
+            # reason, later ones get a new pool
+            self.catalog.update("jobs", job_id, state="failed",
+                                error="the identification worker process died during this job (killed or out of memory)")
+            with self._pool_lock:
+                if self.pool is broken_pool:
+                    self.pool.shutdown(wait=False, cancel_futures=True)
+                    self.pool = self._new_pool()
         elif isinstance(exc, ShakeidError):
             self.catalog.update("jobs", job_id, state="failed", error=str(exc))
         else:

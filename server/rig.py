@@ -177,15 +177,17 @@ class RigService:
         except Exception as exc:  # reported on the sweep, never lost in a thread
             error = f"internal error: {type(exc).__name__}: {exc}"
         finally:
-            for dev in (plc, source):
-                try:
-                    dev.close()
-                except Exception:
-                    pass
             try:
-                on_end(result, error)  # the catalog first: a live client that sees the end finds the status
+                # the catalog first (the file is closed already): a live client that sees the end finds the
+                # status, and identification does not wait for pyserial's socket close (it sleeps 0.3 s)
+                on_end(result, error)
             finally:
                 live.done = True
+                for dev in (plc, source):
+                    try:
+                        dev.close()
+                    except Exception:
+                        pass
                 with self._lock:
                     self.active = None
 
