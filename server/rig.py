@@ -183,13 +183,13 @@ class RigService:
                 on_end(result, error)
             finally:
                 live.done = True
+                with self._lock:
+                    self.active = None  # the rig takes the next sweep now; these connections are this sweep's
                 for dev in (plc, source):
                     try:
                         dev.close()
                     except Exception:
                         pass
-                with self._lock:
-                    self.active = None
 
     def abort(self, sweep_id: str) -> bool:
         act = self.active
