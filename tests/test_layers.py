@@ -1,6 +1,6 @@
 """The import rule of the product card: identify stands alone (numpy/scipy only); sim may use identify
-and the protocol libraries it serves (pymodbus, pyads, python-can, pyserial); daq uses identify and sim;
-server composes them. Checked on the source, so a stray import fails here."""
+and the protocol libraries it serves (pymodbus, pyads, python-can, pyserial); daq uses identify and sim
+(and h5py); server composes them (and the web stack). Checked on the source, so a stray import fails here."""
 import ast
 import sys
 from pathlib import Path
@@ -11,6 +11,10 @@ REPO = Path(__file__).resolve().parents[1]
 ALLOWED = {
     "identify": {"numpy", "scipy", "identify"},
     "sim": {"numpy", "scipy", "identify", "sim", "pymodbus", "pyads", "can", "serial"},
+    "daq": {"numpy", "scipy", "h5py", "identify", "sim", "daq", "pymodbus", "pyads", "can", "serial"},
+    # the service composes the layers; nothing below it may import it (checked by the sets above)
+    "server": {"numpy", "h5py", "matplotlib", "identify", "sim", "daq", "server", "shakeid", "fastapi", "pydantic",
+               "uvicorn"},
 }
 
 
