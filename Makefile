@@ -36,6 +36,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/silverbox.py --data ../shared/data/silverbox/SNLS80mV.mat
 	$(PY) benchmarks/stream_throughput.py
 	$(PY) benchmarks/daq_throughput.py
+	$(PY) benchmarks/service_latency.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info demo-output
