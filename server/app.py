@@ -133,29 +133,35 @@ def create_app(settings: Settings) -> FastAPI:
                 catalog().update("sweeps", sweep_id, state="running", progress=round(frac, 4))
 
         def on_end(result, error):
-            _sweep_ended(sweep_id, rec_id, result, error)
+            _sweep_ended(sweep_id, rec_id, path, result, error)
 
         req = SweepRequest(body.f_start_hz, body.f_end_hz, body.duration_s, body.amplitude_mm, body.settle_s,
                            operator=who, note=body.note)
         catalog().insert("sweeps", id=sweep_id, created=now, updated=now, state="queued", progress=0.0,
                          request=body.model_dump(), recording_id=rec_id, error=None, operator=who)
+        # in the catalog before the sweep thread exists, so its end always finds both rows
+        catalog().insert("recordings", id=rec_id, created=now, origin="sweep", filename=path.name, path=str(path),
+                         status="running", sweep_id=sweep_id, info={"sweep": body.model_dump()})
         try:
             rig.begin_sweep(sweep_id, req, path, on_progress, on_end)
         except RigBusy as busy:  # lost a race with another request: as if it had come first
+            catalog().delete("recordings", rec_id)
             catalog().delete("sweeps", sweep_id)
             return JSONResponse({"detail": f"another sweep is running ({busy}); abort it or wait"}, status_code=409)
         except DeviceError as exc:
+            catalog().delete("recordings", rec_id)
             catalog().update("sweeps", sweep_id, state="failed", error=str(exc), recording_id=None)
             return JSONResponse({"detail": f"rig not reachable: {exc}"}, status_code=503)
-        catalog().insert("recordings", id=rec_id, created=now, origin="sweep", filename=path.name, path=str(path),
-                         status="running", sweep_id=sweep_id, info={"sweep": body.model_dump()})
         return {"id": sweep_id, "state": "queued"}
 
-    def _sweep_ended(sweep_id, rec_id, result, error):
-        if result is None:  # refused at preflight or failed before recording
-            catalog().update("sweeps", sweep_id, state="failed", error=error, recording_id=None)
-            if catalog().get("recordings", rec_id):
+    def _sweep_ended(sweep_id, rec_id, path, result, error):
+        if result is None:  # refused at preflight (nothing recorded, no file) or failed before recording
+            if path.exists():  # an internal error after the file was opened: keep what it holds
+                catalog().update("sweeps", sweep_id, state="failed", error=error)
                 catalog().update("recordings", rec_id, status="failed")
+            else:
+                catalog().update("sweeps", sweep_id, state="failed", error=error, recording_id=None)
+                catalog().delete("recordings", rec_id)
             return
         sweep_state = {"complete": "completed"}.get(result["status"], "aborted")
         catalog().update("sweeps", sweep_id, state=sweep_state, error=result["reason"] or None,

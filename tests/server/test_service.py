@@ -102,6 +102,10 @@ def test_emergency_stop_stops_the_simulated_table(service):
     assert rig["state"] == "estop"
     sweep = wait_for(lambda: (s := op.get(f"/api/sweeps/{sweep_id}").json())["state"] != "running" and s, 30, "end")
     assert sweep["state"] == "aborted" and "emergency stop" in sweep["error"]
+    # a sweep while the PLC is in emergency stop: accepted, then refused by the preflight, nothing recorded
+    refused = op.post("/api/sweeps", json=SWEEP).json()["id"]
+    failed = wait_for(lambda: (s := op.get(f"/api/sweeps/{refused}").json())["state"] == "failed" and s, 30, "refusal")
+    assert "estop" in failed["error"] and "reset it first" in failed["error"] and failed["recording_id"] is None
     assert op.post("/api/rig/reset").status_code == 204
     assert wait_for(lambda: op.get("/api/rig").json()["plc"]["state"] == "idle", 10, "idle")
 
