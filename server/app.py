@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
@@ -68,6 +69,7 @@ def create_app(settings: Settings) -> FastAPI:
     app = FastAPI(title="shakeid", version=_version(), lifespan=lifespan,
                   responses={400: {"model": schemas.Problem}, 422: {"model": schemas.Problem}},
                   description="Sine sweeps on the shaker rig, HDF5 recordings, sparse nonlinear models.")
+    app.state.shutting_down = threading.Event()  # set by `shakeid serve` on SIGTERM/SIGINT
     viewer, operator = Depends(require(settings, "viewer")), Depends(require(settings, "operator"))
     errors = {401: {"model": schemas.Problem}, 403: {"model": schemas.Problem}}
 
@@ -246,7 +248,7 @@ def create_app(settings: Settings) -> FastAPI:
 
         async def events():
             seq = after
-            while buffer is not None:
+            while buffer is not None and not app.state.shutting_down.is_set():
                 points = buffer.since(seq)
                 if points:
                     seq = points[-1][0]

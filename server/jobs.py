@@ -43,7 +43,11 @@ class JobQueue:
         self._stop = True
         self._wake.set()
         self._thread.join(5)
-        self.pool.shutdown(wait=False, cancel_futures=True)
+        # a running job is stopped with its worker and stays "running" in the catalog: the next start re-runs it
+        with self._pool_lock:
+            for proc in list(getattr(self.pool, "_processes", {}).values()):
+                proc.terminate()
+            self.pool.shutdown(wait=True, cancel_futures=True)
 
     def submit(self, kind: str, recording_id: str, options: dict | None = None) -> dict:
         job_id = new_id()

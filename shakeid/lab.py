@@ -203,5 +203,11 @@ def cmd_serve(args) -> int:
     if settings.generated_token:
         print(f"shakeid serve: no tokens configured; operator token: {settings.generated_token} "
               f"(kept in {settings.data_dir / 'operator-token'})", flush=True)
-    uvicorn.run(app, host=args.host, port=args.port, log_level=args.log_level)
+    class Server(uvicorn.Server):
+        def handle_exit(self, sig, frame):
+            app.state.shutting_down.set()  # live streams (SSE) end now instead of holding the shutdown up
+            super().handle_exit(sig, frame)
+
+    config = uvicorn.Config(app, host=args.host, port=args.port, log_level=args.log_level, timeout_graceful_shutdown=5)
+    Server(config).run()
     return 0

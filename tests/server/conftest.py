@@ -48,7 +48,8 @@ class Service:
         return f"http://127.0.0.1:{self.port}"
 
     def output(self) -> str:
-        self.log.flush()
+        if not self.log.closed:
+            self.log.flush()
         return Path(self.log.name).read_text()
 
     def client(self, token: str | None = OPERATOR) -> httpx.Client:
