@@ -13,6 +13,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from pathlib import Path as FsPath
+from typing import Literal
 
 from fastapi import Depends, FastAPI, HTTPException, Path, Query, Request
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, StreamingResponse
@@ -318,15 +319,16 @@ def create_app(settings: Settings) -> FastAPI:
 
     @app.get("/api/recordings/{rec_id}/plots", tags=["jobs"], dependencies=[viewer],
              responses={**errors, 404: {"model": schemas.Problem}})
-    def plots(rec_id: str = Id()) -> list[str]:
-        """Names of the report's figures (PNG) of the latest identification."""
-        report = _latest_result(rec_id, "identify", "report")
+    def plots(rec_id: str = Id(), kind: Literal["identify", "explain"] = "identify") -> list[str]:
+        """Names of the report's figures (PNG) of the latest identification (or explanation)."""
+        report = _latest_result(rec_id, kind, "report")
         return sorted(p.name for p in report.glob("*.png"))
 
     @app.get("/api/recordings/{rec_id}/plots/{name}", tags=["jobs"], dependencies=[viewer],
              response_class=FileResponse, responses={**errors, 404: {"model": schemas.Problem}})
-    def plot(rec_id: str = Id(), name: str = Path(pattern=PLOT_NAME)):
-        report = _latest_result(rec_id, "identify", "report")
+    def plot(rec_id: str = Id(), name: str = Path(pattern=PLOT_NAME),
+             kind: Literal["identify", "explain"] = "identify"):
+        report = _latest_result(rec_id, kind, "report")
         if name not in {p.name for p in report.glob("*.png")}:  # only files that are there, by exact name
             raise HTTPException(404, f"no figure {name}")
         return FileResponse(report / name, media_type="image/png")

@@ -225,3 +225,46 @@ def test_sigterm_mid_sweep_ends_the_recording_aborted_with_the_reason(tmp_path):
     with h5py.File(svc.data_dir / "recordings" / f"{rec_id}.h5") as f:
         assert f["entry"].attrs["status"] == "aborted"
         assert "shutting down" in f["entry"].attrs["status_reason"] and f["entry/data/time"].shape[0] > 0
+
+
+def test_explain_job_names_a_hidden_effect(service, tmp_path, make_run):
+    """POST /explain on an uploaded sweep of a rig with hidden quadratic damping: the analysis names it and
+    adding it closes the free-run gap; its figures are served."""
+    from identify.recording import write_csv
+    from sim.sweep import SineSweep
+
+    run = make_run(rig=RigParameters.design(effects={"quadratic_damping": 2.0}), sweep=SineSweep(1.0, 20.0, 40.0, 1.3),
+                   seed=5)
+    csv = tmp_path / "qd.csv"
+    write_csv(csv, run.recording)
+    op = service.client()
+    rec = op.post("/api/recordings", params={"filename": "qd.csv"}, content=csv.read_bytes()).json()
+    job = op.post(f"/api/recordings/{rec['id']}/explain", json={})
+    assert job.status_code == 202 and job.json()["kind"] == "explain"
+    done = wait_for(lambda: (j := op.get(f"/api/jobs/{job.json()['id']}").json())["state"] in ("completed", "failed")
+                    and j, 120, "explain job")
+    assert done["state"] == "completed", done
+    result = op.get(f"/api/recordings/{rec['id']}/explanation").json()
+    assert result["effect"] == "quadratic_damping" and result["gap_after"] < 0.5 * result["gap_before"]
+    figures = op.get(f"/api/recordings/{rec['id']}/plots", params={"kind": "explain"}).json()
+    assert {"residual_time.png", "candidates.png", "gap.png"} <= set(figures)
+    png = op.get(f"/api/recordings/{rec['id']}/plots/gap.png", params={"kind": "explain"})
+    assert png.status_code == 200 and png.content[:4] == b"\x89PNG"
+    assert op.get(f"/api/recordings/{rec['id']}/model").status_code == 404  # explained, not identified
+
+
+def test_dashboard_is_served_and_calls_only_real_endpoints(service):
+    """The dashboard page: served without a token (it asks for one), and every API path its script
+    calls exists in the OpenAPI document with that method (so the page cannot drift from the API)."""
+    import re
+
+    page = httpx.get(service.url + "/")
+    assert page.status_code == 200 and "EMERGENCY STOP" in page.text
+    spec = httpx.get(service.url + "/openapi.json").json()["paths"]
+    calls = re.findall(r'api\("(GET|POST)", `?"?(/api/[^`"?]+)', page.text)
+    calls += [("GET", p) for p in re.findall(r'(?:new EventSource\(|href=")`?(/api/[^`"?]+)', page.text)]
+    assert len(calls) >= 8
+    for method, path in calls:
+        template = re.sub(r"\$\{[^}]+\}", "{x}", path)
+        matches = [p for p in spec if re.fullmatch(re.sub(r"\{[^}]+\}", "[^/]+", p), template)]
+        assert matches and any(method.lower() in spec[p] for p in matches), (method, path)
