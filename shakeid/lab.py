@@ -54,6 +54,7 @@ def cmd_demo(args) -> int:
     print(summary(ident.result(), str(h5)))
     print("true model: " + json.dumps(truth))
     print(f"report: {out / 'report' / 'index.html'}")
+    print("next: `.venv/bin/shakeid serve` runs the same chain behind HTTP, with a dashboard (docs/service.md)")
     return 0
 
 
@@ -184,6 +185,15 @@ def cmd_recordings(args) -> int:
               f"{info['samples']} samples ({dur:.1f} s at {info['fs_hz']:g} Hz), channels {', '.join(info['channels'])}, "
               f"{len(info['gaps'])} gap(s); started {info['start_time']} by {info['operator'] or '-'}; "
               f"sweep {info['sweep'] or '-'}")
+        if "link_frames" in info:
+            print(f"  sensor link: {info['link_frames']} frames, {info.get('link_frames_lost', 0)} lost, "
+                  f"{info.get('link_frames_corrupt', 0)} corrupt, {info.get('link_saturated_frames', 0)} saturated")
+        for first, count in info["gaps"][:10]:
+            print(f"  gap: {count} samples missing from sample {first} (t = {first / info['fs_hz']:.3f} s)")
+        if len(info["gaps"]) > 10:
+            print(f"  ... {len(info['gaps']) - 10} more gap(s) (--json lists all)")
+        if info.get("processed"):
+            print(f"  processed: {', '.join(info['processed'])}")
     return 0
 
 

@@ -78,6 +78,14 @@ def test_dropped_and_corrupted_stream_frames_are_counted_gaps(tmp_path):
     assert info["gaps"][0][0] < info["gaps"][1][0]  # listed in order
     with pytest.raises(RecordingError, match="2 gap"):
         read_h5_recording(tmp_path / "faults.h5")  # never spliced into one record
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    shown = subprocess.run([str(Path(sys.executable).with_name("shakeid")), "recordings", str(tmp_path / "faults.h5")],
+                           capture_output=True, text=True)
+    assert "2 gap(s)" in shown.stdout and "5 lost, 2 corrupt" in shown.stdout
+    assert f"gap: {3 * FRAME} samples missing from sample {info['gaps'][0][0]}" in shown.stdout
 
 
 def test_lost_can_frames_are_counted_gaps(can_rig, tmp_path):
