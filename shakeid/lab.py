@@ -212,7 +212,8 @@ def cmd_serve(args) -> int:
     print(f"shakeid serve: http://{args.host}:{args.port}/ ({rig}); data in {settings.data_dir.resolve()}", flush=True)
     if settings.generated_token:
         print(f"shakeid serve: no tokens configured; operator token: {settings.generated_token} "
-              f"(kept in {settings.data_dir / 'operator-token'})", flush=True)
+              f"(kept in {settings.data_dir / 'operator-token'}); dashboard: "
+              f"http://{args.host}:{args.port}/#token={settings.generated_token}", flush=True)
     class Server(uvicorn.Server):
         def handle_exit(self, sig, frame):
             app.state.shutting_down.set()  # live streams (SSE) end now instead of holding the shutdown up
