@@ -205,8 +205,6 @@ def test_queued_and_interrupted_jobs_run_after_a_restart(tmp_path, table1_run):
 def test_sigterm_mid_sweep_ends_the_recording_aborted_with_the_reason(tmp_path):
     """A supervisor stopping the service (SIGTERM) while a sweep runs and a live client listens: the
     table is stopped, the file closed 'aborted' with the reason, and the process exits promptly."""
-    import time
-
     svc = Service(tmp_path / "data").start()
     op = svc.client()
     sweep_id = op.post("/api/sweeps", json={**SWEEP, "duration_s": 300.0}).json()["id"]
@@ -215,13 +213,13 @@ def test_sigterm_mid_sweep_ends_the_recording_aborted_with_the_reason(tmp_path):
     reader = threading.Thread(target=_read_live, args=(svc.url, rec_id, events, stop), daemon=True)
     reader.start()
     wait_for(lambda: len(events) > 3, 30, "live samples")
-    t0 = time.monotonic()
     svc.stop(signal.SIGTERM)
     reader.join(10)
     assert events[-1][0] == "end"  # the live client was told, not cut off
-    # uvicorn exits by re-raising the signal once shut down (-15), the convention supervisors expect
-    assert svc.proc.returncode in (0, -signal.SIGTERM) and time.monotonic() - t0 < 10
-    assert "graceful shutdown exceeded" not in svc.output()  # the live stream did not hold it up
+    # uvicorn exits by re-raising the signal once shut down (-15), the convention supervisors expect; a
+    # process that hangs is killed by stop() after 20 s and shows -9 here
+    assert svc.proc.returncode in (0, -signal.SIGTERM)
+    assert "graceful shutdown exceeded" not in svc.output()  # the live stream did not hold it up (5 s)
     with h5py.File(svc.data_dir / "recordings" / f"{rec_id}.h5") as f:
         assert f["entry"].attrs["status"] == "aborted"
         assert "shutting down" in f["entry"].attrs["status_reason"] and f["entry/data/time"].shape[0] > 0
