@@ -56,6 +56,9 @@ def create_app(settings: Settings) -> FastAPI:
         for path in recover_directory(settings.data_dir / "recordings"):  # files a dead service left running
             catalog.update("recordings", path.stem, status="aborted")
             print(f"shakeid serve: recording {path.stem}: was left running; marked aborted, data kept", flush=True)
+        for rec in catalog.list("recordings", "status = 'running'", limit=100_000):
+            if not FsPath(rec["path"]).exists():  # the service died before its recorder created the file
+                catalog.delete("recordings", rec["id"])
         jobs = JobQueue(catalog, settings.data_dir / "results", settings.identify_workers)
         jobs.start()
         rig = RigService(settings.rig, settings.data_dir, settings.sim_speed)

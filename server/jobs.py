@@ -40,14 +40,17 @@ class JobQueue:
         self._thread.start()
 
     def stop(self) -> None:
+        """Stop taking jobs; a running job is stopped with its worker and stays "running" in the catalog,
+        so the next start runs it again."""
         self._stop = True
         self._wake.set()
         self._thread.join(5)
-        # a running job is stopped with its worker and stays "running" in the catalog: the next start re-runs it
         with self._pool_lock:
-            for proc in list(getattr(self.pool, "_processes", {}).values()):
-                proc.terminate()
-            self.pool.shutdown(wait=True, cancel_futures=True)
+            pool = self.pool
+        for proc in list(getattr(pool, "_processes", {}).values()):
+            proc.terminate()
+        # not under the lock: shutdown joins the pool's manager thread, which runs _done callbacks
+        pool.shutdown(wait=True, cancel_futures=True)
 
     def submit(self, kind: str, recording_id: str, options: dict | None = None) -> dict:
         job_id = new_id()
@@ -78,7 +81,7 @@ class JobQueue:
 
     def _done(self, job_id: str, recording_id: str, kind: str, fut: Future, broken_pool=None) -> None:
         self._running.pop(job_id, None)
-        if fut.cancelled():
+        if fut.cancelled() or self._stop:
             return  # the service is stopping: the job stays "running" and is re-queued on the next start
         exc = fut.exception()
         if exc is None:

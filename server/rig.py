@@ -64,8 +64,9 @@ class RigService:
             self.cfg.limits = Limits(**{**self.cfg.limits.__dict__, "watchdog_s": watchdog})
             self.sim = SimulatedRig(PLCConfig(limits=self.cfg.limits), speed=sim_speed)
             self.sim_speed = sim_speed
-        self._control_lock = threading.Lock()
-        self._control: ModbusPLC | AdsPLC | None = None
+        # two PLC connections besides the sweep's: one for status/reset, one that only ever sends the
+        # emergency stop, so a stop never waits behind status polls
+        self._links = {"control": [threading.Lock(), None], "estop": [threading.Lock(), None]}
         self.active: dict | None = None  # {"id", "runner", "thread", "live"}
         self._lock = threading.Lock()
 
@@ -82,8 +83,9 @@ class RigService:
         if act is not None:
             act["runner"].abort("the service is shutting down")
             act["thread"].join(10)
-        if self._control is not None:
-            self._control.close()
+        for _, plc in self._links.values():
+            if plc is not None:
+                plc.close()
         if self.sim is not None:
             self.sim.stop()
 
@@ -94,18 +96,19 @@ class RigService:
             return AdsPLC(p.get("ams_net_id", f"{host}.1.1"), host, int(p.get("ams_port", 851)))
         return ModbusPLC(p.get("host", "127.0.0.1"), int(p.get("port", 502)))
 
-    def _with_control(self, fn):
-        """Run fn(plc) on the control connection, reconnecting once if the link dropped."""
-        with self._control_lock:
+    def _with_control(self, fn, link: str = "control"):
+        """Run fn(plc) on one of the service's own PLC connections, reconnecting once if it dropped."""
+        entry = self._links[link]
+        with entry[0]:
             for attempt in (0, 1):
                 try:
-                    if self._control is None:
-                        self._control = self._plc()
-                    return fn(self._control)
+                    if entry[1] is None:
+                        entry[1] = self._plc()
+                    return fn(entry[1])
                 except DeviceError:
-                    if self._control is not None:
-                        self._control.close()
-                    self._control = None
+                    if entry[1] is not None:
+                        entry[1].close()
+                    entry[1] = None
                     if attempt:
                         raise
 
@@ -135,7 +138,7 @@ class RigService:
     def emergency_stop(self) -> dict:
         act = self.active
         try:
-            self._with_control(lambda plc: plc.command(Command.ESTOP))  # the table first, bookkeeping after
+            self._with_control(lambda plc: plc.command(Command.ESTOP), "estop")  # the table first, bookkeeping after
         finally:
             if act is not None:
                 act["runner"].abort("emergency stop")

@@ -5,6 +5,7 @@ a usable recording is deleted and refused with the reader's own message (422).
 """
 from __future__ import annotations
 
+import asyncio
 import os
 from pathlib import Path
 
@@ -28,7 +29,8 @@ async def store_upload(request: Request, directory: Path, rec_id: str, filename:
                 f.write(chunk)
         if size == 0:
             raise HTTPException(422, "empty upload: send the file as the request body")
-        info = _check(tmp, suffix, filename, options)
+        # reading a large file takes seconds: off the event loop, so emergency stop and pollers are served
+        info = await asyncio.to_thread(_check, tmp, suffix, filename, options)
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)

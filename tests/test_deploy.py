@@ -84,8 +84,9 @@ def test_compose_rig_configuration_drives_a_sweep_through_the_service(tmp_path):
     exe = str(Path(sys.executable).with_name("shakeid"))
     rig = subprocess.Popen([exe, "sim", "--config", str(cfg)], stdout=subprocess.PIPE, text=True)
     env = {"PATH": "/usr/bin:/bin", "SHAKEID_TOKENS": "compose-operator-token:operator"}
+    log = open(tmp_path / "serve.log", "w")  # a file, not a pipe nobody reads (a full pipe blocks the writer)
     serve = subprocess.Popen([exe, "serve", "--config", str(cfg), "--port", str(http)], env=env,
-                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                             stdout=log, stderr=subprocess.STDOUT, text=True)
     try:
         assert "Modbus" in rig.stdout.readline()
         client = httpx.Client(base_url=f"http://127.0.0.1:{http}", timeout=10,
@@ -112,4 +113,6 @@ def test_compose_rig_configuration_drives_a_sweep_through_the_service(tmp_path):
     finally:
         for proc in (serve, rig):
             proc.send_signal(signal.SIGTERM)
-            proc.wait(20)
+        assert serve.wait(30) in (0, -signal.SIGTERM), (tmp_path / "serve.log").read_text()
+        rig.wait(30)
+        log.close()

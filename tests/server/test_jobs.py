@@ -34,3 +34,26 @@ def test_a_killed_worker_fails_its_job_with_the_reason_and_the_next_job_runs(tmp
     finally:
         jobs.stop()
         cat.close()
+
+
+def test_stopping_with_a_job_running_returns_and_leaves_it_for_the_next_start(tmp_path, table1_run):
+    import threading
+
+    cat = Catalog(tmp_path / "catalog.sqlite")
+    csv = tmp_path / "r.csv"
+    write_csv(csv, table1_run.recording)
+    cat.insert("recordings", id="0000000000aa", created=time.time(), origin="upload", filename="r.csv", path=str(csv),
+               status="complete", sweep_id=None, info={})
+    jobs = JobQueue(cat, tmp_path / "results", workers=1)
+    jobs.start()
+    job = jobs.submit("identify", "0000000000aa", {"refine": "free-run"})
+    wait_for(lambda: cat.get("jobs", job["id"])["state"] == "running", 30, "running")
+    stopper = threading.Thread(target=jobs.stop)
+    stopper.start()
+    stopper.join(30)
+    try:
+        assert not stopper.is_alive(), "JobQueue.stop() hung with a job running"
+        assert cat.get("jobs", job["id"])["state"] == "running"  # re-queued by recover_after_restart next time
+        assert cat.recover_after_restart() == [f"job {job['id']}: re-queued after a restart"]
+    finally:
+        cat.close()
