@@ -103,8 +103,11 @@ class SweepRunner:
                     if self.on_progress:
                         self.on_progress(min(st.elapsed_s / req.duration_s, 1.0) if st.state == State.RUNNING
                                          else float(st.state == State.DONE), st)
-                    if st.state in (State.FAULT, State.ESTOP):
-                        status, reason = "fault", f"PLC {State(st.state).name.lower()}, fault code {Fault(st.fault_code).name.lower()}"
+                    if st.state == State.ESTOP:  # pressed anywhere: on the rig, in the service, by another client
+                        status, reason = "aborted", "emergency stop (the PLC is in estop)"
+                        break
+                    if st.state == State.FAULT:
+                        status, reason = "fault", f"PLC fault: {Fault(st.fault_code).name.lower()}"
                         break
                     if st.state == State.DONE and done_index is None:
                         done_index = rec.next_index or 0

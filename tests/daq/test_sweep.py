@@ -166,3 +166,40 @@ def test_sigkill_of_the_sweep_process_the_watchdog_stops_the_table(tmp_path):
         assert np.allclose(np.diff(t), 1 / 2048) and np.all(np.isfinite(f["entry/data/mass_acc"][()]))
     p = subprocess.run([exe, "recordings", "--recover", str(out)], capture_output=True, text=True)
     assert p.returncode == 0 and "marked aborted" in p.stdout and describe(out)["status"] == "aborted"
+
+
+@pytest.mark.parametrize("event,status,reason", [
+    ("drive_fault", "fault", "PLC fault: injected"),
+    ("estop_on_the_rig", "aborted", "emergency stop"),
+    ("sensor_loss", "aborted", "accelerometer stream"),
+])
+def test_abort_paths_leave_the_table_stopped_and_the_file_valid(rig, tmp_path, event, status, reason):
+    """A drive fault, an emergency stop pressed at the rig, and a lost sensor stream mid-sweep: each ends
+    the recording with its status and reason, the samples so far intact, and the table at rest."""
+    import time
+
+    from sim.plc import Command, State
+
+    plc = ModbusPLC(*rig.endpoints["modbus"])
+    runner = _runner(rig, plc)
+    fired = {"done": False}
+    actions = {"drive_fault": lambda: rig.plc.inject_fault(),
+               "estop_on_the_rig": lambda: rig.plc.command(Command.ESTOP),
+               "sensor_loss": lambda: rig.fault_injection.update({"disconnect_s": 60.0})}
+
+    def progress(frac, st):
+        if frac > 0.1 and not fired["done"]:
+            fired["done"] = True
+            rig.call(actions[event])
+
+    runner.on_progress = progress
+    result = runner.run(SweepRequest(2.0, 10.0, 60.0, 1.0), tmp_path / f"{event}.h5")
+    plc.close()
+    assert result["status"] == status and reason in result["reason"], result
+    info = describe(tmp_path / f"{event}.h5")
+    assert info["status"] == status and reason in info["status_reason"] and info["samples"] > 2048
+    end = time.monotonic() + 10
+    while not rig.call(lambda: rig.plc._table_at_rest()):  # stopped by the PLC or by the runner's STOP
+        assert time.monotonic() < end, "the table kept moving"
+        time.sleep(0.05)
+    assert rig.call(lambda: rig.plc.state) != State.RUNNING
