@@ -47,7 +47,7 @@ class JobQueue:
         self._thread.join(5)
         with self._pool_lock:
             pool = self.pool
-        for proc in list(getattr(pool, "_processes", {}).values()):
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):  # None once shut down
             proc.terminate()
         # not under the lock: shutdown joins the pool's manager thread, which runs _done callbacks
         pool.shutdown(wait=True, cancel_futures=True)

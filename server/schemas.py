@@ -56,7 +56,18 @@ class RecordingOut(BaseModel):
     info: dict = {}
 
 
-class IdentifyIn(Strict):
+class ReadOptions(Strict):
+    """How to read the recording (as `shakeid identify/explain`): stretch, layout, columns, band."""
+    samples: tuple[int, int] | None = Field(None, description="rows [a, b) of the recording")
+    band_hz: tuple[float, float] | None = Field(None, description="integration band (f_lo, f_hi), Hz")
+    layout: Literal["base", "force"] | None = None
+    input: str | None = Field(None, max_length=64)
+    output: str | None = Field(None, max_length=64)
+    time: str | None = Field(None, max_length=64)
+    fs_hz: float | None = Field(None, gt=0, le=1e7)
+
+
+class IdentifyIn(ReadOptions):
     """The options of `shakeid identify`; all optional."""
     degree: int | None = Field(None, ge=1, le=7)
     method: Literal["admm", "stlsq"] | None = None
@@ -67,23 +78,10 @@ class IdentifyIn(Strict):
     holdout_fraction: float | None = Field(None, gt=0, lt=0.9)
     n_lambdas: int | None = Field(None, ge=2, le=1000)
     extra_terms: list[str] | None = Field(None, max_length=20)
-    band_hz: tuple[float, float] | None = None
-    samples: tuple[int, int] | None = Field(None, description="rows [a, b) of the recording")
-    layout: Literal["base", "force"] | None = None
-    input: str | None = Field(None, max_length=64)
-    output: str | None = Field(None, max_length=64)
-    time: str | None = Field(None, max_length=64)
-    fs_hz: float | None = Field(None, gt=0, le=1e7)
 
 
-class ExplainIn(Strict):
-    band_hz: tuple[float, float] | None = None
-    samples: tuple[int, int] | None = None
-    layout: Literal["base", "force"] | None = None
-    input: str | None = Field(None, max_length=64)
-    output: str | None = Field(None, max_length=64)
-    time: str | None = Field(None, max_length=64)
-    fs_hz: float | None = Field(None, gt=0, le=1e7)
+class ExplainIn(ReadOptions):
+    """The options of `shakeid explain`: the read options only."""
 
 
 class JobOut(BaseModel):

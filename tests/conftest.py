@@ -50,3 +50,32 @@ def table1_csv(table1_run, tmp_path_factory):
     path = tmp_path_factory.mktemp("rec") / "sweep.csv"
     write_csv(path, table1_run.recording)
     return path
+
+
+@pytest.fixture
+def can_relay():
+    """A python-can-remote relay (a virtual CAN bus served over websocket on loopback), for CAN between
+    processes; yields its port once it accepts connections."""
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    from sim.server import free_port
+
+    port = free_port()
+    relay = subprocess.Popen([sys.executable, "-m", "can_remote", "-i", "virtual", "-c", f"relay{port}",
+                              "-H", "127.0.0.1", "-p", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        end = time.time() + 15.0
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
+                break
+            except OSError:
+                assert relay.poll() is None and time.time() < end, "python-can-remote relay did not start"
+                time.sleep(0.1)
+        yield port
+    finally:
+        relay.terminate()
+        relay.wait(10)

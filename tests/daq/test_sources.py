@@ -119,38 +119,25 @@ def test_missing_can_bus_is_a_clear_error():
         CanSource("nosuchinterface", "x", 2048.0)
 
 
-def test_shakeid_sweep_over_can_across_processes(tmp_path):
+def test_shakeid_sweep_over_can_across_processes(tmp_path, can_relay):
     """Three real processes on loopback: a python-can-remote relay, `shakeid sim` sending the samples as
     CAN frames through it, and `shakeid sweep` with [sampling] source = "can" recording them."""
     import signal
-    import socket
     import subprocess
     import sys
-    import time
     from pathlib import Path
 
     from sim.server import free_port
 
     exe = str(Path(sys.executable).with_name("shakeid"))
-    relay_port, mb, st = free_port(), free_port(), free_port()
-    relay = subprocess.Popen([sys.executable, "-m", "can_remote", "-i", "virtual", "-c", "daq", "-H", "127.0.0.1",
-                              "-p", str(relay_port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    mb, st = free_port(), free_port()
     cfg = tmp_path / "rig.toml"
     # 4x: 8192 frames/s, inside the relay's measured lossless range (shared notes: 2-10 kHz)
     cfg.write_text(f'[plc]\nport = {mb}\n[stream]\nurl = "socket://127.0.0.1:{st}"\n'
-                   f'[can]\ninterface = "remote"\nchannel = "ws://127.0.0.1:{relay_port}/"\n'
+                   f'[can]\ninterface = "remote"\nchannel = "ws://127.0.0.1:{can_relay}/"\n'
                    f'[sampling]\nsource = "can"\n[limits]\nwatchdog_s = 1.0\n[sim]\nspeed = 4\n')
-    sim = None
+    sim = subprocess.Popen([exe, "sim", "--config", str(cfg)], stdout=subprocess.PIPE, text=True)
     try:
-        end = time.time() + 15.0
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", relay_port), timeout=0.5).close()
-                break
-            except OSError:
-                assert time.time() < end, "python-can-remote relay did not start"
-                time.sleep(0.1)
-        sim = subprocess.Popen([exe, "sim", "--config", str(cfg)], stdout=subprocess.PIPE, text=True)
         assert "CAN remote" in sim.stdout.readline()
         out = tmp_path / "can.h5"
         p = subprocess.run([exe, "sweep", "--config", str(cfg), "--f-start-hz", "2", "--f-end-hz", "10",
@@ -158,10 +145,7 @@ def test_shakeid_sweep_over_can_across_processes(tmp_path):
                            capture_output=True, text=True, timeout=120)
         assert p.returncode == 0 and "complete" in p.stdout and "0 gap(s)" in p.stdout, p.stdout + p.stderr
     finally:
-        if sim is not None:
-            sim.send_signal(signal.SIGTERM)
-            sim.communicate(timeout=20)
-        relay.terminate()
-        relay.wait(10)
+        sim.send_signal(signal.SIGTERM)
+        sim.communicate(timeout=20)
     info = describe(out)
     assert info["link_frames"] == info["samples"] >= 9 * 2048 and info["link_frames_lost"] == 0

@@ -356,11 +356,10 @@ def test_plc_fault_mid_sweep_is_seen_by_the_client(rig):
     cli.stop_heartbeat()
 
 
-def test_can_across_processes_through_python_can_remote(tmp_path):
+def test_can_across_processes_through_python_can_remote(tmp_path, can_relay):
     """`shakeid sim` in its own process sends CAN frames through a python-can-remote relay; a client in
     this process receives them with consecutive counters."""
     import signal
-    import socket
     import subprocess
     import sys
     from pathlib import Path
@@ -370,26 +369,15 @@ def test_can_across_processes_through_python_can_remote(tmp_path):
     from sim import can_frames
     from sim.server import free_port
 
-    relay_port, mb, st = free_port(), free_port(), free_port()
-    relay = subprocess.Popen([sys.executable, "-m", "can_remote", "-i", "virtual", "-c", "shakeid", "-H", "127.0.0.1",
-                              "-p", str(relay_port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    mb, st = free_port(), free_port()
     cfg = tmp_path / "rig.toml"
     cfg.write_text(f'[plc]\nport = {mb}\n[stream]\nurl = "socket://127.0.0.1:{st}"\n'
-                   f'[can]\ninterface = "remote"\nchannel = "ws://127.0.0.1:{relay_port}/"\n')
-    sim = None
+                   f'[can]\ninterface = "remote"\nchannel = "ws://127.0.0.1:{can_relay}/"\n')
+    sim = subprocess.Popen([str(Path(sys.executable).with_name("shakeid")), "sim", "--config", str(cfg)],
+                           stdout=subprocess.PIPE, text=True)
     try:
-        end = time.time() + 15.0  # until the relay listens
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", relay_port), timeout=0.5).close()
-                break
-            except OSError:
-                assert time.time() < end, "python-can-remote relay did not start"
-                time.sleep(0.1)
-        sim = subprocess.Popen([str(Path(sys.executable).with_name("shakeid")), "sim", "--config", str(cfg)],
-                               stdout=subprocess.PIPE, text=True)
         assert "CAN remote" in sim.stdout.readline()
-        bus = can.Bus(interface="remote", channel=f"ws://127.0.0.1:{relay_port}/")
+        bus = can.Bus(interface="remote", channel=f"ws://127.0.0.1:{can_relay}/")
         msgs, end = [], time.time() + 1.0
         while time.time() < end:
             m = bus.recv(0.1)
@@ -397,11 +385,8 @@ def test_can_across_processes_through_python_can_remote(tmp_path):
                 msgs.append(m)
         bus.shutdown()
     finally:
-        if sim is not None:
-            sim.send_signal(signal.SIGTERM)
-            sim.communicate(timeout=20)
-        relay.terminate()
-        relay.wait(10)
+        sim.send_signal(signal.SIGTERM)
+        sim.communicate(timeout=20)
     counters = np.array([can_frames.decode(m.data)[0] for m in msgs])
     assert counters.size > 1000  # ~2048 per second of rig time
     assert np.all(np.diff(counters) % 65536 == 1)
