@@ -116,3 +116,23 @@ def test_compose_rig_configuration_drives_a_sweep_through_the_service(tmp_path):
         assert serve.wait(30) in (0, -signal.SIGTERM), (tmp_path / "serve.log").read_text()
         rig.wait(30)
         log.close()
+
+
+def test_the_wheel_the_image_installs_carries_the_service(tmp_path):
+    """The Dockerfile runs `pip install .` (no editable install, no source tree at run time): the wheel
+    must carry every package module, the compiled kernel, the dashboard page and the console script."""
+    import zipfile
+
+    p = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path), str(REPO)],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-2000:]
+    (wheel,) = tmp_path.glob("shakeid-*.whl")
+    names = set(zipfile.ZipFile(wheel).namelist())
+    for package in ("identify", "sim", "daq", "server", "shakeid"):
+        for module in (REPO / package).rglob("*.py"):
+            assert str(module.relative_to(REPO)) in names, module
+    assert "server/dashboard.html" in names
+    assert any(n.startswith("identify/_simkernel") and n.endswith(".so") for n in names)
+    entry = next(n for n in names if n.endswith("entry_points.txt"))
+    assert "shakeid = shakeid.cli:main" in zipfile.ZipFile(wheel).read(entry).decode()
+    assert not any(n.startswith(("tests/", "benchmarks/")) for n in names)
