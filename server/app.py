@@ -61,7 +61,7 @@ def create_app(settings: Settings) -> FastAPI:
                 catalog.delete("recordings", rec["id"])
         jobs = JobQueue(catalog, settings.data_dir / "results", settings.identify_workers)
         jobs.start()
-        rig = RigService(settings.rig, settings.data_dir, settings.sim_speed)
+        rig = RigService(settings.rig, settings.sim_speed)
         rig.start()
         state.update(catalog=catalog, jobs=jobs, rig=rig, estop_pool=ThreadPoolExecutor(1, "estop"))
         yield

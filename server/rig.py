@@ -52,9 +52,10 @@ class LiveBuffer:
 
 
 class RigService:
-    def __init__(self, rig: RigConfig | None, data_dir: Path, sim_speed: float = 1.0):
+    """rig: the rig configuration, or None for an embedded simulated rig running at sim_speed."""
+
+    def __init__(self, rig: RigConfig | None, sim_speed: float = 1.0):
         self.cfg = rig or RigConfig()
-        self.data_dir = Path(data_dir)
         self.sim = None
         if rig is None:
             from sim.server import SimulatedRig

@@ -8,11 +8,10 @@ import threading
 import h5py
 import httpx
 import numpy as np
-import pytest
 
 from sim.rig import RigParameters
 
-from .conftest import OPERATOR, VIEWER, Service, wait_for
+from .conftest import VIEWER, Service, wait_for
 
 SWEEP = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 40.0, "amplitude_mm": 1.3, "settle_s": 2.0}
 
