@@ -61,9 +61,13 @@ def cmd_demo(args) -> int:
 def _progress_bar(frac, st):
     from sim.plc import State
 
+    _progress_bar_fraction(frac, f"{State(st.state).name.lower():8s} {st.frequency_hz:6.2f} Hz  "
+                                 f"table {st.position_mm:+6.2f} mm")
+
+
+def _progress_bar_fraction(frac: float, label: str) -> None:
     bar = "#" * int(30 * frac)
-    sys.stderr.write(f"\r[{bar:<30s}] {100 * frac:5.1f} %  {State(st.state).name.lower():8s} "
-                     f"{st.frequency_hz:6.2f} Hz  table {st.position_mm:+6.2f} mm")
+    sys.stderr.write(f"\r[{bar:<30s}] {100 * frac:5.1f} %  {label}")
     sys.stderr.flush()
 
 
@@ -85,7 +89,13 @@ def _sweep_devices(cfg):
 
 
 def cmd_sweep(args) -> int:
-    """Run one sweep on the rig of --config and record it."""
+    """Run one sweep on the rig of --config and record it (or, with --server, through the service)."""
+    if args.server:
+        from .remote import cmd_sweep_remote
+
+        return cmd_sweep_remote(args)
+    if not args.out:
+        raise ShakeidError("--out FILE.h5 is needed with --config (the service keeps its own files)")
     from daq.sweep import SweepRequest, SweepRunner
     from sim.config import load_config
 

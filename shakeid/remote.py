@@ -1,0 +1,88 @@
+"""`shakeid sweep --server URL`: the same sweep through a running `shakeid serve`, which owns the rig.
+
+The service records, keeps the file and identifies it; this command starts the sweep, shows its
+progress, aborts it on Ctrl-C, and can fetch the file (--out) and wait for the model (--wait-model).
+Plain urllib (standard library): a client this small needs no HTTP package at run time.
+"""
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+from identify.errors import ShakeidError
+
+
+class ServiceClient:
+    def __init__(self, url: str, token: str, timeout_s: float = 10.0):
+        self.url, self.token, self.timeout_s = url.rstrip("/"), token, timeout_s
+
+    def request(self, method: str, path: str, body: dict | None = None, raw: bool = False):
+        """JSON (or bytes with raw=True) of a 2xx answer; ShakeidError with the service's detail otherwise."""
+        data = json.dumps(body).encode() if body is not None else None
+        req = urllib.request.Request(self.url + path, data=data, method=method,
+                                     headers={"Authorization": f"Bearer {self.token}",
+                                              **({"Content-Type": "application/json"} if data else {})})
+        try:
+            with urllib.request.urlopen(req, timeout=self.timeout_s) as r:
+                payload = r.read()
+        except urllib.error.HTTPError as exc:
+            try:
+                detail = json.loads(exc.read()).get("detail", exc.reason)
+            except ValueError:
+                detail = exc.reason
+            raise ShakeidError(f"{method} {path}: {exc.code} {detail if isinstance(detail, str) else json.dumps(detail)}") from None
+        except (urllib.error.URLError, OSError) as exc:
+            raise ShakeidError(f"the service at {self.url} does not answer: {exc}") from None
+        return payload if raw else (json.loads(payload) if payload else {})
+
+
+def cmd_sweep_remote(args) -> int:
+    from .cli import summary
+    from .lab import _progress_bar_fraction
+
+    token = args.token or os.environ.get("SHAKEID_TOKEN", "")
+    if not token:
+        raise ShakeidError("--server needs a token: --token or SHAKEID_TOKEN (an operator's)")
+    client = ServiceClient(args.server, token)
+    body = {"f_start_hz": args.f_start_hz, "f_end_hz": args.f_end_hz, "duration_s": args.duration_s,
+            "amplitude_mm": args.amplitude_mm, "settle_s": args.settle_s, "note": args.note}
+    sweep_id = client.request("POST", "/api/sweeps", body)["id"]
+    print(f"sweep {sweep_id} started on {args.server}", flush=True)
+    try:
+        while (sweep := client.request("GET", f"/api/sweeps/{sweep_id}"))["state"] in ("queued", "running"):
+            _progress_bar_fraction(sweep["progress"], sweep["state"])
+            time.sleep(0.2)
+    except KeyboardInterrupt:
+        client.request("POST", f"/api/sweeps/{sweep_id}/abort")
+        while (sweep := client.request("GET", f"/api/sweeps/{sweep_id}"))["state"] in ("queued", "running"):
+            time.sleep(0.2)
+    _progress_bar_fraction(sweep["progress"], sweep["state"])
+    sys.stderr.write("\n")
+    rec_id = sweep["recording_id"]
+    print(f"sweep {sweep_id}: {sweep['state']}{' (' + sweep['error'] + ')' if sweep['error'] else ''}; "
+          f"recording {rec_id or '-'}")
+    if rec_id and args.out:
+        Path(args.out).write_bytes(client.request("GET", f"/api/recordings/{rec_id}/file", raw=True))
+        print(f"{args.out}: the recording, downloaded")
+    if sweep["state"] != "completed":
+        return 1
+    if args.wait_model:
+        end = time.monotonic() + 300
+        while True:
+            try:
+                result = client.request("GET", f"/api/recordings/{rec_id}/model")
+                break
+            except ShakeidError as exc:
+                jobs = [j for j in client.request("GET", "/api/jobs") if j["recording_id"] == rec_id]
+                if jobs and all(j["state"] == "failed" for j in jobs):
+                    raise ShakeidError(f"identification failed: {jobs[0]['error']}") from None
+                if time.monotonic() > end or " 404 " not in f" {exc} ":
+                    raise
+                time.sleep(0.2)
+        print(summary(result, f"recording {rec_id}"))
+    return 0

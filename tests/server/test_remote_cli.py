@@ -1,0 +1,36 @@
+"""`shakeid sweep --server`: the CLI driving a sweep through a running service (two real processes)."""
+import subprocess
+import sys
+from pathlib import Path
+
+from daq.recorder import describe
+
+from .conftest import OPERATOR, VIEWER
+
+SHAKEID = str(Path(sys.executable).with_name("shakeid"))
+ARGS = ["--f-start-hz", "1", "--f-end-hz", "20", "--duration-s", "30", "--amplitude-mm", "1.3", "--settle-s", "1"]
+
+
+def _sweep(service, *extra, token=OPERATOR):
+    return subprocess.run([SHAKEID, "sweep", "--server", service.url, "--token", token, *ARGS, *extra],
+                          capture_output=True, text=True, timeout=180)
+
+
+def test_sweep_through_the_service_downloads_the_file_and_prints_the_model(service, tmp_path):
+    out = tmp_path / "copy.h5"
+    p = _sweep(service, "--out", str(out), "--wait-model")
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert "completed" in p.stdout and "100.0 %" in p.stderr and "downloaded" in p.stdout
+    info = describe(out)
+    assert info["status"] == "complete" and info["gaps"] == [] and info["samples"] > 30 * 2048
+    assert "q1*q2^2" in p.stdout and "free-run fit" in p.stdout  # the model table, as `shakeid identify`
+
+
+def test_refusals_arrive_as_one_line_errors(service):
+    unsafe = _sweep(service, "--amplitude-mm", "9")
+    assert unsafe.returncode == 2 and "422 sweep refused: amplitude 9 mm above the stroke limit" in unsafe.stderr
+    viewer = _sweep(service, token=VIEWER)
+    assert viewer.returncode == 2 and "403" in viewer.stderr and "operator role" in viewer.stderr
+    nobody = subprocess.run([SHAKEID, "sweep", "--server", "http://127.0.0.1:9", "--token", OPERATOR, *ARGS],
+                            capture_output=True, text=True, timeout=60)
+    assert nobody.returncode == 2 and "does not answer" in nobody.stderr and "Traceback" not in nobody.stderr
