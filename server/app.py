@@ -215,10 +215,14 @@ def create_app(settings: Settings) -> FastAPI:
         return recording_or_404(rec_id)
 
     @app.get("/api/recordings/{rec_id}/file", tags=["recordings"], dependencies=[viewer],
-             response_class=FileResponse, responses={**errors, 404: {"model": schemas.Problem}})
+             response_class=FileResponse, responses={**errors, 404: {"model": schemas.Problem},
+                                                      409: {"model": schemas.Problem}})
     def recording_file(rec_id: str = Id()):
-        """The recording as stored (HDF5 from sweeps; CSV, MAT or HDF5 as uploaded)."""
+        """The recording as stored (HDF5 from sweeps; CSV, MAT or HDF5 as uploaded); 409 while it is being
+        recorded (a copy taken between two flushes could be torn: follow /live instead)."""
         rec = recording_or_404(rec_id)
+        if rec["status"] == "running":
+            raise HTTPException(409, f"recording {rec_id} is still being recorded; follow /live, fetch it after")
         return FileResponse(rec["path"], filename=rec["filename"], media_type="application/octet-stream")
 
     @app.post("/api/recordings", status_code=201, response_model=schemas.RecordingOut, tags=["recordings"],
@@ -275,13 +279,15 @@ def create_app(settings: Settings) -> FastAPI:
         return state["jobs"].submit(kind, rec_id, {**rec["info"].get("read_options", {}), **options})
 
     @app.post("/api/recordings/{rec_id}/identify", status_code=202, response_model=schemas.JobOut,
-              tags=["jobs"], dependencies=[operator], responses={**errors, 404: {"model": schemas.Problem}})
+              tags=["jobs"], dependencies=[operator],
+              responses={**errors, 404: {"model": schemas.Problem}, 409: {"model": schemas.Problem}})
     def identify(body: schemas.IdentifyIn, rec_id: str = Id()):
         """Queue an identification with the CLI's options; poll GET /api/jobs/{id}."""
         return _submit("identify", rec_id, body.model_dump(exclude_none=True))
 
     @app.post("/api/recordings/{rec_id}/explain", status_code=202, response_model=schemas.JobOut,
-              tags=["jobs"], dependencies=[operator], responses={**errors, 404: {"model": schemas.Problem}})
+              tags=["jobs"], dependencies=[operator],
+              responses={**errors, 404: {"model": schemas.Problem}, 409: {"model": schemas.Problem}})
     def explain(body: schemas.ExplainIn, rec_id: str = Id()):
         """Queue a discrepancy analysis (`shakeid explain`): missing effect, gap before/after."""
         return _submit("explain", rec_id, body.model_dump(exclude_none=True))

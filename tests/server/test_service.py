@@ -48,6 +48,7 @@ def test_sweep_live_model_and_the_rules_around_it(service):
     busy = op.post("/api/sweeps", json=SWEEP)
     assert busy.status_code == 409 and sweep_id in busy.json()["detail"]
     rec_id = viewer.get(f"/api/sweeps/{sweep_id}").json()["recording_id"]
+    assert viewer.get(f"/api/recordings/{rec_id}/file").status_code == 409  # not while it is written
     events, stop = [], threading.Event()
     reader = threading.Thread(target=_read_live, args=(service.url, rec_id, events, stop))
     reader.start()
@@ -265,3 +266,33 @@ def test_dashboard_is_served_and_calls_only_real_endpoints(service):
         template = re.sub(r"\$\{[^}]+\}", "{x}", path)
         matches = [p for p in spec if re.fullmatch(re.sub(r"\{[^}]+\}", "[^/]+", p), template)]
         assert matches and any(method.lower() in spec[p] for p in matches), (method, path)
+
+
+def test_mat_and_hdf5_uploads(service, tmp_path, table1_run):
+    """A MAT file with the lab's own variable names (read options as query parameters) and an HDF5
+    recording of the DAQ: both accepted, read as a job reads them, and identified."""
+    from scipy.io import savemat
+
+    from daq.recorder import Recorder
+
+    rec = table1_run.recording
+    savemat(tmp_path / "lab.mat", {"acc_base": rec.input, "acc_mass": rec.output})
+    h5 = tmp_path / "daq.h5"
+    r = Recorder(h5, fs_hz=rec.fs_hz)
+    r.append(0, np.column_stack([rec.input, rec.output]))
+    r.close()
+    op = service.client()
+    mat = op.post("/api/recordings", content=(tmp_path / "lab.mat").read_bytes(),
+                  params={"filename": "lab.mat", "input": "acc_base", "output": "acc_mass", "fs_hz": rec.fs_hz})
+    assert mat.status_code == 201, mat.text
+    assert op.post("/api/recordings", params={"filename": "lab.mat"},  # default column names: not there
+                   content=(tmp_path / "lab.mat").read_bytes()).status_code == 422
+    up = op.post("/api/recordings", params={"filename": "daq.h5"}, content=h5.read_bytes())
+    assert up.status_code == 201 and up.json()["info"]["samples"] == rec.n_samples
+    for rid in (mat.json()["id"], up.json()["id"]):
+        job = op.post(f"/api/recordings/{rid}/identify", json={}).json()
+        done = wait_for(lambda: (j := op.get(f"/api/jobs/{job['id']}").json())["state"] in ("completed", "failed")
+                        and j, 60, "job")
+        assert done["state"] == "completed", done
+        model = op.get(f"/api/recordings/{rid}/model").json()
+        assert set(model["model"]["q1_dot"]) == {"q1", "q2", "q1*q2^2", "q2^3", "zdd"}
