@@ -19,6 +19,7 @@ Samples are never spliced: a missing stretch is listed in /entry/gaps and the ti
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -30,6 +31,10 @@ from identify.errors import RecordingError
 from identify.recording import Recording
 
 STATUSES = ("running", "complete", "aborted", "fault")
+
+
+class DiskFull(RecordingError):
+    """Less free disk space than the recorder's reserve: the recording stops while the file is whole."""
 FLUSH_EVERY_S = 1.0
 CHUNK_ROWS = 4096
 
@@ -51,12 +56,14 @@ class Recorder:
     """Append accelerometer blocks to a new HDF5 file; close with a final status.
 
     channels : names in stream order; units : per channel; fs_hz : sample rate; sensors : optional
-    {channel: {"sensitivity": counts per unit, "position": "table"}}; sweep / rig_config : metadata."""
+    {channel: {"sensitivity": counts per unit, "position": "table"}}; sweep / rig_config : metadata;
+    min_free_bytes : disk space to keep free, checked at every flush (DiskFull below it)."""
 
     def __init__(self, path, channels=("table_acc", "mass_acc"), fs_hz: float = 2048.0, operator: str = "",
                  sweep: dict | None = None, rig_config: dict | None = None, sensors: dict | None = None,
-                 units: str = "m/s^2"):
+                 units: str = "m/s^2", min_free_bytes: int = 0):
         self.path = Path(path)
+        self.min_free_bytes = int(min_free_bytes)  # flush() raises DiskFull below this much free space
         if self.path.exists():
             raise RecordingError(f"{self.path}: exists already; a recording is never overwritten")
         self.channels = tuple(channels)
@@ -116,6 +123,13 @@ class Recorder:
             self.flush()
 
     def flush(self) -> None:
+        """Make everything appended so far durable; first check the disk keeps its reserve (HDF5 that runs
+        out of space mid-write can leave a file no reader opens: stopping early keeps it whole)."""
+        free = shutil.disk_usage(self.path.parent).free
+        if free < self.min_free_bytes:
+            raise DiskFull(f"disk nearly full: {free / 2**20:.0f} MB free on {self.path.parent}, below the "
+                           f"{self.min_free_bytes / 2**20:.0f} MB reserve; recording stopped with "
+                           f"{self.n} samples kept")
         self.f["entry"].attrs["samples_written"] = self.n
         self.f.flush()
         self.last_flush = time.monotonic()

@@ -7,9 +7,11 @@ when the link allows it and the file closed with a status and the reason.
 """
 from __future__ import annotations
 
+import shutil
 import threading
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 from identify.errors import ShakeidError
 from sim.plc import Command, Fault, Limits, State
@@ -17,7 +19,7 @@ from sim.sweep import SineSweep
 
 from .devices import PLC, DeviceError
 from .sources import AccelerometerSource
-from .recorder import Recorder
+from .recorder import DiskFull, Recorder
 
 
 class SweepRefused(ShakeidError):
@@ -38,20 +40,28 @@ class SweepRequest:
 class SweepRunner:
     """plc, source: device backends; limits: the configured safety limits; sensitivity: counts per
     m/s^2; on_progress(fraction, status) is called about ten times a second; on_samples(first index,
-    block (n, channels) in m/s^2) with every block recorded (live views)."""
+    block (n, channels) in m/s^2) with every block recorded (live views); disk_reserve_mb: free space
+    the recording must leave (a sweep that would not fit is refused, one that reaches it is stopped)."""
 
     def __init__(self, plc: PLC, source: AccelerometerSource, limits: Limits, sensitivity: float,
                  channels=("table_acc", "mass_acc"), heartbeat_s: float = 0.05, on_progress=None,
-                 rig_config: dict | None = None, on_samples=None):
+                 rig_config: dict | None = None, on_samples=None, disk_reserve_mb: float = 100.0):
         self.plc, self.source, self.limits = plc, source, limits
         self.sensitivity, self.channels = sensitivity, tuple(channels)
         self.heartbeat_s, self.on_progress, self.rig_config = heartbeat_s, on_progress, rig_config or {}
         self.on_samples = on_samples
+        self.disk_reserve_bytes = int(disk_reserve_mb * 2**20)  # free space kept: refused below, stopped below
+        self.recorder: Recorder | None = None  # the recording in progress
         self.abort_requested = threading.Event()
         self.abort_reason = "operator abort"
         self._lock = threading.Lock()
 
-    def preflight(self, req: SweepRequest) -> None:
+    def expected_bytes(self, req: SweepRequest) -> int:
+        """Disk space the recording will take: time (f8) + channels (f4) per sample, +10 % for chunks."""
+        rows = (req.duration_s + req.settle_s + 2.0) * self.source.fs_hz
+        return int(rows * (8 + 4 * len(self.channels)) * 1.1)
+
+    def preflight(self, req: SweepRequest, out_path=None) -> None:
         try:
             sweep = SineSweep(req.f_start_hz, req.f_end_hz, req.duration_s, req.amplitude_mm)
         except ValueError as exc:
@@ -66,20 +76,33 @@ class SweepRunner:
         if st.state not in (State.IDLE, State.DONE):
             raise SweepRefused(f"sweep refused: PLC is {State(st.state).name.lower()} (fault code {st.fault_code}); "
                                "reset it first")
+        if out_path is not None:
+            directory = Path(out_path).resolve().parent
+            try:
+                free = shutil.disk_usage(directory).free
+            except OSError as exc:
+                raise SweepRefused(f"sweep refused: cannot write recordings to {directory}: {exc}") from None
+            need = self.expected_bytes(req) + self.disk_reserve_bytes
+            if free < need:
+                raise SweepRefused(f"sweep refused: the recording needs about {self.expected_bytes(req) / 2**20:.0f} MB "
+                                   f"plus the {self.disk_reserve_bytes / 2**20:.0f} MB disk reserve; "
+                                   f"{free / 2**20:.0f} MB free on {directory}")
         end = time.monotonic() + 2.0
         while not self.source.read():
             if time.monotonic() > end:
                 raise SweepRefused(f"sweep refused: no accelerometer frames from {self.source.url} within 2 s")
 
     def run(self, req: SweepRequest, out_path) -> dict:
-        self.preflight(req)
+        self.preflight(req, out_path)
         if hasattr(self.source, "reset_stats"):
             self.source.reset_stats()
         rec = Recorder(out_path, self.channels, self.source.fs_hz, req.operator,
                        sweep={"f_start_hz": req.f_start_hz, "f_end_hz": req.f_end_hz, "duration_s": req.duration_s,
                               "amplitude_mm": req.amplitude_mm, "settle_s": req.settle_s, "note": req.note},
                        rig_config=self.rig_config,
-                       sensors={c: {"sensitivity": self.sensitivity} for c in self.channels})
+                       sensors={c: {"sensitivity": self.sensitivity} for c in self.channels},
+                       min_free_bytes=self.disk_reserve_bytes)
+        self.recorder = rec
         status, reason = "complete", ""
         beat = threading.Thread(target=self._heartbeat, daemon=True)
         self._beating = True
@@ -95,7 +118,10 @@ class SweepRunner:
                     block = counts / self.sensitivity
                     rec.append(index, block)
                     if self.on_samples:
-                        self.on_samples(index, block)
+                        try:
+                            self.on_samples(index, block)
+                        except Exception:  # a broken live view must not end the recording
+                            self.on_samples = None
                 if time.monotonic() - last_poll >= 0.1:
                     last_poll = time.monotonic()
                     with self._lock:
@@ -124,10 +150,22 @@ class SweepRunner:
         except KeyboardInterrupt:
             status, reason = "aborted", "operator abort (Ctrl-C)"
             self._safe_stop()
+        except DiskFull as exc:
+            status, reason = "fault", str(exc)
+            self._safe_stop()
+        except Exception as exc:  # a recorder or other internal error: stop the table, say why
+            status, reason = "fault", f"DAQ error: {type(exc).__name__}: {exc}"
+            self._safe_stop()
         finally:
             self._beating = False
             n_gaps = int(rec.gaps.shape[0])
-            rec.close(status, reason, link_stats=getattr(self.source, "stats", None))
+            try:
+                rec.close(status, reason, link_stats=getattr(self.source, "stats", None))
+            except Exception as exc:  # e.g. a full disk: the file keeps "running" and what its last flush held
+                status = "fault"
+                reason = ((reason + "; ") if reason else "") + (
+                    f"the file could not be finalised ({type(exc).__name__}: {exc}); it holds the samples up to "
+                    "its last flush and the next start (or `shakeid recordings --recover`) marks it aborted")
         return {"status": status, "reason": reason, "samples": rec.n, "gaps": n_gaps, "path": str(out_path),
                 **{f"link_{k}": v for k, v in getattr(self.source, "stats", {}).items()}}
 

@@ -170,6 +170,8 @@ class SimulatedRig:
         self._clients.add(writer)
         try:
             await reader.read()  # until the client goes away
+        except ConnectionError:
+            pass  # a client that vanished (killed, reset): nothing to report, the next frames skip it
         finally:
             self._clients.discard(writer)
 

@@ -203,3 +203,42 @@ def test_abort_paths_leave_the_table_stopped_and_the_file_valid(rig, tmp_path, e
         assert time.monotonic() < end, "the table kept moving"
         time.sleep(0.05)
     assert rig.call(lambda: rig.plc.state) != State.RUNNING
+
+
+def test_a_sweep_that_would_not_fit_on_the_disk_is_refused_before_any_plc_write(rig, tmp_path):
+    import shutil
+
+    plc = ModbusPLC(*rig.endpoints["modbus"])
+    runner = _runner(rig, plc)
+    runner.disk_reserve_bytes = shutil.disk_usage(tmp_path).free  # what is left cannot hold a recording
+    before = rig.call(lambda: dict(rig.plc.setpoints))
+    with pytest.raises(SweepRefused, match=r"needs about \d+ MB plus the \d+ MB disk reserve; \d+ MB free"):
+        runner.run(SweepRequest(1.0, 20.0, 60.0, 1.3), tmp_path / "big.h5")
+    assert rig.call(lambda: dict(rig.plc.setpoints)) == before and not (tmp_path / "big.h5").exists()
+    plc.close()
+
+
+def test_disk_reaching_its_reserve_mid_sweep_stops_the_table_and_keeps_the_file_whole(rig, tmp_path):
+    """HDF5 that runs out of space mid-write can leave a file no reader opens (seen here with a file-size
+    limit: 'truncated file'), so the recorder checks the reserve at each flush and the sweep stops first."""
+    import time
+
+    import h5py
+
+    plc = ModbusPLC(*rig.endpoints["modbus"])
+    runner = _runner(rig, plc)
+
+    def progress(frac, st):
+        if frac > 0.2 and runner.recorder is not None:
+            runner.recorder.min_free_bytes = 10**18  # as if the disk had filled up to the reserve
+
+    runner.on_progress = progress
+    result = runner.run(SweepRequest(2.0, 10.0, 60.0, 1.0), tmp_path / "full.h5")
+    plc.close()
+    assert result["status"] == "fault" and "disk nearly full" in result["reason"], result
+    with h5py.File(tmp_path / "full.h5") as f:  # whole: opens, closed with the reason, samples kept
+        assert f["entry"].attrs["status"] == "fault" and f["entry/data/time"].shape[0] > 2048
+    end = time.monotonic() + 10
+    while not rig.call(lambda: rig.plc._table_at_rest()):
+        assert time.monotonic() < end, "the table kept moving"
+        time.sleep(0.05)
