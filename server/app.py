@@ -255,10 +255,14 @@ def create_app(settings: Settings) -> FastAPI:
         buffer = state["rig"].live(rec_id)
 
         async def events():
-            seq = after
+            seq, quiet_since = after, time.monotonic()
             while buffer is not None and not app.state.shutting_down.is_set():
                 points = buffer.since(seq)
+                if not points and time.monotonic() - quiet_since > 10:
+                    quiet_since = time.monotonic()
+                    yield ": keep-alive\n\n"  # a comment line: keeps proxies from closing a quiet stream
                 if points:
+                    quiet_since = time.monotonic()
                     seq = points[-1][0]
                     cols = list(zip(*points))
                     payload = {"seq": seq, "t": cols[1], **{c: cols[2 + j] for j, c in enumerate(buffer.channels)}}
