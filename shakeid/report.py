@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import html
 import json
+import os
 from pathlib import Path
 
 import matplotlib
@@ -72,9 +73,14 @@ def write_report(ident, out_dir) -> Path:
 
 
 def _save(fig, path):
+    """Write the figure under a temporary name and rename it: a reader (the HTTP service lists figures
+    while a job still draws) sees no file or the whole PNG, never half of one."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
+    os.replace(tmp, path)
 
 
 def _path_figure(ident, path):
