@@ -27,6 +27,7 @@ class AccelerometerSource:
 
     def __init__(self):
         self.stats = {"frames": 0, "frames_lost": 0, "frames_corrupt": 0, "saturated_frames": 0}
+        self.backlog = False  # the last read() stopped at its size limit: more was already waiting
 
     def read(self) -> list[tuple[int, np.ndarray]]: ...
     def close(self) -> None: ...
@@ -39,6 +40,8 @@ class AccelerometerSource:
 class SerialSource(AccelerometerSource):
     """Framed stream (sim.frames: sync, sequence number, timestamp, CRC-32) from any pyserial URL.
     The sample index comes from the frame's timestamp, so lost frames leave exact gaps."""
+
+    READ_BYTES = 65536
 
     def __init__(self, url: str, fs_hz: float, timeout_s: float = 0.05):
         import serial
@@ -56,9 +59,10 @@ class SerialSource(AccelerometerSource):
 
     def read(self) -> list[tuple[int, np.ndarray]]:
         try:
-            data = self.port.read(65536)
+            data = self.port.read(self.READ_BYTES)
         except self.serial_mod.SerialException as exc:
             raise DeviceError(f"accelerometer stream {self.url} lost: {exc}") from None
+        self.backlog = len(data) == self.READ_BYTES  # a caught-up read returns less, after its timeout
         frames = self.decoder.feed(data)
         for f in frames:
             if self._last_seq is not None:
@@ -100,9 +104,10 @@ class CanSource(AccelerometerSource):
     def read(self) -> list[tuple[int, np.ndarray]]:
         rows, blocks = [], []
         first = None
+        taken = 0
         try:
             msg = self.bus.recv(self.timeout_s)
-            while msg is not None and len(rows) < self.MAX_FRAMES_PER_READ:
+            while msg is not None:
                 if msg.arbitration_id == self.arbitration_id and not msg.is_error_frame and len(msg.data) == 8:
                     counter, c0, c1, flags = can_frames.decode(msg.data)
                     index = counter if self._next is None else self._next + ((counter - self._next) & 0xFFFF)
@@ -118,9 +123,13 @@ class CanSource(AccelerometerSource):
                     self._next = index + 1
                 elif msg.is_error_frame:
                     self.stats["frames_corrupt"] += 1
+                taken += 1
+                if taken >= self.MAX_FRAMES_PER_READ:  # checked before the next recv: no frame taken is dropped
+                    break
                 msg = self.bus.recv(0)
         except self._can_error as exc:
             raise DeviceError(f"accelerometer bus {self.url} lost: {exc}") from None
+        self.backlog = taken >= self.MAX_FRAMES_PER_READ  # more were probably queued behind the limit
         if rows:
             blocks.append((first, np.array(rows, dtype=np.int16)))
         self.stats["frames"] += sum(b.shape[0] for _, b in blocks)

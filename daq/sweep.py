@@ -114,14 +114,7 @@ class SweepRunner:
             beat.start()
             last_poll = 0.0
             while True:
-                for index, counts in self.source.read():
-                    block = counts / self.sensitivity
-                    rec.append(index, block)
-                    if self.on_samples:
-                        try:
-                            self.on_samples(index, block)
-                        except Exception:  # a broken live view must not end the recording
-                            self.on_samples = None
+                self._pump(rec)
                 if time.monotonic() - last_poll >= 0.1:
                     last_poll = time.monotonic()
                     with self._lock:
@@ -136,6 +129,12 @@ class SweepRunner:
                         status, reason = "fault", f"PLC fault: {Fault(st.fault_code).name.lower()}"
                         break
                     if st.state == State.DONE and done_index is None:
+                        # the settle counts from where the sweep ended, not from where a lagging reader
+                        # happens to be: first read what the link already holds (while reads come back
+                        # full; bounded, since a reader slower than the sensors never catches up)
+                        drain_end = time.monotonic() + 2.0
+                        while getattr(self.source, "backlog", False) and time.monotonic() < drain_end:
+                            self._pump(rec)
                         done_index = rec.next_index or 0
                 if done_index is not None and (rec.next_index or 0) - done_index >= req.settle_s * self.source.fs_hz:
                     break
@@ -168,6 +167,20 @@ class SweepRunner:
                     "its last flush and the next start (or `shakeid recordings --recover`) marks it aborted")
         return {"status": status, "reason": reason, "samples": rec.n, "gaps": n_gaps, "path": str(out_path),
                 **{f"link_{k}": v for k, v in getattr(self.source, "stats", {}).items()}}
+
+    def _pump(self, rec: Recorder) -> int:
+        """Read what the source has, record it, feed the live view; returns the samples read."""
+        n = 0
+        for index, counts in self.source.read():
+            block = counts / self.sensitivity
+            rec.append(index, block)
+            n += block.shape[0]
+            if self.on_samples:
+                try:
+                    self.on_samples(index, block)
+                except Exception:  # a broken live view must not end the recording
+                    self.on_samples = None
+        return n
 
     def abort(self, reason: str = "operator abort") -> None:
         """Ask the running sweep to stop the table and end its recording "aborted" with `reason`."""
