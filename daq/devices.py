@@ -129,3 +129,11 @@ class AdsPLC(PLC):
 
     def close(self):
         self.conn.close()
+
+
+def open_plc(plc: dict) -> PLC:
+    """The PLC backend a rig configuration's [plc] section names (transport "modbus" or "ads")."""
+    if plc.get("transport", "modbus") == "ads":
+        host = plc.get("host", "127.0.0.1")
+        return AdsPLC(plc.get("ams_net_id", f"{host}.1.1"), host, int(plc.get("ams_port", 851)))
+    return ModbusPLC(plc.get("host", "127.0.0.1"), int(plc.get("port", 502)))

@@ -43,7 +43,7 @@ def _now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
 
 
-def _version() -> str:
+def software_version() -> str:
     try:
         from importlib.metadata import version
 
@@ -71,7 +71,7 @@ class Recorder:
         self.f = h5py.File(self.path, "w")
         e = self.f.create_group("entry")
         e.attrs.update(NX_class="NXentry", start_time=_now(), end_time="", operator=operator,
-                       software_version=_version(), status="running", status_reason="", samples_written=0,
+                       software_version=software_version(), status="running", status_reason="", samples_written=0,
                        fs_hz=self.fs_hz, rig_config=json.dumps(rig_config or {}))
         sw = e.create_group("sweep")
         sw.attrs["NX_class"] = "NXcollection"
@@ -210,4 +210,23 @@ def read_h5_recording(path, input: str = "table_acc", output: str = "mass_acc",
         rec = Recording(d[input][a:b], d[output][a:b], fs, "base", input, output,
                         (d[input].attrs.get("units", ""), d[output].attrs.get("units", "")), str(path),
                         {"status": info["status"]})
+    return rec
+
+
+def open_recording(path, layout: str = "base", input: str | None = None, output: str | None = None,
+                   time_column: str | None = None, fs_hz: float | None = None,
+                   samples: tuple[int, int] | None = None) -> Recording:
+    """Any recording file, cut to rows samples=[a, b) if given: the DAQ's HDF5 (never across a gap),
+    else CSV / MAT with identify's readers (layout, column names, sample rate as there)."""
+    if Path(path).suffix.lower() in (".h5", ".hdf5"):
+        return read_h5_recording(path, input or "table_acc", output or "mass_acc", samples)
+    from identify.recording import read_recording
+
+    rec = read_recording(path, layout, input, output, time_column, fs_hz)
+    if samples:
+        a, b = samples
+        if not 0 <= a < b <= rec.n_samples:
+            raise RecordingError(f"{path}: rows {a}-{b} requested, the recording has {rec.n_samples}")
+        rec = rec.slice(a, b)
+        Recording.__post_init__(rec)  # the cut must still be a usable recording
     return rec

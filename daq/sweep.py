@@ -37,6 +37,27 @@ class SweepRequest:
     note: str = ""
 
 
+def limit_violation(limits: Limits, req: SweepRequest) -> str | None:
+    """The message naming the first violated limit (the PLC's own check), or None for a safe sweep."""
+    try:
+        sweep = SineSweep(req.f_start_hz, req.f_end_hz, req.duration_s, req.amplitude_mm)
+    except ValueError as exc:
+        return str(exc)
+    fault, message = limits.check(sweep)
+    return message if fault != Fault.NONE else None
+
+
+def _ended_by(exc: BaseException) -> tuple[str, str]:
+    """Final status and reason of a recording that an exception ended."""
+    if isinstance(exc, KeyboardInterrupt):
+        return "aborted", "operator abort (Ctrl-C)"
+    if isinstance(exc, DeviceError):  # a lost PLC link or sensor stream
+        return "aborted", str(exc)
+    if isinstance(exc, DiskFull):
+        return "fault", str(exc)
+    return "fault", f"DAQ error: {type(exc).__name__}: {exc}"  # a recorder or other internal error
+
+
 class SweepRunner:
     """plc, source: device backends; limits: the configured safety limits; sensitivity: counts per
     m/s^2; on_progress(fraction, status) is called about ten times a second; on_samples(first index,
@@ -62,13 +83,9 @@ class SweepRunner:
         return int(rows * (8 + 4 * len(self.channels)) * 1.1)
 
     def preflight(self, req: SweepRequest, out_path=None) -> None:
-        try:
-            sweep = SineSweep(req.f_start_hz, req.f_end_hz, req.duration_s, req.amplitude_mm)
-        except ValueError as exc:
-            raise SweepRefused(f"sweep refused: {exc}") from None
-        fault, message = self.limits.check(sweep)
-        if fault != Fault.NONE:
-            raise SweepRefused(f"sweep refused: {message}")
+        problem = limit_violation(self.limits, req)
+        if problem:
+            raise SweepRefused(f"sweep refused: {problem}")
         try:
             st = self.plc.status()
         except DeviceError as exc:
@@ -94,8 +111,7 @@ class SweepRunner:
 
     def run(self, req: SweepRequest, out_path) -> dict:
         self.preflight(req, out_path)
-        if hasattr(self.source, "reset_stats"):
-            self.source.reset_stats()
+        self.source.reset_stats()
         rec = Recorder(out_path, self.channels, self.source.fs_hz, req.operator,
                        sweep={"f_start_hz": req.f_start_hz, "f_end_hz": req.f_end_hz, "duration_s": req.duration_s,
                               "amplitude_mm": req.amplitude_mm, "settle_s": req.settle_s, "note": req.note},
@@ -133,54 +149,41 @@ class SweepRunner:
                         # happens to be: first read what the link already holds (while reads come back
                         # full; bounded, since a reader slower than the sensors never catches up)
                         drain_end = time.monotonic() + 2.0
-                        while getattr(self.source, "backlog", False) and time.monotonic() < drain_end:
+                        while self.source.backlog and time.monotonic() < drain_end:
                             self._pump(rec)
                         done_index = rec.next_index or 0
                 if done_index is not None and (rec.next_index or 0) - done_index >= req.settle_s * self.source.fs_hz:
                     break
                 if self.abort_requested.is_set():
                     status, reason = "aborted", self.abort_reason
-                    with self._lock:
-                        self.plc.command(Command.STOP)
+                    self._safe_stop()
                     break
-        except DeviceError as exc:
-            status, reason = ("aborted", str(exc))
-            self._safe_stop()
-        except KeyboardInterrupt:
-            status, reason = "aborted", "operator abort (Ctrl-C)"
-            self._safe_stop()
-        except DiskFull as exc:
-            status, reason = "fault", str(exc)
-            self._safe_stop()
-        except Exception as exc:  # a recorder or other internal error: stop the table, say why
-            status, reason = "fault", f"DAQ error: {type(exc).__name__}: {exc}"
+        except (Exception, KeyboardInterrupt) as exc:  # every other way out: stop the table, say why
+            status, reason = _ended_by(exc)
             self._safe_stop()
         finally:
             self._beating = False
             n_gaps = int(rec.gaps.shape[0])
             try:
-                rec.close(status, reason, link_stats=getattr(self.source, "stats", None))
+                rec.close(status, reason, link_stats=self.source.stats)
             except Exception as exc:  # e.g. a full disk: the file keeps "running" and what its last flush held
                 status = "fault"
                 reason = ((reason + "; ") if reason else "") + (
                     f"the file could not be finalised ({type(exc).__name__}: {exc}); it holds the samples up to "
                     "its last flush and the next start (or `shakeid recordings --recover`) marks it aborted")
         return {"status": status, "reason": reason, "samples": rec.n, "gaps": n_gaps, "path": str(out_path),
-                **{f"link_{k}": v for k, v in getattr(self.source, "stats", {}).items()}}
+                **{f"link_{k}": v for k, v in self.source.stats.items()}}
 
-    def _pump(self, rec: Recorder) -> int:
-        """Read what the source has, record it, feed the live view; returns the samples read."""
-        n = 0
+    def _pump(self, rec: Recorder) -> None:
+        """Read what the source has, record it, feed the live view."""
         for index, counts in self.source.read():
             block = counts / self.sensitivity
             rec.append(index, block)
-            n += block.shape[0]
             if self.on_samples:
                 try:
                     self.on_samples(index, block)
                 except Exception:  # a broken live view must not end the recording
                     self.on_samples = None
-        return n
 
     def abort(self, reason: str = "operator abort") -> None:
         """Ask the running sweep to stop the table and end its recording "aborted" with `reason`."""

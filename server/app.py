@@ -19,7 +19,7 @@ from fastapi import Depends, FastAPI, HTTPException, Path, Query, Request
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, StreamingResponse
 
 from daq.devices import DeviceError
-from daq.recorder import recover_directory
+from daq.recorder import recover_directory, software_version
 from daq.sweep import SweepRequest
 
 from . import schemas
@@ -30,18 +30,11 @@ from .rig import RigBusy, RigService
 from .settings import Settings
 from .uploads import store_upload
 
-def Id():  # noqa: N802 - a fresh parameter object per route (FastAPI binds each to its own name)
-    return Path(pattern=ID_PATTERN, description="12 hex digits")
 PLOT_NAME = r"^[a-z0-9_]{1,40}\.png$"
 
 
-def _version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("shakeid")
-    except Exception:
-        return "unknown"
+def Id():  # noqa: N802 - a fresh parameter object per route (FastAPI binds each to its own name)
+    return Path(pattern=ID_PATTERN, description="12 hex digits")
 
 
 def create_app(settings: Settings) -> FastAPI:
@@ -70,7 +63,7 @@ def create_app(settings: Settings) -> FastAPI:
         state["estop_pool"].shutdown(wait=False)
         catalog.close()
 
-    app = FastAPI(title="shakeid", version=_version(), lifespan=lifespan,
+    app = FastAPI(title="shakeid", version=software_version(), lifespan=lifespan,
                   responses={400: {"model": schemas.Problem}, 422: {"model": schemas.Problem}},
                   description="Sine sweeps on the shaker rig, HDF5 recordings, sparse nonlinear models.")
     app.state.shutting_down = threading.Event()  # set by `shakeid serve` on SIGTERM/SIGINT
@@ -90,8 +83,8 @@ def create_app(settings: Settings) -> FastAPI:
     @app.get("/api/health", response_model=schemas.Health, tags=["service"])
     def health():
         """Liveness, without a token (for supervisors and compose health checks)."""
-        return {"status": "ok", "version": _version(), "rig_simulated": state["rig"].sim is not None,
-                "jobs_queued": len(catalog().list("jobs", "state = 'queued'"))}
+        return {"status": "ok", "version": software_version(), "rig_simulated": state["rig"].sim is not None,
+                "jobs_queued": catalog().count("jobs", "state = 'queued'")}
 
     @app.get("/api/rig", tags=["rig"], responses=errors, dependencies=[viewer])
     def rig_status() -> dict:
@@ -122,7 +115,9 @@ def create_app(settings: Settings) -> FastAPI:
     def start_sweep(body: schemas.SweepIn, who: str = operator):
         """Start a sweep: refused with 422 naming the limit when unsafe, 409 while another runs."""
         rig = state["rig"]
-        problem = rig.check(body.f_start_hz, body.f_end_hz, body.duration_s, body.amplitude_mm)
+        req = SweepRequest(body.f_start_hz, body.f_end_hz, body.duration_s, body.amplitude_mm, body.settle_s,
+                           operator=who, note=body.note)
+        problem = rig.check(req)
         if problem:
             return JSONResponse({"detail": f"sweep refused: {problem}"}, status_code=422)
         if rig.active is not None:
@@ -141,8 +136,6 @@ def create_app(settings: Settings) -> FastAPI:
         def on_end(result, error):
             _sweep_ended(sweep_id, rec_id, path, result, error)
 
-        req = SweepRequest(body.f_start_hz, body.f_end_hz, body.duration_s, body.amplitude_mm, body.settle_s,
-                           operator=who, note=body.note)
         catalog().insert("sweeps", id=sweep_id, created=now, updated=now, state="queued", progress=0.0,
                          request=body.model_dump(), recording_id=rec_id, error=None, operator=who)
         # in the catalog before the sweep thread exists, so its end always finds both rows

@@ -91,6 +91,10 @@ class Catalog:
         with self.lock:
             return [self._row(r) for r in self.db.execute(sql, (*args, limit)).fetchall()]
 
+    def count(self, table: str, where: str = "1", args: tuple = ()) -> int:
+        with self.lock:
+            return int(self.db.execute(f"SELECT COUNT(*) FROM {table} WHERE {where}", args).fetchone()[0])
+
     # -- jobs -----------------------------------------------------------------------------------------
     def next_queued_job(self) -> dict | None:
         with self.lock:

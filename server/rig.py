@@ -8,6 +8,7 @@ is never queued behind the sweep's traffic. With no rig configuration an embedde
 """
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 from collections import deque
@@ -15,12 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from daq.devices import AdsPLC, DeviceError, ModbusPLC
+from daq.devices import DeviceError, open_plc
 from daq.sources import open_source
-from daq.sweep import SweepRefused, SweepRequest, SweepRunner
+from daq.sweep import SweepRefused, SweepRequest, SweepRunner, limit_violation
 from sim.config import RigConfig
 from sim.plc import Command, Fault, Limits, PLCConfig, State
-from sim.sweep import SineSweep
 
 #: samples per second kept for the live view (decimated by block means; enough for a browser plot)
 LIVE_RATE_HZ = 200.0
@@ -48,7 +48,11 @@ class LiveBuffer:
             self.points.append((self.seq, (first_index + k) / self.fs_hz, *map(float, block[k])))
 
     def since(self, seq: int) -> list[tuple]:
-        return [p for p in list(self.points) if p[0] > seq]
+        """Points numbered above seq: the numbers are consecutive, so skip straight to them."""
+        points = self.points
+        if not points:
+            return []
+        return list(itertools.islice(points, max(seq - points[0][0] + 1, 0), None))
 
 
 class RigService:
@@ -90,13 +94,6 @@ class RigService:
         if self.sim is not None:
             self.sim.stop()
 
-    def _plc(self):
-        p = self.cfg.plc
-        if p.get("transport", "modbus") == "ads":
-            host = p.get("host", "127.0.0.1")
-            return AdsPLC(p.get("ams_net_id", f"{host}.1.1"), host, int(p.get("ams_port", 851)))
-        return ModbusPLC(p.get("host", "127.0.0.1"), int(p.get("port", 502)))
-
     def _with_control(self, fn, link: str = "control"):
         """Run fn(plc) on one of the service's own PLC connections, reconnecting once if it dropped."""
         entry = self._links[link]
@@ -104,7 +101,7 @@ class RigService:
             for attempt in (0, 1):
                 try:
                     if entry[1] is None:
-                        entry[1] = self._plc()
+                        entry[1] = open_plc(self.cfg.plc)
                     return fn(entry[1])
                 except DeviceError:
                     if entry[1] is not None:
@@ -127,14 +124,9 @@ class RigService:
                 "limits": dict(self.cfg.limits.__dict__),
                 "active_sweep": self.active["id"] if self.active else None}
 
-    def check(self, f_start_hz, f_end_hz, duration_s, amplitude_mm) -> str | None:
+    def check(self, req: SweepRequest) -> str | None:
         """The violated limit's message, or None: the same check the PLC runs, before anything is sent."""
-        try:
-            sweep = SineSweep(f_start_hz, f_end_hz, duration_s, amplitude_mm)
-        except ValueError as exc:
-            return str(exc)
-        fault, message = self.cfg.limits.check(sweep)
-        return message if fault != Fault.NONE else None
+        return limit_violation(self.cfg.limits, req)
 
     def emergency_stop(self) -> dict:
         act = self.active
@@ -156,7 +148,7 @@ class RigService:
             live = LiveBuffer(out_path.stem, self.cfg.channels, self.cfg.fs_hz)
             plc = source = None
             try:
-                plc = self._plc()
+                plc = open_plc(self.cfg.plc)
                 source = open_source(self.cfg.stream, self.cfg.can, self.cfg.fs_hz, self.cfg.accelerometers)
             except DeviceError:
                 if plc is not None:

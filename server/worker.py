@@ -28,21 +28,12 @@ def _write_json(path: Path, obj) -> None:
 
 
 def read(path: str, options: dict):
-    """The recording at path: the DAQ's HDF5 (optionally rows `samples`), else CSV / MAT."""
-    samples = tuple(options["samples"]) if options.get("samples") else None
-    if Path(path).suffix.lower() in (".h5", ".hdf5"):
-        from daq.recorder import read_h5_recording
+    """The recording at path with the job's read options (as `shakeid identify`'s)."""
+    from daq.recorder import open_recording
 
-        return read_h5_recording(path, options.get("input") or "table_acc", options.get("output") or "mass_acc",
-                                 samples)
-    from identify.recording import Recording, read_recording
-
-    rec = read_recording(path, options.get("layout", "base"), options.get("input"), options.get("output"),
-                         options.get("time"), options.get("fs_hz"))
-    if samples:
-        rec = rec.slice(*samples)
-        Recording.__post_init__(rec)
-    return rec
+    return open_recording(path, options.get("layout", "base"), options.get("input"), options.get("output"),
+                          options.get("time"), options.get("fs_hz"),
+                          tuple(options["samples"]) if options.get("samples") else None)
 
 
 IDENTIFY_KEYS = ("degree", "method", "selection", "tolerance", "max_terms", "refine", "holdout_fraction",

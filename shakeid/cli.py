@@ -70,21 +70,11 @@ def _identifier(args):
 
 def _read(args):
     """The recording named on the command line, cut to --samples if given."""
-    from identify.recording import Recording, read_recording
+    from daq.recorder import open_recording
 
-    if Path(args.file).suffix.lower() in (".h5", ".hdf5"):  # the DAQ's recordings
-        from daq.recorder import read_h5_recording
-
-        return read_h5_recording(args.file, args.input or "table_acc", args.output or "mass_acc",
-                                 tuple(args.samples) if getattr(args, "samples", None) else None)
-    rec = read_recording(args.file, args.layout, args.input, args.output, args.time, args.fs)
-    if getattr(args, "samples", None):
-        a, b = args.samples
-        if not 0 <= a < b <= rec.n_samples:
-            raise ShakeidError(f"--samples {a} {b}: the recording has {rec.n_samples} samples")
-        rec = rec.slice(a, b)
-        Recording.__post_init__(rec)  # the cut must still be a usable recording
-    return rec
+    samples = getattr(args, "samples", None)
+    return open_recording(args.file, args.layout, args.input, args.output, args.time, args.fs,
+                          tuple(samples) if samples else None)
 
 
 def cmd_identify(args) -> int:

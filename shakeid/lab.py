@@ -73,14 +73,10 @@ def _progress_bar_fraction(frac: float, label: str) -> None:
 
 def _sweep_devices(cfg):
     """PLC and accelerometer backends from a rig configuration."""
-    from daq.devices import AdsPLC, ModbusPLC
+    from daq.devices import open_plc
     from daq.sources import open_source
 
-    if cfg.plc.get("transport", "modbus") == "ads":
-        host = cfg.plc.get("host", "127.0.0.1")
-        plc = AdsPLC(cfg.plc.get("ams_net_id", f"{host}.1.1"), host, int(cfg.plc.get("ams_port", 851)))
-    else:
-        plc = ModbusPLC(cfg.plc.get("host", "127.0.0.1"), int(cfg.plc.get("port", 502)))
+    plc = open_plc(cfg.plc)
     try:
         return plc, open_source(cfg.stream, cfg.can, cfg.fs_hz, cfg.accelerometers)
     except Exception:

@@ -16,7 +16,7 @@ import threading
 
 import numpy as np
 
-from . import frames
+from . import can_frames, frames
 from .modbus import make_server
 from .plc import PLCConfig, RigPLC
 
@@ -198,9 +198,7 @@ class SimulatedRig:
             await self._send_frames()
 
     def _send_can(self, counts: np.ndarray, flags: int) -> None:
-        import can
-
-        from . import can_frames
+        import can  # only rigs with a CAN output need python-can loaded
 
         for payload in can_frames.encode(self._can_counter, counts, flags):
             if self.fault_injection["drop_can_frames"] > 0:
