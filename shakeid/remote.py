@@ -17,6 +17,14 @@ from pathlib import Path
 from identify.errors import ShakeidError
 
 
+class ServiceError(ShakeidError):
+    """The service answered with an error; `status` is the HTTP status (0: no answer at all)."""
+
+    def __init__(self, message: str, status: int = 0):
+        super().__init__(message)
+        self.status = status
+
+
 class ServiceClient:
     def __init__(self, url: str, token: str, timeout_s: float = 10.0):
         self.url, self.token, self.timeout_s = url.rstrip("/"), token, timeout_s
@@ -35,9 +43,10 @@ class ServiceClient:
                 detail = json.loads(exc.read()).get("detail", exc.reason)
             except ValueError:
                 detail = exc.reason
-            raise ShakeidError(f"{method} {path}: {exc.code} {detail if isinstance(detail, str) else json.dumps(detail)}") from None
+            raise ServiceError(f"{method} {path}: {exc.code} {detail if isinstance(detail, str) else json.dumps(detail)}",
+                               exc.code) from None
         except (urllib.error.URLError, OSError) as exc:
-            raise ShakeidError(f"the service at {self.url} does not answer: {exc}") from None
+            raise ServiceError(f"the service at {self.url} does not answer: {exc}") from None
         return payload if raw else (json.loads(payload) if payload else {})
 
 
@@ -77,12 +86,12 @@ def cmd_sweep_remote(args) -> int:
             try:
                 result = client.request("GET", f"/api/recordings/{rec_id}/model")
                 break
-            except ShakeidError as exc:
+            except ServiceError as exc:
+                if exc.status != 404 or time.monotonic() > end:  # 404: no model yet
+                    raise
                 jobs = [j for j in client.request("GET", "/api/jobs") if j["recording_id"] == rec_id]
                 if jobs and all(j["state"] == "failed" for j in jobs):
                     raise ShakeidError(f"identification failed: {jobs[0]['error']}") from None
-                if time.monotonic() > end or " 404 " not in f" {exc} ":
-                    raise
                 time.sleep(0.2)
         print(summary(result, f"recording {rec_id}"))
     return 0
