@@ -8,9 +8,9 @@ is never queued behind the sweep's traffic. With no rig configuration an embedde
 """
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import threading
-import time
 from collections import deque
 from pathlib import Path
 
@@ -20,7 +20,7 @@ from daq.devices import DeviceError, open_plc
 from daq.sources import open_source
 from daq.sweep import SweepRefused, SweepRequest, SweepRunner, limit_violation
 from sim.config import RigConfig
-from sim.plc import Command, Fault, Limits, PLCConfig, State
+from sim.plc import Command, Fault, PLCConfig, State
 
 #: samples per second kept for the live view (decimated by block means; enough for a browser plot)
 LIVE_RATE_HZ = 200.0
@@ -66,9 +66,8 @@ class RigService:
 
             # the client heartbeat is every 50 ms of wall time: the watchdog allows that in rig time
             watchdog = max(self.cfg.limits.watchdog_s, 0.5 * sim_speed)
-            self.cfg.limits = Limits(**{**self.cfg.limits.__dict__, "watchdog_s": watchdog})
+            self.cfg.limits = dataclasses.replace(self.cfg.limits, watchdog_s=watchdog)
             self.sim = SimulatedRig(PLCConfig(limits=self.cfg.limits), speed=sim_speed)
-            self.sim_speed = sim_speed
         # two PLC connections besides the sweep's: one for status/reset, one that only ever sends the
         # emergency stop, so a stop never waits behind status polls
         self._links = {"control": [threading.Lock(), None], "estop": [threading.Lock(), None]}
@@ -121,7 +120,7 @@ class RigService:
         return {"plc": plc, "simulated": self.sim is not None, "transport": self.cfg.plc.get("transport", "modbus"),
                 "accelerometers": {"source": self.cfg.accelerometers, "fs_hz": self.cfg.fs_hz,
                                    "channels": list(self.cfg.channels)},
-                "limits": dict(self.cfg.limits.__dict__),
+                "limits": dataclasses.asdict(self.cfg.limits),
                 "active_sweep": self.active["id"] if self.active else None}
 
     def check(self, req: SweepRequest) -> str | None:
@@ -197,9 +196,3 @@ class RigService:
     def live(self, recording_id: str) -> LiveBuffer | None:
         act = self.active
         return act["live"] if act and act["live"].recording_id == recording_id else None
-
-    def wait_idle(self, timeout_s: float) -> bool:
-        end = time.monotonic() + timeout_s
-        while self.active is not None and time.monotonic() < end:
-            time.sleep(0.05)
-        return self.active is None

@@ -11,6 +11,8 @@ from pathlib import Path
 
 from identify.errors import ShakeidError
 
+from .schemas import IdentifyIn, ReadOptions
+
 
 def warm_up() -> bool:
     """Import the numerical stack once, so the first real job does not pay for it."""
@@ -36,8 +38,8 @@ def read(path: str, options: dict):
                           tuple(options["samples"]) if options.get("samples") else None)
 
 
-IDENTIFY_KEYS = ("degree", "method", "selection", "tolerance", "max_terms", "refine", "holdout_fraction",
-                 "n_lambdas", "threshold", "extra_terms")
+#: SparseIdentifier parameters a job may set: the identify body's own fields (schemas.IdentifyIn)
+IDENTIFY_KEYS = tuple(sorted(set(IdentifyIn.model_fields) - set(ReadOptions.model_fields)))
 
 
 def run_job(kind: str, path: str, options: dict, out_dir: str) -> dict:
