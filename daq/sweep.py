@@ -13,6 +13,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from identify.errors import ShakeidError
 from sim.plc import Command, Fault, Limits, State
 from sim.sweep import SineSweep
@@ -66,7 +68,8 @@ class SweepRunner:
 
     def __init__(self, plc: PLC, source: AccelerometerSource, limits: Limits, sensitivity: float,
                  channels=("table_acc", "mass_acc"), heartbeat_s: float = 0.05, on_progress=None,
-                 rig_config: dict | None = None, on_samples=None, disk_reserve_mb: float = 100.0):
+                 rig_config: dict | None = None, on_samples=None, disk_reserve_mb: float = 100.0,
+                 heartbeat_plc: PLC | None = None):
         self.plc, self.source, self.limits = plc, source, limits
         self.sensitivity, self.channels = sensitivity, tuple(channels)
         self.heartbeat_s, self.on_progress, self.rig_config = heartbeat_s, on_progress, rig_config or {}
@@ -76,6 +79,10 @@ class SweepRunner:
         self.abort_requested = threading.Event()
         self.abort_reason = "operator abort"
         self._lock = threading.Lock()
+        # the heartbeat's own link (if given) shares no lock with status polls, so a slow poll cannot
+        # delay a beat; intervals between beats (s) are kept: the watchdog is chosen from their jitter
+        self.heartbeat_plc = heartbeat_plc
+        self.heartbeat_intervals: list[float] = []
 
     def expected_bytes(self, req: SweepRequest) -> int:
         """Disk space the recording will take: time (f8) + channels (f4) per sample, +10 % for chunks."""
@@ -172,6 +179,7 @@ class SweepRunner:
                     f"the file could not be finalised ({type(exc).__name__}: {exc}); it holds the samples up to "
                     "its last flush and the next start (or `shakeid recordings --recover`) marks it aborted")
         return {"status": status, "reason": reason, "samples": rec.n, "gaps": n_gaps, "path": str(out_path),
+                **self.heartbeat_stats(),
                 **{f"link_{k}": v for k, v in self.source.stats.items()}}
 
     def _pump(self, rec: Recorder) -> None:
@@ -198,12 +206,28 @@ class SweepRunner:
             pass  # the link is gone: the PLC's own watchdog stops the table
 
     def _heartbeat(self):
-        n = 0
+        n, last = 0, None
+        intervals = self.heartbeat_intervals
         while self._beating:
             n += 1
             try:
-                with self._lock:
-                    self.plc.heartbeat(n)
+                if self.heartbeat_plc is not None:
+                    self.heartbeat_plc.heartbeat(n)
+                else:
+                    with self._lock:
+                        self.plc.heartbeat(n)
             except DeviceError:
                 return
+            now = time.monotonic()
+            if last is not None and len(intervals) < 1_000_000:
+                intervals.append(now - last)
+            last = now
             time.sleep(self.heartbeat_s)
+
+    def heartbeat_stats(self) -> dict:
+        """Intervals between heartbeats written to the PLC (s): nominal, p99, largest."""
+        gaps = np.asarray(self.heartbeat_intervals)
+        if gaps.size == 0:
+            return {}
+        return {"heartbeat_nominal_s": self.heartbeat_s, "heartbeat_p99_s": round(float(np.quantile(gaps, 0.99)), 4),
+                "heartbeat_max_s": round(float(gaps.max()), 4), "heartbeats": int(gaps.size + 1)}
