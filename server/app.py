@@ -1,8 +1,10 @@
 """The FastAPI application: `create_app(settings)`; served by uvicorn (`shakeid serve`).
 
 Sync route functions run in the server's thread pool, async ones on the event loop; nothing here
-computes: identification runs in the job pool (server/jobs.py), sweeps in their own thread
-(server/rig.py), and emergency stop has a thread of its own so it never waits behind other requests.
+computes or drives the rig: identification runs in the job pool (server/jobs.py), uploads are checked
+in a process of their own (server/uploads.py), and the rig (sweeps, heartbeat, emergency stop) is the
+rig controller's, a separate process reached over server/ipc.py (server/controller.py). The emergency
+stop has a thread and a controller connection of its own, so it never waits behind other requests.
 """
 from __future__ import annotations
 
@@ -16,17 +18,18 @@ from pathlib import Path as FsPath
 from typing import Literal
 
 from fastapi import Depends, FastAPI, HTTPException, Path, Query, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, StreamingResponse
 
-from daq.devices import DeviceError
-from daq.recorder import recover_directory, software_version
-from daq.sweep import SweepRequest
+from daq.recorder import software_version
 
 from . import schemas
 from .auth import require
 from .catalog import ID_PATTERN, Catalog, new_id
+from .ipc import ControllerRefused, ControllerUnavailable
 from .jobs import JobQueue
-from .rig import RigBusy, RigService
+from .rigclient import RigLink
 from .settings import Settings
 from .uploads import store_upload
 
@@ -46,19 +49,14 @@ def create_app(settings: Settings) -> FastAPI:
         catalog = Catalog(settings.data_dir / "catalog.sqlite")
         for note in catalog.recover_after_restart():
             print(f"shakeid serve: {note}", flush=True)
-        for path in recover_directory(settings.data_dir / "recordings"):  # files a dead service left running
-            catalog.update("recordings", path.stem, status="aborted")
-            print(f"shakeid serve: recording {path.stem}: was left running; marked aborted, data kept", flush=True)
-        for rec in catalog.list("recordings", "status = 'running'", limit=100_000):
-            if not FsPath(rec["path"]).exists():  # the service died before its recorder created the file
-                catalog.delete("recordings", rec["id"])
         jobs = JobQueue(catalog, settings.data_dir / "results", settings.identify_workers)
         jobs.start()
-        rig = RigService(settings.rig, settings.sim_speed)
-        rig.start()
-        state.update(catalog=catalog, jobs=jobs, rig=rig, estop_pool=ThreadPoolExecutor(1, "estop"))
+        link = RigLink(settings, settings.controller,
+                       on_event=lambda event: jobs.wake() if event.get("event") == "job_queued" else None)
+        await run_in_threadpool(link.start)  # waits for a child controller to listen (it recovers the rig's files)
+        state.update(catalog=catalog, jobs=jobs, link=link, estop_pool=ThreadPoolExecutor(1, "estop"))
         yield
-        rig.stop()
+        await run_in_threadpool(link.stop)
         jobs.stop()
         state["estop_pool"].shutdown(wait=False)
         catalog.close()
@@ -73,6 +71,24 @@ def create_app(settings: Settings) -> FastAPI:
     def catalog() -> Catalog:
         return state["catalog"]
 
+    async def controller(op: str, **params):
+        """One request to the rig controller, off the event loop; its refusals keep their status."""
+        try:
+            return await run_in_threadpool(state["link"].client.call, op, **params)
+        except ControllerRefused as exc:
+            raise HTTPException(exc.status, exc.detail) from None
+        except ControllerUnavailable as exc:
+            raise HTTPException(503, f"{exc} (restarting? the hardware stop and `shakeid rig estop` work without "
+                                     "it)") from None
+
+    @app.exception_handler(RequestValidationError)
+    async def invalid_request(request: Request, exc: RequestValidationError):
+        """422 naming each field; inputs echoed only as text, so NaN, Infinity or 1e400 in a body get a
+        422 like any other bad value (JSON cannot carry them back, and a 500 would drop the connection)."""
+        detail = [{"loc": list(err.get("loc", ())), "msg": err.get("msg", ""), "type": err.get("type", ""),
+                   **({"input": _text(err["input"])} if "input" in err else {})} for err in exc.errors()]
+        return JSONResponse({"detail": detail}, status_code=422)
+
     def recording_or_404(rec_id: str) -> dict:
         rec = catalog().get("recordings", rec_id)
         if rec is None:
@@ -83,13 +99,16 @@ def create_app(settings: Settings) -> FastAPI:
     @app.get("/api/health", response_model=schemas.Health, tags=["service"])
     def health():
         """Liveness, without a token (for supervisors and compose health checks)."""
-        return {"status": "ok", "version": software_version(), "rig_simulated": state["rig"].sim is not None,
+        link = state["link"]
+        return {"status": "ok", "version": software_version(), "rig_simulated": settings.rig is None,
+                "controller": "attached" if link.attached.is_set() else "unreachable",
                 "jobs_queued": catalog().count("jobs", "state = 'queued'")}
 
-    @app.get("/api/rig", tags=["rig"], responses=errors, dependencies=[viewer])
-    def rig_status() -> dict:
-        """PLC state, accelerometers, safety limits, the active sweep."""
-        return state["rig"].status()
+    @app.get("/api/rig", tags=["rig"], responses={**errors, 503: {"model": schemas.Problem}},
+             dependencies=[viewer])
+    async def rig_status() -> dict:
+        """PLC state, accelerometers, safety limits, the active sweep (from the rig controller)."""
+        return await controller("status")
 
     @app.post("/api/rig/estop", response_model=schemas.EstopOut, tags=["rig"], dependencies=[operator],
               responses={**errors, 503: {"model": schemas.Problem}})
@@ -97,78 +116,25 @@ def create_app(settings: Settings) -> FastAPI:
         """Emergency stop: the table ramps to rest at once; an active sweep ends aborted."""
         loop = asyncio.get_running_loop()
         try:
-            return await loop.run_in_executor(state["estop_pool"], state["rig"].emergency_stop)
-        except DeviceError as exc:
+            return await loop.run_in_executor(state["estop_pool"], state["link"].client.emergency_stop)
+        except (ControllerRefused, ControllerUnavailable) as exc:
             raise HTTPException(503, f"emergency stop not delivered: {exc}; use the hardware stop") from None
 
-    @app.post("/api/rig/reset", status_code=204, tags=["rig"], dependencies=[operator], responses=errors)
-    def reset():
-        """Clear a fault or an emergency stop once the table is at rest."""
-        try:
-            state["rig"].reset()
-        except DeviceError as exc:
-            raise HTTPException(503, str(exc)) from None
+    @app.post("/api/rig/reset", response_model=schemas.ResetOut, tags=["rig"], dependencies=[operator],
+              responses={**errors, 409: {"model": schemas.Problem}, 503: {"model": schemas.Problem}})
+    async def reset():
+        """Clear a fault or an emergency stop once the table is at rest; 409 if the PLC stays in it."""
+        return await controller("reset")
 
     # -- sweeps -----------------------------------------------------------------------------------------
     @app.post("/api/sweeps", status_code=202, response_model=schemas.Accepted, tags=["sweeps"],
-              responses={**errors, 409: {"model": schemas.Problem}, 422: {"model": schemas.Problem}})
-    def start_sweep(body: schemas.SweepIn, who: str = operator):
-        """Start a sweep: refused with 422 naming the limit when unsafe, 409 while another runs."""
-        rig = state["rig"]
-        req = SweepRequest(body.f_start_hz, body.f_end_hz, body.duration_s, body.amplitude_mm, body.settle_s,
-                           operator=who, note=body.note)
-        problem = rig.check(req)
-        if problem:
-            return JSONResponse({"detail": f"sweep refused: {problem}"}, status_code=422)
-        if rig.active is not None:
-            return JSONResponse({"detail": f"another sweep is running ({rig.active['id']}); abort it or wait"},
-                                status_code=409)
-        sweep_id, rec_id = new_id(), new_id()
-        path = settings.data_dir / "recordings" / f"{rec_id}.h5"
-        now = time.time()
-        last = {"t": 0.0}
-
-        def on_progress(frac, st):
-            if time.monotonic() - last["t"] >= 0.2 or frac >= 1.0:
-                last["t"] = time.monotonic()
-                catalog().update("sweeps", sweep_id, state="running", progress=round(frac, 4))
-
-        def on_end(result, error):
-            _sweep_ended(sweep_id, rec_id, path, result, error)
-
-        catalog().insert("sweeps", id=sweep_id, created=now, updated=now, state="queued", progress=0.0,
-                         request=body.model_dump(), recording_id=rec_id, error=None, operator=who)
-        # in the catalog before the sweep thread exists, so its end always finds both rows
-        catalog().insert("recordings", id=rec_id, created=now, origin="sweep", filename=path.name, path=str(path),
-                         status="running", sweep_id=sweep_id, info={"sweep": body.model_dump()})
-        try:
-            rig.begin_sweep(sweep_id, req, path, on_progress, on_end)
-        except RigBusy as busy:  # lost a race with another request: as if it had come first
-            catalog().delete("recordings", rec_id)
-            catalog().delete("sweeps", sweep_id)
-            return JSONResponse({"detail": f"another sweep is running ({busy}); abort it or wait"}, status_code=409)
-        except DeviceError as exc:
-            catalog().delete("recordings", rec_id)
-            catalog().update("sweeps", sweep_id, state="failed", error=str(exc), recording_id=None)
-            return JSONResponse({"detail": f"rig not reachable: {exc}"}, status_code=503)
-        return {"id": sweep_id, "state": "queued"}
-
-    def _sweep_ended(sweep_id, rec_id, path, result, error):
-        if result is None:  # refused at preflight (nothing recorded, no file) or failed before recording
-            if path.exists():  # an internal error after the file was opened: keep what it holds
-                catalog().update("sweeps", sweep_id, state="failed", error=error)
-                catalog().update("recordings", rec_id, status="failed")
-            else:
-                catalog().update("sweeps", sweep_id, state="failed", error=error, recording_id=None)
-                catalog().delete("recordings", rec_id)
-            return
-        sweep_state = {"complete": "completed"}.get(result["status"], "aborted")
-        catalog().update("sweeps", sweep_id, state=sweep_state, error=result["reason"] or None,
-                         **({"progress": 1.0} if sweep_state == "completed" else {}))
-        info = {k: v for k, v in result.items() if k != "path"}
-        catalog().update("recordings", rec_id, status=result["status"], info={**recording_or_404(rec_id)["info"], **info})
-        if sweep_state == "completed" and settings.auto_identify:
-            state["jobs"].submit("identify", rec_id, {})
+              responses={**errors, 409: {"model": schemas.Problem}, 422: {"model": schemas.Problem},
+                         503: {"model": schemas.Problem}})
+    async def start_sweep(body: schemas.SweepIn, who: str = operator):
+        """Start a sweep: refused with 422 naming the limit when unsafe, 409 while another runs or while the
+        PLC is in emergency stop or fault (with the reason), 503 when the rig cannot be reached."""
+        started = await controller("start_sweep", body=body.model_dump(), operator=who)
+        return {"id": started["id"], "state": started["state"]}
 
     @app.get("/api/sweeps", response_model=list[schemas.SweepOut], tags=["sweeps"], dependencies=[viewer],
              responses=errors)
@@ -187,12 +153,12 @@ def create_app(settings: Settings) -> FastAPI:
     @app.post("/api/sweeps/{sweep_id}/abort", status_code=202, response_model=schemas.Accepted, tags=["sweeps"],
               dependencies=[operator], responses={**errors, 404: {"model": schemas.Problem},
                                                    409: {"model": schemas.Problem}})
-    def abort_sweep(sweep_id: str = Id()):
+    async def abort_sweep(sweep_id: str = Id()):
         """Operator abort: the table is commanded to stop, the recording ends 'aborted'."""
         sweep = catalog().get("sweeps", sweep_id)
         if sweep is None:
             raise HTTPException(404, f"no sweep {sweep_id}")
-        if not state["rig"].abort(sweep_id):
+        if not await controller("abort", sweep_id=sweep_id):
             raise HTTPException(409, f"sweep {sweep_id} is {sweep['state']}, not running")
         return {"id": sweep_id, "state": "aborting"}
 
@@ -245,12 +211,16 @@ def create_app(settings: Settings) -> FastAPI:
         """Server-sent events while recording: `samples` events with decimated samples (about 200 per
         second: t in s, one list per channel in m/s^2), then `end` with the recording's status."""
         rec = recording_or_404(rec_id)
-        buffer = state["rig"].live(rec_id)
+        client = state["link"].client
 
         async def events():
             seq, quiet_since = after, time.monotonic()
-            while buffer is not None and not app.state.shutting_down.is_set():
-                points = buffer.since(seq)
+            while rec["status"] == "running" and not app.state.shutting_down.is_set():
+                try:
+                    view = await run_in_threadpool(client.call, "live", recording_id=rec_id, after=seq)
+                except (ControllerRefused, ControllerUnavailable):
+                    view = {"active": False}
+                points = view.get("points") or []
                 if not points and time.monotonic() - quiet_since > 10:
                     quiet_since = time.monotonic()
                     yield ": keep-alive\n\n"  # a comment line: keeps proxies from closing a quiet stream
@@ -258,9 +228,9 @@ def create_app(settings: Settings) -> FastAPI:
                     quiet_since = time.monotonic()
                     seq = points[-1][0]
                     cols = list(zip(*points))
-                    payload = {"seq": seq, "t": cols[1], **{c: cols[2 + j] for j, c in enumerate(buffer.channels)}}
+                    payload = {"seq": seq, "t": cols[1], **{c: cols[2 + j] for j, c in enumerate(view["channels"])}}
                     yield f"event: samples\nid: {seq}\ndata: {json.dumps(payload)}\n\n"
-                elif buffer.done:
+                elif not view.get("active") or view.get("done"):
                     break
                 await asyncio.sleep(0.1)
             status = (catalog().get("recordings", rec_id) or rec)["status"]
@@ -344,3 +314,10 @@ def create_app(settings: Settings) -> FastAPI:
         return (FsPath(__file__).with_name("dashboard.html")).read_text()
 
     return app
+
+
+def _text(value) -> str | int | bool | None:
+    """An input echoed in a 422: text for anything that JSON might not carry (non-finite floats)."""
+    if value is None or isinstance(value, (bool, int, str)):
+        return value if not isinstance(value, str) else value[:200]
+    return repr(value)[:200]

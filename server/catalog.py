@@ -102,8 +102,8 @@ class Catalog:
                 "SELECT * FROM jobs WHERE state = 'queued' ORDER BY created LIMIT 1").fetchone())
 
     def recover_after_restart(self, max_attempts: int = 2) -> list[str]:
-        """Jobs a dead service left running go back to the queue (or fail after max_attempts);
-        sweeps it left queued/running are marked aborted. Returns what was done, for the log."""
+        """Jobs a dead web server left running go back to the queue (or fail after max_attempts).
+        Returns what was done, for the log. (Sweeps are the rig controller's: abort_interrupted_sweeps.)"""
         notes = []
         for job in self.list("jobs", "state = 'running'", limit=10_000):
             if job["attempts"] >= max_attempts:
@@ -113,6 +113,12 @@ class Catalog:
             else:
                 self.update("jobs", job["id"], state="queued", error="interrupted by a service restart; re-queued")
                 notes.append(f"job {job['id']}: re-queued after a restart")
+        return notes
+
+    def abort_interrupted_sweeps(self) -> list[str]:
+        """Sweeps a dead rig controller left queued/running are marked aborted (its sweep thread is gone,
+        so the PLC's watchdog stopped the table). Returns what was done, for the log."""
+        notes = []
         for sweep in self.list("sweeps", "state IN ('queued', 'running')", limit=10_000):
             self.update("sweeps", sweep["id"], state="aborted",
                         error="the service stopped during the sweep (the PLC watchdog stopped the table)")

@@ -7,6 +7,7 @@ start `Catalog.recover_after_restart` puts jobs a dead service left running back
 from __future__ import annotations
 
 import multiprocessing
+import os
 import threading
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -17,6 +18,14 @@ from identify.errors import ShakeidError
 
 from . import worker
 from .catalog import Catalog, new_id
+
+
+def queue_job(catalog: Catalog, results_dir: Path, kind: str, recording_id: str, options: dict | None = None) -> dict:
+    """Put a job in the catalog's queue (the web server and the rig controller both queue jobs)."""
+    job_id = new_id()
+    return catalog.insert("jobs", id=job_id, created=time.time(), updated=time.time(), kind=kind,
+                          recording_id=recording_id, options=options or {}, state="queued", attempts=0,
+                          error=None, result_dir=str(Path(results_dir) / job_id))
 
 
 class JobQueue:
@@ -31,7 +40,8 @@ class JobQueue:
 
     def _new_pool(self) -> ProcessPoolExecutor:
         # spawn, not fork: the service has threads (uvicorn, rig, dispatcher) a fork would copy mid-flight
-        pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"))
+        pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=worker.die_with_parent, initargs=(os.getpid(),))
         for _ in range(self.workers):
             pool.submit(worker.warm_up)  # imports numpy/scipy/matplotlib now, not in the first job
         return pool
@@ -53,12 +63,13 @@ class JobQueue:
         pool.shutdown(wait=True, cancel_futures=True)
 
     def submit(self, kind: str, recording_id: str, options: dict | None = None) -> dict:
-        job_id = new_id()
-        job = self.catalog.insert("jobs", id=job_id, created=time.time(), updated=time.time(), kind=kind,
-                                  recording_id=recording_id, options=options or {}, state="queued", attempts=0,
-                                  error=None, result_dir=str(self.results_dir / job_id))
+        job = queue_job(self.catalog, self.results_dir, kind, recording_id, options)
         self._wake.set()
         return job
+
+    def wake(self) -> None:
+        """A job was queued elsewhere (the rig controller, after a sweep): look now, not at the next poll."""
+        self._wake.set()
 
     def _dispatch(self) -> None:
         while not self._stop:

@@ -1,9 +1,11 @@
-"""The rig as the service sees it: one sweep at a time, progress, a live view, emergency stop.
+"""The rig as the controller process runs it (server/controller.py): one sweep at a time, progress, a
+live view, emergency stop.
 
 A sweep runs in its own thread with its own PLC and accelerometer connections (daq.SweepRunner, the
-same code as `shakeid sweep`), so the HDF5 file it writes is as crash-safe as the CLI's. A second PLC
-connection, used by nothing else and behind its own lock, serves status and emergency stop, so a stop
-is never queued behind the sweep's traffic. With no rig configuration an embedded simulated rig
+same code as `shakeid sweep`), so the HDF5 file it writes is as crash-safe as the CLI's; its heartbeat
+has a PLC connection of its own, so a slow status poll never delays a beat. Two more PLC connections,
+each behind its own lock, serve status/reset and the emergency stop, so a stop is never queued behind
+the sweep's traffic or a status poll. With no rig configuration an embedded simulated rig
 (sim.server.SimulatedRig) plays the hardware over loopback Modbus and the TCP stream.
 """
 from __future__ import annotations
@@ -72,6 +74,7 @@ class RigService:
         # emergency stop, so a stop never waits behind status polls
         self._links = {"control": [threading.Lock(), None], "estop": [threading.Lock(), None]}
         self.active: dict | None = None  # {"id", "runner", "thread", "live"}
+        self.last_live: LiveBuffer | None = None
         self._lock = threading.Lock()
 
     # -- lifecycle ----------------------------------------------------------------------------------
@@ -82,11 +85,13 @@ class RigService:
             self.cfg.plc = {"transport": "modbus", "host": host, "port": port}
             self.cfg.stream = {**self.cfg.stream, "url": self.sim.endpoints["stream"]}
 
-    def stop(self) -> None:
+    def stop(self, reason: str = "the service is shutting down") -> None:
+        """Abort a running sweep (the table is commanded to stop, the file closed with `reason`), wait
+        for it, then close the links and the simulated rig."""
         act = self.active
         if act is not None:
-            act["runner"].abort("the service is shutting down")
-            act["thread"].join(10)
+            act["runner"].abort(reason)
+            act["thread"].join(15)
         for _, plc in self._links.values():
             if plc is not None:
                 plc.close()
@@ -136,8 +141,22 @@ class RigService:
                 act["runner"].abort("emergency stop")
         return {"state": "estop", "aborted_sweep": act["id"] if act else None}
 
-    def reset(self) -> None:
-        self._with_control(lambda plc: plc.command(Command.RESET))
+    def reset(self):
+        """RESET, then the PLC's status read back (still FAULT/ESTOP if the table was not at rest)."""
+        def reset_and_read(plc):
+            plc.command(Command.RESET)
+            return plc.status()
+        return self._with_control(reset_and_read)
+
+    def not_ready(self) -> str | None:
+        """Why a sweep cannot start now (the PLC in estop, fault or running), or None: asked before a
+        sweep is accepted, so the caller hears it at once instead of from a failed sweep later."""
+        st = self._with_control(lambda plc: plc.status())
+        if st.state in (State.IDLE, State.DONE):
+            return None
+        how = {State.ESTOP: "the PLC is in emergency stop", State.RUNNING: "the table is moving",
+               State.FAULT: f"the PLC is in fault ({Fault(st.fault_code).name.lower()})"}[State(st.state)]
+        return f"{how}; reset it first (POST /api/rig/reset or `shakeid rig reset --config RIG.toml`)"
 
     def begin_sweep(self, sweep_id: str, req: SweepRequest, out_path: Path, on_progress, on_end) -> LiveBuffer:
         """Start a sweep thread. Raises RigBusy if one is active. on_end(result | None, error | None)."""
@@ -145,25 +164,27 @@ class RigService:
             if self.active is not None:
                 raise RigBusy(self.active["id"])
             live = LiveBuffer(out_path.stem, self.cfg.channels, self.cfg.fs_hz)
-            plc = source = None
+            devices = []  # the sweep's own PLC link, its heartbeat's link, the accelerometers
             try:
-                plc = open_plc(self.cfg.plc)
-                source = open_source(self.cfg.stream, self.cfg.can, self.cfg.fs_hz, self.cfg.accelerometers)
+                devices.append(open_plc(self.cfg.plc))
+                devices.append(open_plc(self.cfg.plc))
+                devices.append(open_source(self.cfg.stream, self.cfg.can, self.cfg.fs_hz, self.cfg.accelerometers))
             except DeviceError:
-                if plc is not None:
-                    plc.close()
+                for dev in devices:
+                    dev.close()
                 raise
+            plc, beat_plc, source = devices
             runner = SweepRunner(plc, source, self.cfg.limits, float(self.cfg.stream["sensitivity_counts_per_ms2"]),
                                  self.cfg.channels, on_progress=on_progress, on_samples=live.add,
                                  rig_config={"source": self.cfg.source, "plc": self.cfg.plc,
-                                             "simulated": self.sim is not None})
-            thread = threading.Thread(target=self._run, args=(runner, plc, source, req, out_path, live, on_end),
+                                             "simulated": self.sim is not None}, heartbeat_plc=beat_plc)
+            thread = threading.Thread(target=self._run, args=(runner, devices, req, out_path, live, on_end),
                                       name=f"sweep-{sweep_id}", daemon=True)
             self.active = {"id": sweep_id, "runner": runner, "thread": thread, "live": live}
             thread.start()
             return live
 
-    def _run(self, runner, plc, source, req, out_path, live, on_end) -> None:
+    def _run(self, runner, devices, req, out_path, live, on_end) -> None:
         result, error = None, None
         try:
             result = runner.run(req, out_path)
@@ -179,8 +200,9 @@ class RigService:
             finally:
                 live.done = True
                 with self._lock:
+                    self.last_live = live  # late live clients still get the tail and the end
                     self.active = None  # the rig takes the next sweep now; these connections are this sweep's
-                for dev in (plc, source):
+                for dev in devices:
                     try:
                         dev.close()
                     except Exception:
@@ -194,5 +216,9 @@ class RigService:
         return True
 
     def live(self, recording_id: str) -> LiveBuffer | None:
+        """The live view of the running recording, or of the one that just ended."""
         act = self.active
-        return act["live"] if act and act["live"].recording_id == recording_id else None
+        for live in (act["live"] if act else None, self.last_live):
+            if live is not None and live.recording_id == recording_id:
+                return live
+        return None

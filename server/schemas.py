@@ -10,7 +10,8 @@ JobState = Literal["queued", "running", "completed", "failed"]
 
 
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    """Unknown fields and non-finite numbers (NaN, Infinity, 1e400) are refused with a 422 naming the field."""
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class SweepIn(Strict):
@@ -43,6 +44,7 @@ class Health(BaseModel):
     status: Literal["ok"]
     version: str
     rig_simulated: bool
+    controller: Literal["attached", "unreachable"] = Field(description="the rig controller process")
     jobs_queued: int
 
 
@@ -99,6 +101,10 @@ class JobOut(BaseModel):
 class EstopOut(BaseModel):
     state: Literal["estop"]
     aborted_sweep: str | None = None
+
+
+class ResetOut(BaseModel):
+    state: Literal["idle", "done"]
 
 
 class Problem(BaseModel):

@@ -6,9 +6,12 @@
     sim_speed = 10.0                         # embedded simulated rig only (no --config)
     identify_workers = 1                     # processes for identification jobs
     auto_identify = true                     # identify every completed sweep
+    max_upload_mb = 512                      # larger uploads are refused (413) before they are read
+    controller = "unix:/run/shakeid/controller.sock"   # attach to a rig controller that runs on its own
+                                             # (`shakeid controller`); unset: `shakeid serve` starts one
 
 Environment (wins over the file): SHAKEID_DATA_DIR, SHAKEID_TOKENS ("token:role,token:role"),
-SHAKEID_SIM_SPEED. With no configuration file the service starts an embedded simulated rig; with no
+SHAKEID_SIM_SPEED, SHAKEID_CONTROLLER. With no configuration file the service starts an embedded simulated rig; with no
 token configured it makes one operator token, prints it and keeps it in <data_dir>/operator-token so a
 new user can log in without reading anything first.
 """
@@ -23,7 +26,7 @@ from identify.errors import ShakeidError
 from sim.config import RigConfig, load_config
 
 ROLES = ("viewer", "operator")
-KEYS = {"data_dir", "tokens", "sim_speed", "identify_workers", "auto_identify", "max_upload_mb"}
+KEYS = {"data_dir", "tokens", "sim_speed", "identify_workers", "auto_identify", "max_upload_mb", "controller"}
 
 
 class SettingsError(ShakeidError):
@@ -40,12 +43,15 @@ class Settings:
     auto_identify: bool = True
     max_upload_mb: float = 512.0
     generated_token: str | None = None                   # set when no token was configured
+    config_path: Path | None = None                      # the rig configuration file, if any
+    controller: str | None = None                        # an existing rig controller; None: start one
 
     @classmethod
     def load(cls, config_path=None, env=None, data_dir=None) -> "Settings":
         env = os.environ if env is None else env
         s = cls()
         if config_path:
+            s.config_path = Path(config_path).resolve()
             s.rig = load_config(config_path)
             section = s.rig.server
             unknown = set(section) - KEYS
@@ -58,6 +64,7 @@ class Settings:
             s.identify_workers = int(section.get("identify_workers", s.identify_workers))
             s.auto_identify = bool(section.get("auto_identify", s.auto_identify))
             s.max_upload_mb = float(section.get("max_upload_mb", s.max_upload_mb))
+            s.controller = section.get("controller", s.controller)
         if env.get("SHAKEID_DATA_DIR"):
             s.data_dir = Path(env["SHAKEID_DATA_DIR"])
         if data_dir:
@@ -67,6 +74,8 @@ class Settings:
                 s.tokens = dict(item.strip().rsplit(":", 1) for item in env["SHAKEID_TOKENS"].split(",") if item.strip())
             except ValueError:
                 raise SettingsError("SHAKEID_TOKENS must read token:role,token:role") from None
+        if env.get("SHAKEID_CONTROLLER"):
+            s.controller = env["SHAKEID_CONTROLLER"]
         if env.get("SHAKEID_SIM_SPEED"):
             s.sim_speed = float(env["SHAKEID_SIM_SPEED"])
         bad = {t: r for t, r in s.tokens.items() if r not in ROLES}

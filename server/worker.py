@@ -14,6 +14,21 @@ from identify.errors import ShakeidError
 from .schemas import IdentifyIn, ReadOptions
 
 
+def die_with_parent(parent_pid: int) -> None:
+    """Pool initializer: the worker exits when the service that started it is gone (even after a
+    SIGKILL, which gives the service no chance to stop its pool): a job left behind would hold memory
+    and its files for nobody, and the catalog re-queues it on the next start anyway."""
+    import threading
+    import time
+
+    def watch():
+        while os.getppid() == parent_pid:
+            time.sleep(0.5)
+        os._exit(0)
+
+    threading.Thread(target=watch, name="die-with-parent", daemon=True).start()
+
+
 def warm_up() -> bool:
     """Import the numerical stack once, so the first real job does not pay for it."""
     import matplotlib  # noqa: F401

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from identify.errors import ShakeidError
 
-from .lab import cmd_demo, cmd_recordings, cmd_serve, cmd_sim, cmd_sweep
+from .lab import cmd_controller, cmd_demo, cmd_recordings, cmd_serve, cmd_sim, cmd_sweep
 
 EXIT_USAGE = 2
 
@@ -270,7 +270,18 @@ def build_parser() -> argparse.ArgumentParser:
                                       "./shakeid-data)")
     q.add_argument("--sim-speed", type=float, help="embedded simulated rig: rig seconds per wall second")
     q.add_argument("--log-level", default="warning", choices=("debug", "info", "warning", "error"))
+    q.add_argument("--controller", metavar="ADDRESS",
+                   help="attach to a rig controller that runs on its own (`shakeid controller`), e.g. "
+                        "unix:/run/shakeid/controller.sock or tcp:127.0.0.1:8765 (default: start one as a child)")
     q.set_defaults(func=cmd_serve)
+    q = sub.add_parser("controller", help="the rig controller process: sweeps, heartbeat, emergency stop (the "
+                                          "service starts one itself; run it alone for a separate deployment)")
+    q.add_argument("--config", metavar="RIG.toml", help="rig configuration; none: embedded simulated rig")
+    q.add_argument("--data-dir", help="shared with the web server: catalog, recordings (default as serve)")
+    q.add_argument("--address", help="where to listen (default unix:DATA_DIR/controller.sock)")
+    q.add_argument("--sim-speed", type=float, help="embedded simulated rig: rig seconds per wall second")
+    q.add_argument("--parent-pid", type=int, help=argparse.SUPPRESS)  # set by `shakeid serve` for its child
+    q.set_defaults(func=cmd_controller)
     q = sub.add_parser("simulate", help="write a synthetic recording of the simulated rig (CSV + truth JSON)")
     q.add_argument("--out", required=True, metavar="FILE.csv")
     _add_sweep_options(q)

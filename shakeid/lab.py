@@ -213,8 +213,11 @@ def cmd_serve(args) -> int:
     settings = Settings.load(args.config, data_dir=args.data_dir)
     if args.sim_speed is not None:
         settings.sim_speed = args.sim_speed
+    if args.controller:
+        settings.controller = args.controller
     app = create_app(settings)  # prepares the data directory (and the generated token, if any)
     rig = f"rig of {args.config}" if args.config else f"embedded simulated rig at {settings.sim_speed:g}x"
+    rig += f", rig controller at {settings.controller}" if settings.controller else ", rig controller as a child process"
     print(f"shakeid serve: http://{args.host}:{args.port}/ ({rig}); data in {settings.data_dir.resolve()}", flush=True)
     if settings.generated_token:
         print(f"shakeid serve: no tokens configured; operator token: {settings.generated_token} "
@@ -228,3 +231,14 @@ def cmd_serve(args) -> int:
     config = uvicorn.Config(app, host=args.host, port=args.port, log_level=args.log_level, timeout_graceful_shutdown=5)
     Server(config).run()
     return 0
+
+
+def cmd_controller(args) -> int:
+    """The rig controller process (server/controller.py): started by `shakeid serve`, or on its own."""
+    from server.controller import main
+    from server.settings import Settings
+
+    settings = Settings.load(args.config, data_dir=args.data_dir)
+    if args.sim_speed is not None:
+        settings.sim_speed = args.sim_speed
+    return main(settings, args.address or settings.controller, args.parent_pid)

@@ -109,12 +109,15 @@ def test_emergency_stop_stops_the_simulated_table(service):
     assert rig["state"] == "estop"
     sweep = wait_for(lambda: (s := op.get(f"/api/sweeps/{sweep_id}").json())["state"] != "running" and s, 30, "end")
     assert sweep["state"] == "aborted" and "emergency stop" in sweep["error"]
-    # a sweep while the PLC is in emergency stop: accepted, then refused by the preflight, nothing recorded
-    refused = op.post("/api/sweeps", json=SWEEP).json()["id"]
-    failed = wait_for(lambda: (s := op.get(f"/api/sweeps/{refused}").json())["state"] == "failed" and s, 30, "refusal")
-    assert "estop" in failed["error"] and "reset it first" in failed["error"] and failed["recording_id"] is None
-    assert op.post("/api/rig/reset").status_code == 204
-    assert wait_for(lambda: op.get("/api/rig").json()["plc"]["state"] == "idle", 10, "idle")
+    # a sweep while the PLC is in emergency stop: refused at once with the reason (409), nothing recorded
+    n_sweeps = len(op.get("/api/sweeps").json())
+    refused = op.post("/api/sweeps", json=SWEEP)
+    assert refused.status_code == 409, refused.text
+    assert "emergency stop" in refused.json()["detail"] and "reset it first" in refused.json()["detail"]
+    assert len(op.get("/api/sweeps").json()) == n_sweeps
+    reset = op.post("/api/rig/reset")
+    assert reset.status_code == 200 and reset.json()["state"] == "idle"
+    assert op.get("/api/rig").json()["plc"]["state"] == "idle"
 
 
 def test_uploads_jobs_and_clear_errors(service, tmp_path, table1_run):
@@ -148,20 +151,24 @@ def test_uploads_jobs_and_clear_errors(service, tmp_path, table1_run):
 
 
 def test_service_killed_mid_sweep_loses_nothing_and_recovers(tmp_path):
+    """SIGKILL of `shakeid serve` mid-sweep: its rig controller sees the web server gone, stops the table,
+    closes the file 'aborted' with the reason and exits; a restart finds everything in order."""
     svc = Service(tmp_path / "data").start()
     op = svc.client()
     sweep_id = op.post("/api/sweeps", json={**SWEEP, "duration_s": 120.0}).json()["id"]
     wait_for(lambda: op.get(f"/api/sweeps/{sweep_id}").json()["progress"] > 0.2, 60, "progress")
     rec_id = op.get(f"/api/sweeps/{sweep_id}").json()["recording_id"]
-    svc.stop(signal.SIGKILL)  # the service, its sweep thread and its simulated rig die together
+    svc.stop(signal.SIGKILL)
     path = svc.data_dir / "recordings" / f"{rec_id}.h5"
+    wait_for(lambda: not (svc.data_dir / "controller.sock").exists(), 30, "the controller to exit")
     with h5py.File(path) as f:
-        assert f["entry"].attrs["status"] == "running" and f["entry/data/time"].shape[0] > 2048
+        assert f["entry"].attrs["status"] == "aborted" and f["entry/data/time"].shape[0] > 2048
+        assert "web server went away" in f["entry"].attrs["status_reason"]
     svc.start()  # restart on the same data directory
     try:
         op = svc.client()
         sweep = op.get(f"/api/sweeps/{sweep_id}").json()
-        assert sweep["state"] == "aborted" and "service stopped" in sweep["error"]
+        assert sweep["state"] == "aborted" and "web server went away" in sweep["error"]
         rec = op.get(f"/api/recordings/{rec_id}").json()
         assert rec["status"] == "aborted"
         with h5py.File(path) as f:

@@ -1,0 +1,319 @@
+"""The rig controller: the one process that drives the rig, apart from the web server.
+
+Sweep runner, heartbeat, PLC and accelerometer connections, the emergency stop and the embedded
+simulated rig live here (server/rig.py's RigService), so nothing the web server does (parsing a
+200 MB upload, serialising JSON for fifty pollers, a crash) can delay a heartbeat or a stop: the
+pattern of Bluesky's queueserver, whose run-engine manager is a process apart from its HTTP server.
+The web server talks to it over server/ipc.py (a Unix socket in the data directory by default).
+
+The controller owns the sweeps and the recordings they make (their rows in the SQLite catalog, the
+HDF5 files) and queues the identification of every complete one; the web server owns jobs and uploads.
+
+Lifecycle:
+- `shakeid serve` starts it as a child (`shakeid controller --parent-pid PID`) and it lives as long as
+  the web server: if the web server dies (its session connection ends, or its PID is gone) the running
+  sweep is aborted, the table stopped, the file closed, and the controller exits.
+- `shakeid controller --config RIG.toml` runs it on its own (a compose service); a web server attaches
+  with `shakeid serve --controller ADDRESS`. If that web server dies the table is stopped the same way,
+  and the controller waits for it to come back.
+Every request is served on its own connection thread; the emergency stop has a PLC connection of its own.
+"""
+from __future__ import annotations
+
+import hmac
+import os
+import secrets
+import signal
+import socket
+import threading
+import time
+from pathlib import Path
+
+from daq.devices import DeviceError
+from daq.recorder import recover_directory
+from daq.sweep import SweepRequest
+from sim.plc import State
+
+from .catalog import Catalog, new_id
+from .ipc import Line, parse_address
+from .jobs import queue_job
+from .rig import RigBusy, RigService
+from .settings import Settings
+
+#: why a sweep ended when its web server died (session ended or its process gone, whichever is seen first)
+WEB_SERVER_GONE = "the web server went away during the sweep; the rig controller stopped the table"
+#: decimated points one live request returns at the most (~10 s at the live view's 200 per second)
+LIVE_BATCH = 2000
+
+
+class Refused(Exception):
+    """A request the controller turns down; status is the HTTP status the web server answers with."""
+
+    def __init__(self, status: int, detail: str):
+        super().__init__(detail)
+        self.status, self.detail = status, detail
+
+
+def default_address(data_dir: Path) -> str:
+    return f"unix:{Path(data_dir).resolve() / 'controller.sock'}"
+
+
+def key_path(data_dir: Path) -> Path:
+    return Path(data_dir) / "controller.key"
+
+
+class RigController:
+    def __init__(self, settings: Settings, address: str | None = None, parent_pid: int | None = None):
+        settings.prepare()
+        self.settings, self.parent_pid = settings, parent_pid
+        self.address = address or default_address(settings.data_dir)
+        self.catalog = Catalog(settings.data_dir / "catalog.sqlite")
+        self.rig = RigService(settings.rig, settings.sim_speed)
+        self.key = secrets.token_urlsafe(32)
+        self.sessions: set[Line] = set()
+        self.stopping = threading.Event()
+        self.stop_reason = "the rig controller is stopping"
+        self._lock = threading.Lock()
+        self._listener: socket.socket | None = None
+
+    # -- lifecycle ------------------------------------------------------------------------------------
+    def start(self) -> "RigController":
+        self._recover()
+        self.rig.start()
+        family, addr = parse_address(self.address)
+        sock = socket.socket(family, socket.SOCK_STREAM)
+        if family == socket.AF_UNIX:
+            Path(addr).unlink(missing_ok=True)  # a socket file a dead controller left behind
+        else:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(addr)
+        if family == socket.AF_UNIX:
+            os.chmod(addr, 0o600)
+        sock.listen(64)
+        self._listener = sock
+        path = key_path(self.settings.data_dir)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(self.key + "\n")
+        tmp.chmod(0o600)
+        os.replace(tmp, path)  # written last: a client that reads the key finds the socket listening
+        threading.Thread(target=self._accept, name="controller-accept", daemon=True).start()
+        if self.parent_pid:
+            threading.Thread(target=self._watch_parent, name="controller-parent", daemon=True).start()
+        return self
+
+    def stop(self, reason: str) -> None:
+        self.stop_reason = reason
+        self.stopping.set()
+
+    def run(self) -> None:
+        """Serve until stopped; then stop the table, close the recording, and release everything."""
+        self.stopping.wait()
+        self.rig.stop(self.stop_reason)  # aborts a running sweep (the table is commanded to stop) and waits
+        if self._listener is not None:
+            self._listener.close()
+        family, addr = parse_address(self.address)
+        if family == socket.AF_UNIX:
+            Path(addr).unlink(missing_ok=True)
+        key_path(self.settings.data_dir).unlink(missing_ok=True)
+        self.catalog.close()
+
+    def _recover(self) -> None:
+        """What a dead controller left: recordings marked running become aborted (their data kept)."""
+        for note in self.catalog.abort_interrupted_sweeps():
+            print(f"shakeid controller: {note}", flush=True)
+        for path in recover_directory(self.settings.data_dir / "recordings"):
+            self.catalog.update("recordings", path.stem, status="aborted")
+            print(f"shakeid controller: recording {path.stem}: was left running; marked aborted, data kept", flush=True)
+        for rec in self.catalog.list("recordings", "status = 'running'", limit=100_000):
+            if not Path(rec["path"]).exists():  # died before its recorder created the file
+                self.catalog.delete("recordings", rec["id"])
+
+    def _watch_parent(self) -> None:
+        while not self.stopping.wait(0.2):
+            if os.getppid() != self.parent_pid:
+                self.stop(WEB_SERVER_GONE)
+
+    # -- connections ----------------------------------------------------------------------------------
+    def _accept(self) -> None:
+        while not self.stopping.is_set():
+            try:
+                sock, _ = self._listener.accept()
+            except OSError:
+                return
+            threading.Thread(target=self._serve, args=(sock,), name="controller-conn", daemon=True).start()
+
+    def _serve(self, sock: socket.socket) -> None:
+        sock.settimeout(5.0)  # for the hello only
+        line = Line(sock)
+        try:
+            hello = line.recv()
+            if not hello or hello.get("op") != "hello" or not hmac.compare_digest(
+                    str(hello.get("key", "")).encode(), self.key.encode()):
+                line.send({"ok": False, "status": 401, "detail": "wrong or missing controller key"})
+                return
+            sock.settimeout(None)
+            line.send({"ok": True, "result": {"pid": os.getpid(), "simulated": self.rig.sim is not None}})
+            if hello.get("role") == "session":
+                return self._session(line)
+            while (msg := line.recv()) is not None:
+                line.send(self.handle(msg))
+        except (OSError, ValueError):
+            pass  # the peer went away mid-message: nothing to answer
+        finally:
+            line.close()
+
+    def _session(self, line: Line) -> None:
+        with self._lock:
+            self.sessions.add(line)
+        try:
+            while line.recv() is not None:  # the web server's keep-alives; the end means it is gone
+                pass
+        except (OSError, ValueError):
+            pass
+        finally:
+            with self._lock:
+                self.sessions.discard(line)
+                alone = not self.sessions
+            if alone and not self.stopping.is_set():
+                self._web_server_gone()
+
+    def _web_server_gone(self) -> None:
+        act = self.rig.active
+        if act is not None:
+            print(f"shakeid controller: {WEB_SERVER_GONE} (sweep {act['id']})", flush=True)
+            act["runner"].abort(WEB_SERVER_GONE)
+        if self.parent_pid and os.getppid() != self.parent_pid:
+            self.stop(WEB_SERVER_GONE)
+
+    def notify(self, event: dict) -> None:
+        with self._lock:
+            sessions = list(self.sessions)
+        for line in sessions:
+            try:
+                line.send(event)
+            except OSError:
+                pass
+
+    # -- requests -------------------------------------------------------------------------------------
+    def handle(self, msg: dict) -> dict:
+        op = msg.get("op")
+        fn = getattr(self, f"op_{op}", None) if isinstance(op, str) else None
+        if fn is None:
+            return {"ok": False, "status": 400, "detail": f"unknown request {op!r}"}
+        try:
+            return {"ok": True, "result": fn(**{k: v for k, v in msg.items() if k != "op"})}
+        except Refused as exc:
+            return {"ok": False, "status": exc.status, "detail": exc.detail}
+        except DeviceError as exc:
+            return {"ok": False, "status": 503, "detail": f"rig not reachable: {exc}"}
+        except TypeError as exc:
+            return {"ok": False, "status": 400, "detail": f"bad request {op!r}: {exc}"}
+        except Exception as exc:  # said to the caller, never a dead connection thread
+            return {"ok": False, "status": 500, "detail": f"controller error: {type(exc).__name__}: {exc}"}
+
+    def op_ping(self) -> dict:
+        return {"pid": os.getpid(), "active_sweep": self.rig.active["id"] if self.rig.active else None}
+
+    def op_status(self) -> dict:
+        return self.rig.status()
+
+    def op_estop(self) -> dict:
+        return self.rig.emergency_stop()
+
+    def op_reset(self) -> dict:
+        st = self.rig.reset()
+        if st.state not in (State.IDLE, State.DONE):
+            raise Refused(409, f"the PLC stayed in {State(st.state).name.lower()} (fault code {st.fault_code}): "
+                               "the table is not at rest yet, or the fault is still there; try again")
+        return {"state": State(st.state).name.lower()}
+
+    def op_shutdown(self, reason: str = "the service is shutting down") -> dict:
+        self.stop(reason)
+        return {"stopping": True}
+
+    def op_abort(self, sweep_id: str) -> bool:
+        return self.rig.abort(sweep_id)
+
+    def op_live(self, recording_id: str, after: int = 0) -> dict:
+        buffer = self.rig.live(recording_id)
+        if buffer is None:
+            return {"active": False}
+        points = buffer.since(int(after))[:LIVE_BATCH]
+        return {"active": True, "channels": buffer.channels, "points": points,
+                "done": buffer.done and len(points) < LIVE_BATCH}
+
+    def op_start_sweep(self, body: dict, operator: str = "") -> dict:
+        """Checked here, synchronously: limits (422), another sweep or a PLC in estop/fault (409)."""
+        req = SweepRequest(float(body["f_start_hz"]), float(body["f_end_hz"]), float(body["duration_s"]),
+                           float(body["amplitude_mm"]), float(body.get("settle_s", 2.0)), operator=operator,
+                           note=str(body.get("note", "")))
+        problem = self.rig.check(req)
+        if problem:
+            raise Refused(422, f"sweep refused: {problem}")
+        if self.rig.active is not None:
+            raise Refused(409, f"another sweep is running ({self.rig.active['id']}); abort it or wait")
+        refusal = self.rig.not_ready()
+        if refusal:
+            raise Refused(409, f"sweep refused: {refusal}")
+        sweep_id, rec_id = new_id(), new_id()
+        path = self.settings.data_dir / "recordings" / f"{rec_id}.h5"
+        now = time.time()
+        last = {"t": 0.0}
+        cat = self.catalog
+
+        def on_progress(frac, st):
+            if time.monotonic() - last["t"] >= 0.2 or frac >= 1.0:
+                last["t"] = time.monotonic()
+                cat.update("sweeps", sweep_id, state="running", progress=round(frac, 4))
+
+        cat.insert("sweeps", id=sweep_id, created=now, updated=now, state="queued", progress=0.0, request=body,
+                   recording_id=rec_id, error=None, operator=operator)
+        # in the catalog before the sweep thread exists, so its end always finds both rows
+        cat.insert("recordings", id=rec_id, created=now, origin="sweep", filename=path.name, path=str(path),
+                   status="running", sweep_id=sweep_id, info={"sweep": body})
+        try:
+            self.rig.begin_sweep(sweep_id, req, path, on_progress,
+                                 lambda result, error: self._sweep_ended(sweep_id, rec_id, path, result, error))
+        except RigBusy as busy:  # lost a race with another request: as if it had come first
+            cat.delete("recordings", rec_id)
+            cat.delete("sweeps", sweep_id)
+            raise Refused(409, f"another sweep is running ({busy}); abort it or wait") from None
+        except DeviceError as exc:
+            cat.delete("recordings", rec_id)
+            cat.update("sweeps", sweep_id, state="failed", error=str(exc), recording_id=None)
+            raise Refused(503, f"rig not reachable: {exc}") from None
+        return {"id": sweep_id, "state": "queued", "recording_id": rec_id}
+
+    def _sweep_ended(self, sweep_id, rec_id, path, result, error) -> None:
+        cat = self.catalog
+        if result is None:  # refused at preflight (nothing recorded, no file) or failed before recording
+            if path.exists():  # an internal error after the file was opened: keep what it holds
+                cat.update("sweeps", sweep_id, state="failed", error=error)
+                cat.update("recordings", rec_id, status="failed")
+            else:
+                cat.update("sweeps", sweep_id, state="failed", error=error, recording_id=None)
+                cat.delete("recordings", rec_id)
+            return
+        sweep_state = {"complete": "completed"}.get(result["status"], "aborted")
+        cat.update("sweeps", sweep_id, state=sweep_state, error=result["reason"] or None,
+                   **({"progress": 1.0} if sweep_state == "completed" else {}))
+        rec = cat.get("recordings", rec_id) or {"info": {}}
+        info = {**rec["info"], **{k: v for k, v in result.items() if k != "path"}}
+        cat.update("recordings", rec_id, status=result["status"], info=info)
+        if sweep_state == "completed" and self.settings.auto_identify:
+            queue_job(cat, self.settings.data_dir / "results", "identify", rec_id, {})
+            self.notify({"event": "job_queued"})
+
+
+def main(settings: Settings, address: str | None = None, parent_pid: int | None = None) -> int:
+    """`shakeid controller`: run until SIGTERM/SIGINT (or, as a child, until the web server is gone)."""
+    ctl = RigController(settings, address, parent_pid)
+    signal.signal(signal.SIGTERM, lambda *_: ctl.stop("the rig controller was stopped (SIGTERM)"))
+    signal.signal(signal.SIGINT, lambda *_: ctl.stop("the rig controller was stopped (SIGINT)"))
+    ctl.start()
+    print(f"shakeid controller: pid {os.getpid()}, listening on {ctl.address}"
+          f" ({'embedded simulated rig' if ctl.rig.sim is not None else 'rig of ' + str(settings.rig.source)})",
+          flush=True)
+    ctl.run()
+    print(f"shakeid controller: stopped ({ctl.stop_reason})", flush=True)
+    return 0
