@@ -81,6 +81,7 @@ class RigLink:
             except ControllerUnavailable:
                 self._stop.wait(0.2)
                 continue
+            line.sock.settimeout(None)  # a session is quiet for hours; only its end means something
             self.attached.set()
             self._session = line
             try:

@@ -11,7 +11,7 @@
                                              # (`shakeid controller`); unset: `shakeid serve` starts one
 
 Environment (wins over the file): SHAKEID_DATA_DIR, SHAKEID_TOKENS ("token:role,token:role"),
-SHAKEID_SIM_SPEED, SHAKEID_CONTROLLER. With no configuration file the service starts an embedded simulated rig; with no
+SHAKEID_SIM_SPEED, SHAKEID_CONTROLLER, SHAKEID_MAX_UPLOAD_MB. With no configuration file the service starts an embedded simulated rig; with no
 token configured it makes one operator token, prints it and keeps it in <data_dir>/operator-token so a
 new user can log in without reading anything first.
 """
@@ -74,6 +74,8 @@ class Settings:
                 s.tokens = dict(item.strip().rsplit(":", 1) for item in env["SHAKEID_TOKENS"].split(",") if item.strip())
             except ValueError:
                 raise SettingsError("SHAKEID_TOKENS must read token:role,token:role") from None
+        if env.get("SHAKEID_MAX_UPLOAD_MB"):
+            s.max_upload_mb = float(env["SHAKEID_MAX_UPLOAD_MB"])
         if env.get("SHAKEID_CONTROLLER"):
             s.controller = env["SHAKEID_CONTROLLER"]
         if env.get("SHAKEID_SIM_SPEED"):

@@ -20,8 +20,8 @@ OPERATOR, VIEWER = "operator-token-for-tests", "viewer-token-for-tests"
 class Service:
     """One service process; start() again on the same data_dir is a restart."""
 
-    def __init__(self, data_dir: Path, speed: float = 10.0, env: dict | None = None):
-        self.data_dir, self.speed, self.extra_env = data_dir, speed, env or {}
+    def __init__(self, data_dir: Path, speed: float = 10.0, env: dict | None = None, args: tuple = ()):
+        self.data_dir, self.speed, self.extra_env, self.args = data_dir, speed, env or {}, tuple(args)
         self.proc: subprocess.Popen | None = None
         self.port = 0
 
@@ -30,7 +30,8 @@ class Service:
         env = {**os.environ, "SHAKEID_TOKENS": f"{OPERATOR}:operator,{VIEWER}:viewer", **self.extra_env}
         self.log = open(self.data_dir.parent / f"serve-{self.port}.log", "w")
         self.proc = subprocess.Popen([SHAKEID, "serve", "--data-dir", str(self.data_dir), "--port", str(self.port),
-                                      "--sim-speed", str(self.speed)], stdout=self.log, stderr=subprocess.STDOUT,
+                                      "--sim-speed", str(self.speed), *self.args], stdout=self.log,
+                                     stderr=subprocess.STDOUT,
                                      env=env)
         end = time.monotonic() + 60
         while True:
