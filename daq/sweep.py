@@ -20,6 +20,7 @@ from sim.plc import Command, Fault, Limits, State
 from sim.sweep import SineSweep
 
 from .devices import PLC, DeviceError
+from .realtime import HEARTBEAT_PRIORITY, make_realtime
 from .sources import AccelerometerSource
 from .recorder import DiskFull, Recorder
 
@@ -83,6 +84,8 @@ class SweepRunner:
         # delay a beat; intervals between beats (s) are kept: the watchdog is chosen from their jitter
         self.heartbeat_plc = heartbeat_plc
         self.heartbeat_intervals: list[float] = []
+        self.heartbeat_write_max_s = 0.0
+        self.heartbeat_realtime = False  # SCHED_FIFO granted to the heartbeat thread (daq/realtime.py)
 
     def expected_bytes(self, req: SweepRequest) -> int:
         """Disk space the recording will take: time (f8) + channels (f4) per sample, +10 % for chunks."""
@@ -208,8 +211,10 @@ class SweepRunner:
     def _heartbeat(self):
         n, last = 0, None
         intervals = self.heartbeat_intervals
+        self.heartbeat_realtime = make_realtime(HEARTBEAT_PRIORITY)
         while self._beating:
             n += 1
+            sent = time.monotonic()
             try:
                 if self.heartbeat_plc is not None:
                     self.heartbeat_plc.heartbeat(n)
@@ -219,6 +224,7 @@ class SweepRunner:
             except DeviceError:
                 return
             now = time.monotonic()
+            self.heartbeat_write_max_s = max(self.heartbeat_write_max_s, now - sent)  # the PLC's answer time
             if last is not None and len(intervals) < 1_000_000:
                 intervals.append(now - last)
             last = now
@@ -230,4 +236,6 @@ class SweepRunner:
         if gaps.size == 0:
             return {}
         return {"heartbeat_nominal_s": self.heartbeat_s, "heartbeat_p99_s": round(float(np.quantile(gaps, 0.99)), 4),
-                "heartbeat_max_s": round(float(gaps.max()), 4), "heartbeats": int(gaps.size + 1)}
+                "heartbeat_max_s": round(float(gaps.max()), 4), "heartbeats": int(gaps.size + 1),
+                "heartbeat_write_max_s": round(self.heartbeat_write_max_s, 4),
+                "heartbeat_realtime": self.heartbeat_realtime}

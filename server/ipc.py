@@ -24,6 +24,9 @@ from pathlib import Path
 
 from identify.errors import ShakeidError
 
+#: longest wait for the controller's answer to an emergency stop, s (it answers in milliseconds from a
+#: real-time thread; past this the caller is told to use the hardware stop)
+ESTOP_TIMEOUT_S = 2.0
 #: longest line either side sends (a live-view answer with ~2 s of decimated samples is ~100 kB)
 MAX_LINE = 8 * 2**20
 
@@ -181,12 +184,14 @@ class ControllerClient:
             return self._result(answer)
 
     def emergency_stop(self) -> dict:
-        """On the estop connection only (opened ahead of time by connect_estop): never behind a request."""
+        """On the estop connection only (opened ahead of time by connect_estop): never behind a request;
+        an answer within ESTOP_TIMEOUT_S or ControllerUnavailable."""
         with self._estop_lock:
             for attempt in (0, 1):
                 try:
                     if self._estop is None:
                         self._estop = self._open("estop")
+                        self._estop.sock.settimeout(ESTOP_TIMEOUT_S)
                     return self._result(self._exchange(self._estop, {"op": "estop"}))
                 except (OSError, ValueError, ConnectionError) as exc:
                     if self._estop is not None:
@@ -199,6 +204,7 @@ class ControllerClient:
         with self._estop_lock:
             if self._estop is None:
                 self._estop = self._open("estop")
+                self._estop.sock.settimeout(ESTOP_TIMEOUT_S)
 
     def close(self) -> None:
         with self._pool_lock:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import threading
+import time
 from collections import deque
 from pathlib import Path
 
@@ -24,6 +25,8 @@ from daq.sweep import SweepRefused, SweepRequest, SweepRunner, limit_violation
 from sim.config import RigConfig
 from sim.plc import Command, Fault, PLCConfig, State
 
+#: the PLC status served to pollers is at most this old, s (the dashboard refreshes every second)
+STATUS_MAX_AGE_S = 0.1
 #: samples per second kept for the live view (decimated by block means; enough for a browser plot)
 LIVE_RATE_HZ = 200.0
 
@@ -75,6 +78,7 @@ class RigService:
         self._links = {"control": [threading.Lock(), None], "estop": [threading.Lock(), None]}
         self.active: dict | None = None  # {"id", "runner", "thread", "live"}
         self.last_live: LiveBuffer | None = None
+        self._status: tuple[float, object] | None = None  # (monotonic time, PLCStatus) of the last read
         self._lock = threading.Lock()
 
     # -- lifecycle ----------------------------------------------------------------------------------
@@ -115,9 +119,20 @@ class RigService:
                         raise
 
     # -- what the API offers -------------------------------------------------------------------------
+    def _plc_status(self):
+        """The PLC's status, read at most every STATUS_MAX_AGE_S: fifty dashboards polling must not
+        become fifty Modbus reads a poll (a PLC has better things to do; the simulated one shares the
+        machine). Commands (reset, estop, sweeps) always read it afresh."""
+        cached = self._status
+        if cached is not None and time.monotonic() - cached[0] < STATUS_MAX_AGE_S:
+            return cached[1]
+        st = self._with_control(lambda plc: plc.status())
+        self._status = (time.monotonic(), st)
+        return st
+
     def status(self) -> dict:
         try:
-            st = self._with_control(lambda plc: plc.status())
+            st = self._plc_status()
             plc = {"reachable": True, "state": State(st.state).name.lower(), "fault": Fault(st.fault_code).name.lower(),
                    "elapsed_s": st.elapsed_s, "frequency_hz": st.frequency_hz, "position_mm": st.position_mm}
         except DeviceError as exc:
@@ -137,6 +152,7 @@ class RigService:
         try:
             self._with_control(lambda plc: plc.command(Command.ESTOP), "estop")  # the table first, bookkeeping after
         finally:
+            self._status = None
             if act is not None:
                 act["runner"].abort("emergency stop")
         return {"state": "estop", "aborted_sweep": act["id"] if act else None}
@@ -146,6 +162,7 @@ class RigService:
         def reset_and_read(plc):
             plc.command(Command.RESET)
             return plc.status()
+        self._status = None
         return self._with_control(reset_and_read)
 
     def not_ready(self) -> str | None:
@@ -193,6 +210,8 @@ class RigService:
         except Exception as exc:  # reported on the sweep, never lost in a thread
             error = f"internal error: {type(exc).__name__}: {exc}"
         finally:
+            if self.active is not None:
+                self.active["ending"] = True  # what is left: bookkeeping, closing the connections
             try:
                 # the catalog first (the file is closed already): a live client that sees the end finds the
                 # status, and identification does not wait for pyserial's socket close (it sleeps 0.3 s)

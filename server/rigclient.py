@@ -41,10 +41,14 @@ class RigLink:
         if self.child:
             self._spawn()
         self._thread.start()
-        if not self.attached.wait(timeout_s):
-            detail = self._log_tail() if self.child else ""
+        if not self.child:  # one of its own may come later: until then the rig answers 503, the rest works
+            if not self.attached.wait(min(timeout_s, 10.0)):
+                print(f"shakeid serve: no rig controller at {self.address} yet; rig requests answer 503 until it "
+                      "comes (`shakeid controller`)", flush=True)
+                return
+        elif not self.attached.wait(timeout_s):
             raise ControllerUnavailable(f"the rig controller at {self.address} did not answer within "
-                                        f"{timeout_s:g} s{': ' + detail if detail else ''}")
+                                        f"{timeout_s:g} s: {self._log_tail()}")
         try:
             self.client.connect_estop()  # opened now: the first stop does not pay for a connection
         except ControllerUnavailable:

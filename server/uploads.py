@@ -108,6 +108,7 @@ def check(path: Path, suffix: str, filename: str, options: dict) -> dict:
 def _main(argv: list[str]) -> int:
     import resource
 
+    os.nice(10)  # batch work: the web server and the rig controller keep the cores
     limit = int(os.environ.get("SHAKEID_CHECK_MEMORY_BYTES", "0"))
     if limit:
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))

@@ -17,9 +17,12 @@ from .schemas import IdentifyIn, ReadOptions
 def die_with_parent(parent_pid: int) -> None:
     """Pool initializer: the worker exits when the service that started it is gone (even after a
     SIGKILL, which gives the service no chance to stop its pool): a job left behind would hold memory
-    and its files for nobody, and the catalog re-queues it on the next start anyway."""
+    and its files for nobody, and the catalog re-queues it on the next start anyway. Also: batch work
+    runs at a lower CPU priority (nice +10), so the web server and the rig controller keep the cores."""
     import threading
     import time
+
+    os.nice(10)
 
     def watch():
         while os.getppid() == parent_pid:

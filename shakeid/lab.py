@@ -102,15 +102,21 @@ def cmd_sweep(args) -> int:
         print(f"{path}: was left running by a crash; marked aborted, its data kept")
     req = SweepRequest(args.f_start_hz, args.f_end_hz, args.duration_s, args.amplitude_mm, args.settle_s,
                        args.operator, args.note)
+    from daq.devices import open_plc
+    from daq.realtime import CONTROLLER_PRIORITY, make_realtime
+
+    make_realtime(CONTROLLER_PRIORITY, round_robin=True)  # where allowed: the heartbeat is never late
     plc, source = _sweep_devices(cfg)
+    beat_plc = open_plc(cfg.plc)  # the heartbeat's own link: never behind a status poll
     runner = SweepRunner(plc, source, cfg.limits, float(cfg.stream["sensitivity_counts_per_ms2"]), cfg.channels,
-                         on_progress=_progress_bar, rig_config={"source": cfg.source, "plc": cfg.plc})
+                         on_progress=_progress_bar, rig_config={"source": cfg.source, "plc": cfg.plc},
+                         heartbeat_plc=beat_plc)
     try:
         result = runner.run(req, args.out)
     finally:
         sys.stderr.write("\n")
-        plc.close()
-        source.close()
+        for dev in (plc, beat_plc, source):
+            dev.close()
     print(f"{result['path']}: {result['status']}{' (' + result['reason'] + ')' if result['reason'] else ''}, "
           f"{result['samples']} samples, {result['gaps']} gap(s)")
     return 0 if result["status"] == "complete" else 1

@@ -170,8 +170,8 @@ class SimulatedRig:
         self._clients.add(writer)
         try:
             await reader.read()  # until the client goes away
-        except ConnectionError:
-            pass  # a client that vanished (killed, reset): nothing to report, the next frames skip it
+        except (ConnectionError, asyncio.CancelledError):
+            pass  # a client that vanished (killed, reset), or the rig stopping: nothing to report
         finally:
             self._clients.discard(writer)
 

@@ -36,13 +36,16 @@ def test_compose_file_is_valid_and_runs_what_exists():
     assert p.returncode == 0, p.stderr
     doc = yaml.safe_load(p.stdout)
     services = doc["services"]
-    assert set(services) == {"rig-sim", "server"}
-    server, rig = services["server"], services["rig-sim"]
-    assert "rig-sim" in server["depends_on"]
-    assert any(src == "shakeid-data" and dst == "/data" for src, dst in map(_mount, server["volumes"]))
+    assert set(services) == {"rig-sim", "controller", "server"}
+    server, rig, ctl = services["server"], services["rig-sim"], services["controller"]
+    assert "controller" in server["depends_on"] and "rig-sim" in ctl["depends_on"]
+    for svc in (server, ctl):  # the catalog, the recordings and the controller's socket are shared
+        assert any(src == "shakeid-data" and dst == "/data" for src, dst in map(_mount, svc["volumes"]))
+    address = server["command"][server["command"].index("--controller") + 1]
+    assert address == ctl["command"][ctl["command"].index("--address") + 1] == "unix:/data/controller.sock"
     assert "shakeid-data" in doc["volumes"]
     assert server["environment"]["SHAKEID_TOKENS"] == "t" * 12 + ":operator"  # interpolated from the environment
-    for svc in (server, rig):
+    for svc in (server, rig, ctl):
         assert (Path(svc["build"]["context"]) / "Dockerfile").exists()
         assert svc["command"][0] == "shakeid"
         build_parser().parse_args(svc["command"][1:])  # a real subcommand with real options (exits if not)
@@ -66,8 +69,9 @@ def test_a_broken_compose_file_is_caught(tmp_path):
 
 
 def test_compose_rig_configuration_drives_a_sweep_through_the_service(tmp_path):
-    """The compose wiring without Docker: `shakeid sim` and `shakeid serve --config` as two processes with
-    the compose rig configuration (hosts pointed at loopback): the service drives the separate rig."""
+    """The compose wiring without Docker: `shakeid sim`, `shakeid controller --config` and `shakeid serve
+    --config --controller` as three processes with the compose rig configuration (hosts pointed at
+    loopback, the socket in the data directory): the service drives the separate rig."""
     import httpx
 
     from sim.server import free_port
@@ -85,8 +89,11 @@ def test_compose_rig_configuration_drives_a_sweep_through_the_service(tmp_path):
     rig = subprocess.Popen([exe, "sim", "--config", str(cfg)], stdout=subprocess.PIPE, text=True)
     env = {"PATH": "/usr/bin:/bin", "SHAKEID_TOKENS": "compose-operator-token:operator"}
     log = open(tmp_path / "serve.log", "w")  # a file, not a pipe nobody reads (a full pipe blocks the writer)
-    serve = subprocess.Popen([exe, "serve", "--config", str(cfg), "--port", str(http)], env=env,
-                             stdout=log, stderr=subprocess.STDOUT, text=True)
+    address = f"unix:{tmp_path / 'data' / 'controller.sock'}"
+    ctl = subprocess.Popen([exe, "controller", "--config", str(cfg), "--address", address], env=env,
+                           stdout=log, stderr=subprocess.STDOUT, text=True)
+    serve = subprocess.Popen([exe, "serve", "--config", str(cfg), "--port", str(http), "--controller", address],
+                             env=env, stdout=log, stderr=subprocess.STDOUT, text=True)
     try:
         assert "Modbus" in rig.stdout.readline()
         client = httpx.Client(base_url=f"http://127.0.0.1:{http}", timeout=10,
@@ -112,9 +119,10 @@ def test_compose_rig_configuration_drives_a_sweep_through_the_service(tmp_path):
         # the sweep and at least the settle after it, less at most one 64-sample frame (daq.sweep)
         assert rec["info"]["gaps"] == 0 and rec["info"]["samples"] >= 11 * 2048 - 64
     finally:
-        for proc in (serve, rig):
+        for proc in (serve, ctl, rig):
             proc.send_signal(signal.SIGTERM)
         assert serve.wait(30) in (0, -signal.SIGTERM), (tmp_path / "serve.log").read_text()
+        assert ctl.wait(30) == 0, (tmp_path / "serve.log").read_text()
         rig.wait(30)
         log.close()
 
