@@ -10,7 +10,7 @@ EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 def test_shipped_examples_load():
     sim = load_config(EXAMPLES / "sim-rig.toml")
-    assert sim.plc["transport"] == "modbus" and sim.fs_hz == 2048.0 and sim.limits.watchdog_s == 0.25
+    assert sim.plc["transport"] == "modbus" and sim.fs_hz == 2048.0 and sim.limits.watchdog_s == 0.5
     assert sim.rig.model().coefficient("q1_dot", "q1*q2^2") == pytest.approx(1.162e4, rel=1e-3)
     real = load_config(EXAMPLES / "real-rig.toml")
     assert real.plc["transport"] == "ads" and real.limits.f_max_hz == 40.0 and real.stream["url"] == "/dev/ttyUSB0"
