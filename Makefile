@@ -38,6 +38,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/stream_throughput.py
 	$(PY) benchmarks/daq_throughput.py
 	$(PY) benchmarks/service_latency.py
+	$(PY) benchmarks/estop_latency.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info demo-output
