@@ -60,7 +60,9 @@ class Limits:
     f_min_hz: float = 0.2
     f_max_hz: float = 50.0
     max_duration_s: float = 600.0
-    # heartbeat timeout; + the 0.2 s ramp + one 10 ms PLC cycle keeps the table at rest within 0.5 s
+    # heartbeat timeout; + the 0.2 s ramp + one 10 ms PLC cycle keeps the table at rest within 0.5 s.
+    # 4x the largest interval between 50 ms heartbeats measured under load with the rig controller
+    # real-time (63 ms, docs/service.md); without real-time rights use 0.5 s (examples/sim-rig.toml)
     watchdog_s: float = 0.25
 
     def check(self, sweep: SineSweep) -> tuple[Fault, str]:
