@@ -8,6 +8,10 @@
     /entry/data           NXdata @signal @axes="time": time (s), one dataset per channel (m/s^2),
                           chunked and appended in blocks
     /entry/gaps           (k, 2) int64: [first missing sample, count], from the sample indices
+    /entry/quality        @usable_for_identification @reasons (JSON) @final (written at close, else at
+                          the last flush) @mass_table_rms_ratio @clipped_share @rms @pair @thresholds;
+                          flags: channel, kind (clipped | dead | stuck | nonfinite | ratio), first_row,
+                          rows, samples, t_start_s, t_end_s, value (identify/quality.py says what each is)
 
 Why this layout and this HDF5 mode (shared/notes, 12 SIGKILLs per mode): the default file format plus
 a `flush()` at least every second leaves a file that any HDF5 reader opens after a SIGKILL, with every
@@ -28,6 +32,7 @@ import h5py
 import numpy as np
 
 from identify.errors import RecordingError
+from identify.quality import QualityMonitor, clip_level, verdict
 from identify.recording import Recording
 
 STATUSES = ("running", "complete", "aborted", "fault")
@@ -37,6 +42,15 @@ class DiskFull(RecordingError):
     """Less free disk space than the recorder's reserve: the recording stops while the file is whole."""
 FLUSH_EVERY_S = 1.0
 CHUNK_ROWS = 4096
+#: the quality detectors run over this many appended rows at a time (a stream frame is 64 rows: per-call
+#: overhead would cost more than the detectors themselves), and at every flush
+QUALITY_BATCH_ROWS = 8192
+#: flags kept in the file (a pathological channel could produce one per tenth of a second for hours)
+MAX_FLAGS = 10000
+FLAG_DTYPE = np.dtype([("channel", "S32"), ("kind", "S16"), ("first_row", "<i8"), ("rows", "<i8"),
+                       ("samples", "<i8"), ("t_start_s", "<f8"), ("t_end_s", "<f8"), ("value", "<f8")])
+NOT_ASSESSED = {"assessed": False, "note": "not assessed: written before quality flags; identification "
+                                           "assesses the rows it uses when it reads the file"}
 
 
 def _now() -> str:
@@ -57,11 +71,13 @@ class Recorder:
 
     channels : names in stream order; units : per channel; fs_hz : sample rate; sensors : optional
     {channel: {"sensitivity": counts per unit, "position": "table"}}; sweep / rig_config : metadata;
-    min_free_bytes : disk space to keep free, checked at every flush (DiskFull below it)."""
+    min_free_bytes : disk space to keep free, checked at every flush (DiskFull below it). Quality flags
+    (identify/quality.py) are computed while recording and written at every flush and at close; their
+    verdict is for pair = (input, output) channels (default table_acc, mass_acc, else the first two)."""
 
     def __init__(self, path, channels=("table_acc", "mass_acc"), fs_hz: float = 2048.0, operator: str = "",
                  sweep: dict | None = None, rig_config: dict | None = None, sensors: dict | None = None,
-                 units: str = "m/s^2", min_free_bytes: int = 0):
+                 units: str = "m/s^2", min_free_bytes: int = 0, pair: tuple[str, str] | None = None):
         self.path = Path(path)
         self.min_free_bytes = int(min_free_bytes)  # flush() raises DiskFull below this much free space
         if self.path.exists():
@@ -78,11 +94,22 @@ class Recorder:
         sw.attrs.update({k: v for k, v in (sweep or {}).items()})
         inst = e.create_group("instrument")
         inst.attrs["NX_class"] = "NXinstrument"
+        levels = {}
         for ch in self.channels:
             g = inst.create_group(ch)
             meta = (sensors or {}).get(ch, {})
-            g.attrs.update(NX_class="NXsensor", units=units, sensitivity=float(meta.get("sensitivity", 1.0)),
+            sens = float(meta.get("sensitivity", 1.0))
+            g.attrs.update(NX_class="NXsensor", units=units, sensitivity=sens,
                            position=str(meta.get("position", ch.split("_")[0])))
+            levels[ch] = clip_level(sens)  # int16 counts at +-32767
+        if pair is None:
+            pair = ("table_acc", "mass_acc") if {"table_acc", "mass_acc"} <= set(self.channels) else self.channels[:2]
+        self.pair = tuple(pair) if len(pair) == 2 else None
+        self.quality_monitor = QualityMonitor(self.channels, self.fs_hz, levels, self.pair)
+        self._pending: list[np.ndarray] = []  # appended rows the detectors have not seen yet
+        self._pending_first = 0
+        self._pending_rows = 0
+        self.quality: dict = {}  # the final summary, set by close()
         d = e.create_group("data")
         d.attrs.update(NX_class="NXdata", signal=self.channels[-1], axes="time")
         self.time = d.create_dataset("time", (0,), maxshape=(None,), dtype="f8", chunks=(CHUNK_ROWS,))
@@ -94,6 +121,9 @@ class Recorder:
             self.data[ch] = ds
         self.gaps = e.create_dataset("gaps", (0, 2), maxshape=(None, 2), dtype="i8")
         self.gaps.attrs["columns"] = "first missing sample, count"
+        q = e.create_group("quality")
+        self.flags = q.create_dataset("flags", (0,), maxshape=(None,), dtype=FLAG_DTYPE, chunks=(64,))
+        self._write_quality(final=False)
         self.next_index: int | None = None
         self.n = 0
         self.last_flush = time.monotonic()
@@ -107,20 +137,60 @@ class Recorder:
         if self.next_index is not None and first_index != self.next_index:
             if first_index < self.next_index:
                 raise ValueError(f"samples out of order: {first_index} < {self.next_index}")
+            self._assess()  # the detectors see each gap-free stretch with its own first sample index
             g = self.gaps.shape[0]
             self.gaps.resize((g + 1, 2))
             self.gaps[g] = (self.next_index, first_index - self.next_index)
         m = block.shape[0]
         self.time.resize((self.n + m,))
         self.time[self.n:] = (first_index + np.arange(m)) / self.fs_hz
+        columns = np.ascontiguousarray(block.T)  # one transpose: h5py and the detectors read it contiguous
         for j, ch in enumerate(self.channels):
             ds = self.data[ch]
             ds.resize((self.n + m,))
-            ds[self.n:] = block[:, j]
+            ds[self.n:] = columns[j]
+        if not self._pending:
+            self._pending_first = first_index
+        self._pending.append(columns)
+        self._pending_rows += m
+        if self._pending_rows >= QUALITY_BATCH_ROWS:
+            self._assess()
         self.n += m
         self.next_index = first_index + m
         if time.monotonic() - self.last_flush >= FLUSH_EVERY_S:
             self.flush()
+
+    def _assess(self) -> None:
+        """Run the quality detectors over the rows appended since they last ran."""
+        if self._pending:
+            columns = self._pending[0] if len(self._pending) == 1 else np.concatenate(self._pending, axis=1)
+            self.quality_monitor.update_columns(columns, self._pending_first)
+            self._pending, self._pending_rows = [], 0
+
+    def quality_report(self) -> dict:
+        """The detectors' report so far with the verdict for the pair: usable_for_identification, reasons."""
+        self._assess()
+        rep = self.quality_monitor.report()
+        usable, reasons = verdict(rep, *self.pair) if self.pair else (True, [])
+        return {**rep, "usable_for_identification": usable, "reasons": reasons}
+
+    def _write_quality(self, final: bool, extra: dict | None = None) -> dict:
+        rep = self.quality_report()
+        flags = rep["flags"][:MAX_FLAGS]
+        rows = np.array([(f["channel"].encode()[:32], f["kind"].encode(), f["first"], f["count"], f["samples"],
+                          f["t_start_s"], f["t_end_s"], np.nan if f["value"] is None else f["value"]) for f in flags],
+                        dtype=FLAG_DTYPE)
+        self.flags.resize((rows.size,))
+        if rows.size:
+            self.flags[:] = rows
+        ratio = rep["mass_table_rms_ratio"]
+        self.flags.parent.attrs.update(
+            usable_for_identification=rep["usable_for_identification"], reasons=json.dumps(rep["reasons"]),
+            final=final, rows_assessed=rep["rows"], flags_total=len(rep["flags"]),
+            mass_table_rms_ratio=np.nan if ratio is None else ratio, pair=json.dumps(rep["pair"]),
+            clipped_share=json.dumps(rep["clipped_share"]), rms=json.dumps(rep["rms"]),
+            thresholds=json.dumps(rep["thresholds"]), **(extra or {}))
+        return rep
 
     def flush(self) -> None:
         """Make everything appended so far durable; first check the disk keeps its reserve (HDF5 that runs
@@ -131,6 +201,7 @@ class Recorder:
                            f"{self.min_free_bytes / 2**20:.0f} MB reserve; recording stopped with "
                            f"{self.n} samples kept")
         self.f["entry"].attrs["samples_written"] = self.n
+        self._write_quality(final=False)  # a crashed file keeps the flags up to its last flush
         self.f.flush()
         self.last_flush = time.monotonic()
 
@@ -141,8 +212,39 @@ class Recorder:
             raise ValueError(f"final status must be one of {STATUSES[1:]}")
         e = self.f["entry"]
         e.attrs.update({f"link_{k}": int(v) for k, v in (link_stats or {}).items()})
+        saturated = int((link_stats or {}).get("saturated_frames", 0))
+        self.quality = quality_summary(self._write_quality(final=True, extra={"link_saturated_frames": saturated}))
         e.attrs.update(status=status, status_reason=reason, end_time=_now(), samples_written=self.n)
         self.f.close()
+
+
+def quality_summary(report: dict) -> dict:
+    """A short form of a quality report (for a sweep's result and the service's catalog)."""
+    kinds = sorted({f"{f['channel']} {f['kind']}" for f in report.get("flags", [])})
+    return {"usable_for_identification": report.get("usable_for_identification"),
+            "reasons": report.get("reasons", []), "flags": len(report.get("flags", [])), "flagged": kinds}
+
+
+def read_quality(f: h5py.File) -> dict:
+    """The /entry/quality group of an open recording as a dict (NOT_ASSESSED for files without one)."""
+    if "entry/quality" not in f:
+        return dict(NOT_ASSESSED)
+    q = f["entry/quality"]
+    a = q.attrs
+    ratio = float(a.get("mass_table_rms_ratio", np.nan))
+    flags = [{"channel": r["channel"].decode(), "kind": r["kind"].decode(), "first": int(r["first_row"]),
+              "count": int(r["rows"]), "samples": int(r["samples"]), "t_start_s": float(r["t_start_s"]),
+              "t_end_s": float(r["t_end_s"]), "value": None if np.isnan(r["value"]) else float(r["value"])}
+             for r in q["flags"][()]]
+    out = {"assessed": True, "final": bool(a["final"]), "usable_for_identification": bool(a["usable_for_identification"]),
+           "reasons": json.loads(a["reasons"]), "rows_assessed": int(a["rows_assessed"]),
+           "flags_total": int(a.get("flags_total", len(flags))), "flags": flags,
+           "mass_table_rms_ratio": None if np.isnan(ratio) else ratio}
+    for k in ("pair", "clipped_share", "rms", "thresholds"):
+        out[k] = json.loads(a[k])
+    if "link_saturated_frames" in a:
+        out["link_saturated_frames"] = int(a["link_saturated_frames"])
+    return out
 
 
 def recover(path) -> bool:
@@ -164,14 +266,15 @@ def recover_directory(directory) -> list[Path]:
 
 
 def describe(path) -> dict:
-    """Metadata, status and gaps of a recording (for `shakeid recordings`)."""
+    """Metadata, status, gaps and quality flags of a recording (for `shakeid recordings`)."""
     try:
         with h5py.File(path, "r") as f:
             e = f["entry"]
             return {"path": str(path), **{k: (v.item() if hasattr(v, "item") else v) for k, v in e.attrs.items()},
                     "sweep": dict(e["sweep"].attrs), "channels": [k for k in e["data"] if k != "time"],
                     "samples": int(e["data/time"].shape[0]), "gaps": e["gaps"][()].tolist(),
-                    "processed": [k for k in e["processed"] if k != "time"] if "processed" in e else []}
+                    "processed": [k for k in e["processed"] if k != "time"] if "processed" in e else [],
+                    "quality": read_quality(f)}
     except (OSError, KeyError) as exc:
         raise RecordingError(f"{path}: not a shakeid HDF5 recording ({exc})") from None
 
@@ -207,9 +310,12 @@ def read_h5_recording(path, input: str = "table_acc", output: str = "mass_acc",
                     f"{path}: {len(info['gaps'])} gap(s) in the samples (first: {count} samples missing at "
                     f"sample {first}); identify a gap-free stretch with --samples A B (longest: rows "
                     f"{longest[0]} {longest[1]})")
+        inst = f["entry/instrument"]
+        full_scale = {c: clip_level(float(inst[c].attrs.get("sensitivity", 1.0))) for c in (input, output) if c in inst}
         rec = Recording(d[input][a:b], d[output][a:b], fs, "base", input, output,
                         (d[input].attrs.get("units", ""), d[output].attrs.get("units", "")), str(path),
-                        {"status": info["status"]})
+                        {"status": info["status"], "status_reason": info.get("status_reason", ""),
+                         "full_scale": full_scale, "first_row": a})
     return rec
 
 
@@ -229,4 +335,5 @@ def open_recording(path, layout: str = "base", input: str | None = None, output:
             raise RecordingError(f"{path}: rows {a}-{b} requested, the recording has {rec.n_samples}")
         rec = rec.slice(a, b)
         Recording.__post_init__(rec)  # the cut must still be a usable recording
+        rec.metadata["first_row"] = a
     return rec

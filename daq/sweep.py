@@ -22,7 +22,7 @@ from sim.sweep import SineSweep
 from .devices import PLC, DeviceError
 from .realtime import HEARTBEAT_PRIORITY, make_realtime
 from .sources import AccelerometerSource
-from .recorder import DiskFull, Recorder
+from .recorder import DiskFull, Recorder, quality_summary
 
 
 class SweepRefused(ShakeidError):
@@ -181,7 +181,9 @@ class SweepRunner:
                 reason = ((reason + "; ") if reason else "") + (
                     f"the file could not be finalised ({type(exc).__name__}: {exc}); it holds the samples up to "
                     "its last flush and the next start (or `shakeid recordings --recover`) marks it aborted")
+            quality = rec.quality or quality_summary(rec.quality_report())  # the flags, even if close failed
         return {"status": status, "reason": reason, "samples": rec.n, "gaps": n_gaps, "path": str(out_path),
+                "quality": quality,
                 **self.heartbeat_stats(),
                 **{f"link_{k}": v for k, v in self.source.stats.items()}}
 

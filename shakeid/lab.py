@@ -175,7 +175,7 @@ def cmd_sim(args) -> int:
 
 
 def cmd_recordings(args) -> int:
-    """Metadata, status and gaps of HDF5 recordings; --recover marks crashed ones as aborted."""
+    """Metadata, status, gaps and quality flags of HDF5 recordings; --recover marks crashed ones as aborted."""
     from daq.recorder import describe, recover
 
     for path in args.files:
@@ -206,7 +206,33 @@ def cmd_recordings(args) -> int:
             print(f"  ... {len(info['gaps']) - 10} more gap(s) (--json lists all)")
         if info.get("processed"):
             print(f"  processed: {', '.join(info['processed'])}")
+        for line in quality_lines(info["quality"]):
+            print("  " + line)
     return 0
+
+
+def quality_lines(q: dict, max_flags: int = 10) -> list[str]:
+    """The quality flags and verdict of a recording (daq.recorder.describe()["quality"]), readably."""
+    if not q.get("assessed"):
+        return [f"quality: {q.get('note', 'not assessed')}"]
+    when = "" if q.get("final") else " (as of the last flush: the file was not closed)"
+    ratio = q.get("mass_table_rms_ratio")
+    head = (f"quality{when}: " + ("usable for identification" if q["usable_for_identification"] else
+                                  "NOT usable for identification: " + "; ".join(q["reasons"]))
+            + (f"; mass/table RMS ratio {ratio:.3g}" if ratio is not None else "")
+            + (f"; {q['link_saturated_frames']} saturated frame(s) on the link" if q.get("link_saturated_frames") else ""))
+    lines = [head]
+    for f in q["flags"][:max_flags]:
+        kind, v = f["kind"], f["value"]
+        what = (f"clipped ({f['samples']} samples at full scale)" if kind == "clipped" else "dead (exactly 0)"
+                if kind == "dead" else f"non-finite ({f['samples']} samples)" if kind == "nonfinite" else
+                f"implausible ratio {v:.3g}" if kind == "ratio" and v is not None else f"stuck at {v:.6g}"
+                if kind == "stuck" and v is not None else kind)
+        lines.append(f"flag: {f['channel']} {what}, rows {f['first']}-{f['first'] + f['count']} "
+                     f"(t = {f['t_start_s']:.3f}-{f['t_end_s']:.3f} s)")
+    if q["flags_total"] > max_flags:
+        lines.append(f"... {q['flags_total'] - max_flags} more flag(s) (--json lists them)")
+    return lines
 
 
 def cmd_serve(args) -> int:

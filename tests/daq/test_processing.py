@@ -49,7 +49,7 @@ def test_relative_motion_matches_the_true_states_per_segment(recording_with_gap)
     assert describe(path)["processed"] == ["relative_acc", "relative_disp", "relative_vel", "valid"]
     add_processed(path)  # again: replaces, does not duplicate
     with h5py.File(path) as f:
-        assert sorted(f["entry"]) == ["data", "gaps", "instrument", "processed", "sweep"]
+        assert sorted(f["entry"]) == ["data", "gaps", "instrument", "processed", "quality", "sweep"]
 
 
 def test_a_running_recording_is_not_processed(tmp_path):
