@@ -30,7 +30,7 @@ from .physical import RigConstants, physical_parameters
 from .recording import Recording
 from .refine import refine_free_run
 from .selection import DEFAULT_TOLERANCE, select
-from .validation import validate
+from .validation import model_verdict, validate
 
 N_BLOCKS = 50
 
@@ -164,6 +164,9 @@ class SparseIdentifier:
             self.validation_, self.simulated_states_, self.simulated_q1_dot_ = validate(
                 self.model_, sig, self.heldout_rows_ if held.any() else np.ones_like(self.heldout_rows_))
             timings["validation"] = time.perf_counter() - t0
+        # a fitted model that does not reproduce the motion is kept (a library user may inspect it) but
+        # reported as failed: verdict_ = {"status": "ok" | "failed" | "unvalidated", "reason": ...}
+        self.verdict_ = model_verdict(self.validation_)
         self.timings_ = timings
         return self
 
@@ -191,6 +194,8 @@ class SparseIdentifier:
                        "score": float(s.score[s.index]),
                        "threshold": None if np.isnan(s.threshold) else float(s.threshold)}
         out = {
+            "status": self.verdict_["status"],
+            "reason": self.verdict_["reason"],
             "model": self.model_.to_dict()["model"],
             "standard_errors": self.standard_errors_,
             "states": {"q1": "relative velocity" if sig.input_name == "zdd" else "output derivative",
