@@ -1,0 +1,117 @@
+"""`shakeid rig status|reset|estop --config RIG.toml`: the PLC of a rig configuration, directly.
+
+No HTTP service and no rig controller in between (daq.devices.open_plc: Modbus TCP or ADS), so an
+operator can read and stop the rig while the service is wedged. Exit 0 when the command took effect,
+2 (one line `shakeid: error: ...`) when the PLC does not answer or did not do what it was told.
+"""
+from __future__ import annotations
+
+import json
+import time
+
+from identify.errors import ShakeidError
+
+#: how long a command may take to show in the state read back (s, wall clock); the PLC cycle is 10 ms
+#: and a table stopping from full speed ramps down in 0.2 s of rig time
+SETTLE_S = 5.0
+POLL_S = 0.05
+
+
+def _describe(st) -> dict:
+    from sim.plc import Fault, State
+
+    def name(enum, code):
+        try:
+            return enum(code).name.lower()
+        except ValueError:
+            return f"unknown ({code})"
+
+    return {"state": name(State, st.state), "fault_code": int(st.fault_code), "fault": name(Fault, st.fault_code),
+            "position_mm": round(float(st.position_mm), 4), "frequency_hz": round(float(st.frequency_hz), 4),
+            "elapsed_s": round(float(st.elapsed_s), 3)}
+
+
+def _line(where: str, d: dict) -> str:
+    return (f"{where}: state {d['state']}, fault {d['fault_code']} ({d['fault']}), position {d['position_mm']:+.3f} mm, "
+            f"frequency {d['frequency_hz']:.2f} Hz")
+
+
+def _wait(plc, done, timeout_s: float = SETTLE_S):
+    """Poll the PLC until done(status) or the timeout; returns the last status read."""
+    end = time.monotonic() + timeout_s
+    st = plc.status()
+    while not done(st) and time.monotonic() < end:
+        time.sleep(POLL_S)
+        st = plc.status()
+    return st
+
+
+def _at_rest(plc, timeout_s: float = SETTLE_S):
+    """Wait until the table position reads the same twice, 0.1 s apart; returns (at rest, last status)."""
+    end = time.monotonic() + timeout_s
+    st = plc.status()
+    while True:
+        time.sleep(0.1)
+        nxt = plc.status()
+        if nxt.position_mm == st.position_mm:
+            return True, nxt
+        st = nxt
+        if time.monotonic() > end:
+            return False, st
+
+
+def cmd_rig(args) -> int:
+    from daq.devices import DeviceError, open_plc
+    from sim.config import load_config
+    from sim.plc import Command, State
+
+    cfg = load_config(args.config)
+    p = cfg.plc
+    where = (f"PLC {p.get('host', '127.0.0.1')}:{p.get('port', 502)} (Modbus TCP)" if p.get("transport", "modbus") == "modbus"
+             else f"PLC {p.get('ams_net_id', '')} at {p.get('host', '127.0.0.1')} (ADS)")
+    try:
+        plc = open_plc(p)
+    except DeviceError as exc:
+        raise ShakeidError(f"{args.config}: {exc}") from None
+    try:
+        before = plc.status()
+        message = ""
+        if args.action == "estop":
+            plc.command(Command.ESTOP)
+            st = _wait(plc, lambda s: s.state == State.ESTOP)
+            if st.state != State.ESTOP:
+                raise ShakeidError(f"{args.config}: emergency stop did not take effect: {_line(where, _describe(st))}")
+            rest, st = _at_rest(plc)
+            if not rest:
+                raise ShakeidError(f"{args.config}: the PLC is in estop but the table still moves: "
+                                   f"{_line(where, _describe(st))}")
+            message = "emergency stop: the PLC is in estop, the table at rest"
+        elif args.action == "reset":
+            if before.state == State.RUNNING:
+                raise ShakeidError(f"{args.config}: a sweep is running: not reset (stop it with `shakeid rig estop`)")
+            if before.state == State.IDLE:
+                st, message = before, "nothing to reset: the PLC is idle"
+            else:
+                rest, _ = _at_rest(plc)  # the PLC resets only a table at rest
+                plc.command(Command.RESET)
+                st = _wait(plc, lambda s: s.state == State.IDLE, 1.0)
+                if st.state != State.IDLE:
+                    d = _describe(st)
+                    raise ShakeidError(f"{args.config}: reset did not take effect: the PLC stayed in {d['state']} "
+                                       f"(fault {d['fault_code']} {d['fault']}"
+                                       f"{'' if rest else '; the table did not come to rest'})")
+                message = f"reset: {_describe(before)['state']} -> idle"
+        else:
+            st = before
+        d = _describe(st)
+    except DeviceError as exc:
+        raise ShakeidError(f"{args.config}: {exc}") from None
+    finally:
+        plc.close()
+    if args.json:
+        print(json.dumps({"plc": where, **d, "action": args.action, "message": message}))
+    else:
+        print(_line(where, d))
+        if message:
+            print(message)
+    return 0
