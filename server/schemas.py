@@ -80,6 +80,8 @@ class IdentifyIn(ReadOptions):
     holdout_fraction: float | None = Field(None, gt=0, lt=0.9)
     n_lambdas: int | None = Field(None, ge=2, le=1000)
     extra_terms: list[str] | None = Field(None, max_length=20)
+    accept_faulty: bool | None = Field(None, description="identify a recording that is not complete or whose "
+                                                         "quality flags make it unusable (the result says so)")
 
 
 class ExplainIn(ReadOptions):

@@ -57,7 +57,7 @@ def read(path: str, options: dict):
 
 
 #: SparseIdentifier parameters a job may set: the identify body's own fields (schemas.IdentifyIn)
-IDENTIFY_KEYS = tuple(sorted(set(IdentifyIn.model_fields) - set(ReadOptions.model_fields)))
+IDENTIFY_KEYS = tuple(sorted(set(IdentifyIn.model_fields) - set(ReadOptions.model_fields) - {"accept_faulty"}))
 
 
 def run_job(kind: str, path: str, options: dict, out_dir: str) -> dict:
@@ -68,18 +68,24 @@ def run_job(kind: str, path: str, options: dict, out_dir: str) -> dict:
         rec = read(path, options)
         if kind == "identify":
             from identify.identifier import SparseIdentifier
+            from identify.quality import check_identifiable
             from shakeid.report import write_report
 
             params = {k: options[k] for k in IDENTIFY_KEYS if options.get(k) is not None}
             if options.get("band_hz"):
                 params["band_hz"] = tuple(options["band_hz"])
-            ident = SparseIdentifier(**params).fit(rec)
-            result = ident.result()
+            ident = SparseIdentifier(**params)
+            # data that cannot carry a model is refused, as by `shakeid identify` (the job fails, saying why)
+            data = check_identifiable(rec, Path(path).name, bool(options.get("accept_faulty")),
+                                      "set accept_faulty to identify it anyway")
+            result = {**ident.fit(rec).result(), **data}
+            if result["status"] == "failed":  # no model.json: what was fitted is not a model of the rig
+                raise ShakeidError(f"{Path(path).name}: identification failed: {result['reason']}")
             _write_json(out / "model.json", result)
             write_report(ident, out / "report")
             val = (result.get("validation") or {}).get("heldout", {}).get("q1_dot", {})
             return {"terms": {eq: sorted(terms) for eq, terms in result["model"].items()},
-                    "fit_percent": val.get("fit_percent")}
+                    "fit_percent": val.get("fit_percent"), "accepted_faulty": result.get("accepted_faulty", [])}
         if kind == "explain":
             from identify.explain import DiscrepancyAnalysis
             from shakeid.explain_report import write_explain_report

@@ -13,6 +13,7 @@ from pathlib import Path
 from identify.errors import ShakeidError
 
 from .lab import cmd_controller, cmd_demo, cmd_recordings, cmd_serve, cmd_sim, cmd_sweep
+from .rigcmd import cmd_rig
 
 EXIT_USAGE = 2
 
@@ -78,13 +79,18 @@ def _read(args):
 
 
 def cmd_identify(args) -> int:
+    """Exit 0 with a model; 2 for data that cannot carry one (refused before fitting, unless
+    --accept-faulty); 1 when the fitted model fails its validation (identify/validation.py)."""
+    from identify.quality import check_identifiable
+
     ident = _identifier(args)  # option errors first, before any file is read
     rec = _read(args)
+    data = check_identifiable(rec, args.file, args.accept_faulty)
     try:
         ident.fit(rec)
     except ValueError as exc:  # library/term specification problems
         raise ShakeidError(str(exc)) from None
-    result = ident.result()
+    result = {**ident.result(), **data}
     if args.report:
         from .report import write_report
 
@@ -95,14 +101,19 @@ def cmd_identify(args) -> int:
         print(summary(result, rec.source))
         if args.report:
             print(f"report: {Path(args.report) / 'index.html'}")
+    if result["status"] == "failed":
+        print(f"shakeid: identification failed: {args.file}: {result['reason']}", file=sys.stderr)
+        return 1
     return 0
 
 
 def summary(result: dict, source: str) -> str:
     from .report import coefficient_table
 
-    lines = [f"identified {source}: method {result['method']}, selection {result['selection']['rule']}", "",
-             coefficient_table(result)]
+    lines = [f"identified {source}: method {result['method']}, selection {result['selection']['rule']}", ""]
+    if result.get("accepted_faulty"):
+        lines += ["accepted faulty data (--accept-faulty): " + "; ".join(result["accepted_faulty"]), ""]
+    lines.append(coefficient_table(result))
     val = result.get("validation")
     if val:
         h = val["heldout"]
@@ -118,6 +129,8 @@ def summary(result: dict, source: str) -> str:
                                                pv("cubic_stiffness_n_per_m3", "N/m^3"),
                                                pv("prestress_b_m", "mm", 1e3)]) +
                      f" (design k3 = {phys['design']['cubic_stiffness_n_per_m3']:.4g} N/m^3)")
+    if result.get("status") == "failed":
+        lines.append(f"MODEL FAILED: {result['reason']}")
     return "\n".join(lines)
 
 
@@ -217,6 +230,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_identify_options(q)
     q.add_argument("--report", metavar="DIR", help="write figures, coefficient table and model JSON here")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    q.add_argument("--accept-faulty", action="store_true",
+                   help="identify a recording that is not complete or whose quality flags make it unusable")
     q.set_defaults(func=cmd_identify)
     q = sub.add_parser("explain", help="where a model misses the rig, which effect is missing, and the fix")
     q.add_argument("file")
@@ -255,6 +270,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="add processed signals: relative acceleration, velocity, displacement (/entry/processed)")
     q.add_argument("--json", action="store_true")
     q.set_defaults(func=cmd_recordings)
+    q = sub.add_parser("rig", help="the PLC of --config directly (works while the service is wedged): status, "
+                                   "reset, estop")
+    q.add_argument("action", choices=("status", "reset", "estop"))
+    q.add_argument("--config", metavar="RIG.toml", required=True, help="rig configuration: its [plc] section")
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=cmd_rig)
     q = sub.add_parser("sim", help="run the simulated rig: PLC over Modbus TCP, accelerometer stream over TCP")
     q.add_argument("--config", metavar="RIG.toml", help="rig configuration (examples/sim-rig.toml)")
     q.add_argument("--host", help="listen address (default: the config's, else 127.0.0.1)")
