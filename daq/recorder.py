@@ -315,7 +315,7 @@ def read_h5_recording(path, input: str = "table_acc", output: str = "mass_acc",
         rec = Recording(d[input][a:b], d[output][a:b], fs, "base", input, output,
                         (d[input].attrs.get("units", ""), d[output].attrs.get("units", "")), str(path),
                         {"status": info["status"], "status_reason": info.get("status_reason", ""),
-                         "full_scale": full_scale, "first_row": a})
+                         "full_scale": full_scale, "first_row": a, "t0_s": float(d["time"][a])})
     return rec
 
 

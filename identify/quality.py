@@ -322,16 +322,17 @@ def assess_arrays(columns: dict, fs_hz: float, full_scale: dict | None = None,
 
 def assess_recording(rec) -> dict:
     """The detectors over an identify.recording.Recording's input and output; full scale from
-    rec.metadata["full_scale"] ({channel: level}, the DAQ's files) or inferred; rows and times count from
-    rec.metadata["first_row"] (a cut). The ratio only for the base layout (input = table, output = mass)."""
+    rec.metadata["full_scale"] ({channel: level}, the DAQ's files) or inferred; rows count from
+    rec.metadata["first_row"] (a cut), times from rec.metadata["t0_s"] (the file's time axis at that row). The ratio only for the base layout (input = table, output = mass)."""
     pair = (rec.input_name, rec.output_name) if rec.layout == "base" else None
     report = assess_arrays({rec.input_name: rec.input, rec.output_name: rec.output}, rec.fs_hz,
                            rec.metadata.get("full_scale"), pair)
     row0 = int(rec.metadata.get("first_row", 0))  # rows and times of the file, for a cut (--samples)
+    t0 = float(rec.metadata.get("t0_s", row0 / rec.fs_hz))  # the file's own time axis where it has one
     for f in report["flags"]:
         f["first"] += row0
-        f["t_start_s"] += row0 / rec.fs_hz
-        f["t_end_s"] += row0 / rec.fs_hz
+        f["t_start_s"] += t0
+        f["t_end_s"] += t0
     usable, reasons = verdict(report, rec.input_name, rec.output_name)
     return {**report, "usable_for_identification": usable, "reasons": reasons}
 

@@ -52,6 +52,8 @@ def test_longest_sweep_at_the_largest_amplitude_the_limits_allow(service):
         model = op.get(f"/api/recordings/{rec['id']}/model")
         if not quality["usable_for_identification"]:
             assert job["state"] == "failed" and model.status_code == 404, (job, quality)
+            for reason in quality["reasons"]:  # the job names the same faults at the same times of the file
+                assert reason.split("(")[0] in job["error"], (reason, job["error"])
         if job["state"] == "completed":
             assert model.status_code == 200 and model.json()["status"] == "ok"
     else:
