@@ -67,6 +67,8 @@ class ReadOptions(Strict):
     output: str | None = Field(None, max_length=64)
     time: str | None = Field(None, max_length=64)
     fs_hz: float | None = Field(None, gt=0, le=1e7)
+    accept_faulty: bool | None = Field(None, description="go on with a recording that is not complete or whose "
+                                                         "quality flags make it unusable (the result says so)")
 
 
 class IdentifyIn(ReadOptions):
@@ -80,8 +82,6 @@ class IdentifyIn(ReadOptions):
     holdout_fraction: float | None = Field(None, gt=0, lt=0.9)
     n_lambdas: int | None = Field(None, ge=2, le=1000)
     extra_terms: list[str] | None = Field(None, max_length=20)
-    accept_faulty: bool | None = Field(None, description="identify a recording that is not complete or whose "
-                                                         "quality flags make it unusable (the result says so)")
 
 
 class ExplainIn(ReadOptions):

@@ -57,7 +57,7 @@ def read(path: str, options: dict):
 
 
 #: SparseIdentifier parameters a job may set: the identify body's own fields (schemas.IdentifyIn)
-IDENTIFY_KEYS = tuple(sorted(set(IdentifyIn.model_fields) - set(ReadOptions.model_fields) - {"accept_faulty"}))
+IDENTIFY_KEYS = tuple(sorted(set(IdentifyIn.model_fields) - set(ReadOptions.model_fields)))
 
 
 def run_job(kind: str, path: str, options: dict, out_dir: str) -> dict:
@@ -66,18 +66,19 @@ def run_job(kind: str, path: str, options: dict, out_dir: str) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     try:
         rec = read(path, options)
+        from identify.quality import check_identifiable
+
+        # data that cannot carry a model is refused, as by the CLI (the job fails, saying why)
+        data = check_identifiable(rec, Path(path).name, bool(options.get("accept_faulty")),
+                                  f"set accept_faulty to {'identify' if kind == 'identify' else 'analyse'} it anyway")
         if kind == "identify":
             from identify.identifier import SparseIdentifier
-            from identify.quality import check_identifiable
             from shakeid.report import write_report
 
             params = {k: options[k] for k in IDENTIFY_KEYS if options.get(k) is not None}
             if options.get("band_hz"):
                 params["band_hz"] = tuple(options["band_hz"])
             ident = SparseIdentifier(**params)
-            # data that cannot carry a model is refused, as by `shakeid identify` (the job fails, saying why)
-            data = check_identifiable(rec, Path(path).name, bool(options.get("accept_faulty")),
-                                      "set accept_faulty to identify it anyway")
             result = {**ident.fit(rec).result(), **data}
             if result["status"] == "failed":  # no model.json: what was fitted is not a model of the rig
                 raise ShakeidError(f"{Path(path).name}: identification failed: {result['reason']}")
@@ -91,7 +92,7 @@ def run_job(kind: str, path: str, options: dict, out_dir: str) -> dict:
             from shakeid.explain_report import write_explain_report
 
             analysis = DiscrepancyAnalysis(band_hz=tuple(options["band_hz"]) if options.get("band_hz") else None)
-            result = analysis.fit(rec).result()
+            result = {**analysis.fit(rec).result(), **data}
             _write_json(out / "explain.json", result)
             write_explain_report(analysis, out / "report")
             return {"effect": result["effect"], "gap_before": result["gap_before"], "gap_after": result["gap_after"]}

@@ -138,10 +138,14 @@ def cmd_explain(args) -> int:
     from identify.explain import DiscrepancyAnalysis
     from identify.model import SparseModel
 
+    from identify.quality import check_identifiable
+
     baseline = SparseModel.load(args.model) if args.model else None
     rec = _read(args)
+    data = check_identifiable(rec, args.file, args.accept_faulty,  # as identify: no analysis of unusable data
+                              "use --accept-faulty to analyse it anyway")
     analysis = DiscrepancyAnalysis(baseline=baseline, band_hz=tuple(args.band) if args.band else None).fit(rec)
-    result = analysis.result()
+    result = {**analysis.result(), **data}
     if args.report:
         from .explain_report import write_explain_report
 
@@ -217,8 +221,16 @@ def cmd_simulate(args) -> int:
     write_csv(out, run.recording)
     truth = out.with_suffix(".truth.json")
     truth.write_text(json.dumps(run.truth, indent=2))
+    stops, n_contact = run.truth["end_stops"], run.truth["contact_samples"]
+    if stops is None:
+        contact = "no end stops"
+    elif n_contact:
+        contact = (f"end stops (+-{stops['travel_mm']:g} mm) hit: {n_contact} samples in contact "
+                   f"({n_contact / run.recording.fs_hz:.2f} s)")
+    else:
+        contact = f"end stops (+-{stops['travel_mm']:g} mm) not touched"
     print(f"wrote {out} ({run.recording.n_samples} samples at {run.recording.fs_hz:g} Hz) and {truth}; "
-          f"max |q| = {run.truth['max_abs_q_m'] * 1e3:.2f} mm")
+          f"max |q| = {run.truth['max_abs_q_m'] * 1e3:.2f} mm, {contact}")
     return 0
 
 
@@ -244,6 +256,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--fs", type=float)
     g.add_argument("--samples", type=int, nargs=2, metavar=("START", "STOP"))
     g.add_argument("--band", type=float, nargs=2, metavar=("F_LO", "F_HI"))
+    q.add_argument("--accept-faulty", action="store_true",
+                   help="analyse a recording that is not complete or whose quality flags make it unusable")
     q.add_argument("--report", metavar="DIR")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     q.set_defaults(func=cmd_explain)

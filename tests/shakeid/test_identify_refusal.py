@@ -110,3 +110,17 @@ def test_the_job_worker_refuses_accepts_on_request_and_fails_a_non_model(tmp_pat
     with pytest.raises(ShakeidError, match="identification failed: held-out free-run fit"):
         run_job("identify", str(_h5(tmp_path / "ok.h5", table1_run.recording)), {"max_terms": 1}, str(tmp_path / "job4"))
     assert not (tmp_path / "job4" / "model.json").exists()
+
+
+def test_explain_refuses_the_same_data_unless_accepted(tmp_path, table1_run, dead_csv, capsys):
+    """The discrepancy analysis gets the same gate as identification, in the CLI and in a job."""
+    assert main(["explain", str(dead_csv)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "mass_acc reads exactly 0" in err and err.endswith("(use --accept-faulty to analyse it anyway)")
+    path = _h5(tmp_path / "a.h5", table1_run.recording, "aborted", "operator abort")
+    with pytest.raises(ShakeidError, match=r"status is aborted \(operator abort\), not complete \(set accept_faulty "
+                                           r"to analyse it anyway\)"):
+        run_job("explain", str(path), {}, str(tmp_path / "job"))
+    run_job("explain", str(path), {"accept_faulty": True}, str(tmp_path / "job2"))
+    doc = json.loads((tmp_path / "job2" / "explain.json").read_text())
+    assert doc["accepted_faulty"] == ["status is aborted (operator abort), not complete"]
