@@ -18,17 +18,19 @@ class Library:
     states, inputs : names of the state and input signals (default: q1 = relative velocity,
         q2 = relative displacement, zdd = table acceleration).
     degree : highest total degree of the state monomials (the paper uses 4: 16 columns with zdd).
-    extra_terms : further term names, e.g. ``("sign(q1)", "q1*|q1|")`` for friction effects.
+    extra_terms : further term names, e.g. ``("sign(q1)", "q1*|q1|")`` for friction effects, or
+        ``("stop(q2)", "q1*contact(q2)")`` for end stops (which need `travel`).
+    travel : {state: end-stop travel in m} for the stop/contact features, e.g. ``{"q2": 0.0175}``.
     """
 
-    def __init__(self, states=("q1", "q2"), inputs=("zdd",), degree: int = 4, extra_terms=()):
+    def __init__(self, states=("q1", "q2"), inputs=("zdd",), degree: int = 4, extra_terms=(), travel=None):
         self.states = tuple(states)
         self.inputs = tuple(inputs)
         self.degree = int(degree)
         self.extra_terms = tuple(extra_terms)
         if not 1 <= self.degree <= 8:
             raise ModelError(f"library degree must be 1..8, got {degree}")
-        self.space = FeatureSpace(self.states, self.inputs)
+        self.space = FeatureSpace(self.states, self.inputs, travel)
         terms = self.space.monomials(self.degree)
         terms += [self.space.parse(n) for n in self.extra_terms]
         terms += [self.space.parse(n) for n in self.inputs]
@@ -40,11 +42,11 @@ class Library:
         self.names: list[str] = names
 
     @classmethod
-    def from_terms(cls, names, states=("q1", "q2"), inputs=("zdd",)) -> "Library":
+    def from_terms(cls, names, states=("q1", "q2"), inputs=("zdd",), travel=None) -> "Library":
         """A library of exactly these terms (canonical names, duplicates removed, order kept)."""
         lib = cls.__new__(cls)
         lib.states, lib.inputs, lib.degree, lib.extra_terms = tuple(states), tuple(inputs), None, ()
-        lib.space = FeatureSpace(lib.states, lib.inputs)
+        lib.space = FeatureSpace(lib.states, lib.inputs, travel)
         terms: list[Term] = []
         for n in names:
             t = lib.space.parse(n)
@@ -79,12 +81,17 @@ def evaluate_terms(space: FeatureSpace, terms, states, inputs, out=None) -> np.n
     def feature(name: str) -> np.ndarray:
         if name not in feats:
             idx = space.index[name]
-            ns = len(space.states)
-            if idx >= 3 * ns:
-                feats[name] = inputs[:, idx - 3 * ns]
-            else:
+            ns, ni = len(space.states), len(space.inputs)
+            if idx < 3 * ns:
                 q = cols[idx // 3]
                 feats[name] = (q, np.abs(q), np.sign(q))[idx % 3]
+            elif idx < 3 * ns + ni:
+                feats[name] = inputs[:, idx - 3 * ns]
+            else:  # stop(q) = sign(q) max(|q| - d, 0), contact(q) = [|q| > d]
+                i, kind = divmod(idx - 3 * ns - ni, 2)
+                q = cols[i]
+                pen = np.abs(q) - space.travel[space.states[i]]
+                feats[name] = np.where(pen > 0, np.copysign(pen, q), 0.0) if kind == 0 else (pen > 0) * 1.0
         return feats[name]
 
     done: dict[tuple, np.ndarray] = {}

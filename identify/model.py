@@ -27,12 +27,18 @@ class SparseModel:
     states, inputs : signal names; default the base-excited rig (q1 = relative velocity,
         q2 = relative displacement, zdd = table acceleration).
     standard_errors : optional, same shape as `equations`.
+    travel : {state: end-stop travel in m} for the terms `stop(q2)`, `q1*contact(q2)` (identify.terms);
+        JSON "travel", written only when set, so models without end stops keep their JSON.
     """
 
-    def __init__(self, equations: dict, states=("q1", "q2"), inputs=("zdd",), standard_errors=None):
+    def __init__(self, equations: dict, states=("q1", "q2"), inputs=("zdd",), standard_errors=None,
+                 travel=None):
         self.states = tuple(states)
         self.inputs = tuple(inputs)
-        self.space = FeatureSpace(self.states, self.inputs)
+        if travel is not None and not isinstance(travel, dict):
+            raise ModelError(f"model 'travel' must be an object {{state: metres}}, got {travel!r}")
+        self.space = FeatureSpace(self.states, self.inputs, travel)
+        self.travel = dict(self.space.travel)
         expected = [f"{s}_dot" for s in self.states]
         unknown = set(equations) - set(expected)
         if unknown:
@@ -71,6 +77,8 @@ class SparseModel:
     def to_dict(self) -> dict:
         d = {"format": MODEL_FORMAT, "states": list(self.states), "inputs": list(self.inputs),
              "model": {eq: dict(terms) for eq, terms in self.equations.items()}}
+        if self.travel:
+            d["travel"] = dict(self.travel)
         if self.standard_errors is not None:
             d["standard_errors"] = self.standard_errors
         return d
@@ -80,7 +88,8 @@ class SparseModel:
         if not isinstance(d, dict) or "model" not in d:
             raise ModelError("model JSON needs a 'model' object: {\"model\": {\"q1_dot\": {...}, ...}}")
         return cls(d["model"], states=tuple(d.get("states", ("q1", "q2"))),
-                   inputs=tuple(d.get("inputs", ("zdd",))), standard_errors=d.get("standard_errors"))
+                   inputs=tuple(d.get("inputs", ("zdd",))), standard_errors=d.get("standard_errors"),
+                   travel=d.get("travel"))
 
     def save(self, path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=2))
@@ -95,4 +104,5 @@ class SparseModel:
     def __repr__(self) -> str:
         eqs = "; ".join(f"{eq} = " + " + ".join(f"{c:.5g}*{t}" for t, c in terms.items())
                         for eq, terms in self.equations.items())
-        return f"SparseModel({eqs})"
+        stops = f"; travel {self.travel}" if self.travel else ""
+        return f"SparseModel({eqs}{stops})"

@@ -118,7 +118,7 @@ def simulate(model: SparseModel, dt: float, x0, inputs=None, *, inputs_fine=None
         np.asarray(ptr, dtype=np.int32).tobytes(), np.asarray(feat, dtype=np.int32).tobytes(),
         np.asarray(powr, dtype=np.int32).tobytes(), np.ascontiguousarray(model.coef_).tobytes(),
         x0.tobytes(), u.reshape(-1), u.shape[1], int(n_samples), int(substeps), float(dt), float(bound),
-        out.reshape(-1))
+        out.reshape(-1), np.array([model.travel.get(s, np.inf) for s in model.states]).tobytes())
     if n_valid < n_samples:
         out[n_valid:] = np.nan
     return SimulationResult(out, int(n_valid), int(substeps))

@@ -1,12 +1,14 @@
 """Named candidate terms: products of small integer powers of *features*.
 
-A feature is a state `q1`, its magnitude `|q1|`, its sign `sign(q1)`, or an input (`zdd`, `u`).
-Every library term the product knows (monomials, Coulomb friction `sign(q1)`, quadratic damping
-`q1*|q1|`, ...) is such a product, so one representation serves the library matrix, the model JSON and
-the compiled simulation kernel alike.
+A feature is a state `q1`, its magnitude `|q1|`, its sign `sign(q1)`, an input (`zdd`, `u`), or, for a
+state with an end-stop travel d (m), its penetration `stop(q2)` = sign(q2) max(|q2| - d, 0) (m) and
+contact indicator `contact(q2)` = 1 while |q2| > d, else 0. Every library term the product knows
+(monomials, Coulomb friction `sign(q1)`, quadratic damping `q1*|q1|`, end-stop spring `stop(q2)` and
+damping `q1*contact(q2)`, ...) is such a product, so one representation serves the library matrix, the
+model JSON and the compiled simulation kernel alike.
 
-Canonical names: factors joined by `*`, a power as `^p`, the constant as `1`. Monomials list states in
-order (`q1^2*q2`), then magnitudes, signs and inputs: `q1*q2^2`, `q1*|q1|`, `sign(q1)`, `zdd`.
+Canonical names: factors joined by `*`, a power as `^p`, the constant as `1`, factors in feature order:
+`q1^2*q2`, `q1*q2^2`, `q1*|q1|`, `sign(q1)`, `zdd`, `q1*contact(q2)`.
 """
 from __future__ import annotations
 
@@ -16,7 +18,9 @@ from itertools import combinations_with_replacement
 
 from .errors import ModelError
 
-_FACTOR = re.compile(r"^(?P<base>\|[A-Za-z_]\w*\||sign\([A-Za-z_]\w*\)|[A-Za-z_]\w*)(?:\^(?P<pow>\d+))?$")
+_FACTOR = re.compile(r"^(?P<base>\|[A-Za-z_]\w*\||(?:sign|stop|contact)\([A-Za-z_]\w*\)|[A-Za-z_]\w*)"
+                     r"(?:\^(?P<pow>\d+))?$")
+_STOP = re.compile(r"^(?:stop|contact)\((?P<state>[A-Za-z_]\w*)\)$")
 
 
 @dataclass(frozen=True)
@@ -42,20 +46,27 @@ class Term:
 class FeatureSpace:
     """The features of a system with the given state and input names.
 
-    Feature order (also the compiled kernel's): for each state i: q_i, |q_i|, sign(q_i); then inputs.
+    Feature order (also the compiled kernel's): for each state i: q_i, |q_i|, sign(q_i); then the
+    inputs; then for each state i: stop(q_i), contact(q_i). `travel` {state: d in m, > 0} sets the
+    end stops; stop/contact features of a state without one are refused by `parse`.
     """
 
-    def __init__(self, states: tuple[str, ...], inputs: tuple[str, ...]):
+    def __init__(self, states: tuple[str, ...], inputs: tuple[str, ...], travel: dict | None = None):
         self.states = tuple(states)
         self.inputs = tuple(inputs)
+        self.travel = check_travel(travel, self.states)
         names: list[str] = []
         for s in self.states:
             names += [s, f"|{s}|", f"sign({s})"]
         names += list(self.inputs)
-        self.names = tuple(names)
+        usable = list(names)  # the features a term may use: stop/contact only where a travel is set
+        for s in self.states:
+            names += [f"stop({s})", f"contact({s})"]
+            usable += names[-2:] if s in self.travel else []
         self.index = {n: i for i, n in enumerate(names)}
         if len(self.index) != len(names):
             raise ModelError(f"state and input names must be distinct: {states} {inputs}")
+        self.names = tuple(usable)
 
     def parse(self, name: str) -> Term:
         """Parse a term name (`q1*q2^2`, `sign(q1)`, `1`) into a Term in canonical order."""
@@ -65,6 +76,11 @@ class FeatureSpace:
         powers: dict[str, int] = {}
         for part in text.split("*"):
             m = _FACTOR.match(part)
+            stop = _STOP.match(m.group("base")) if m else None
+            state = stop.group("state") if stop else None
+            if state in self.states and state not in self.travel:
+                raise ModelError(f"term {name!r}: {m.group('base')} needs an end-stop travel for {state} "
+                                 f"(model JSON: \"travel\": {{\"{state}\": <metres>}})")
             if not m or m.group("base") not in self.index:
                 raise ModelError(f"unknown term {name!r}: factor {part!r} is not one of {', '.join(self.names)}")
             p = int(m.group("pow") or 1)
@@ -93,3 +109,19 @@ class FeatureSpace:
                 powr.append(p)
             ptr.append(len(feat))
         return ptr, feat, powr
+
+
+def check_travel(travel, states) -> dict[str, float]:
+    """{state: end-stop travel in m}: states known, values finite and positive; None = no stops."""
+    out: dict[str, float] = {}
+    for state, d in (travel or {}).items():
+        if state not in states:
+            raise ModelError(f"end-stop travel for {state!r}, which is not a state ({', '.join(states)})")
+        try:
+            d = float(d)
+        except (TypeError, ValueError):
+            raise ModelError(f"end-stop travel for {state}: {d!r} is not a number") from None
+        if not 0 < d < float("inf"):
+            raise ModelError(f"end-stop travel for {state} must be positive and finite, got {d!r} m")
+        out[state] = d
+    return out
