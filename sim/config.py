@@ -8,7 +8,8 @@
     [limits]   max_stroke_mm, max_velocity_ms, max_acceleration_ms2, f_min_hz, f_max_hz,
                max_duration_s, watchdog_s
     [rig]      mass_kg, damping_ns_per_m, stiffness_n_per_m, cubic_stiffness_n_per_m3, input_gain,
-               [rig.effects] (simulated rig only: the physics and its hidden effects)
+               end_stop_travel_mm (inf: no end stops), contact_stiffness_n_per_m, contact_damping_ns_per_m,
+               [rig.effects] (simulated rig only: the physics, its end stops and hidden effects)
     [sensors]  noise_ms2, bias_ms2 (simulated rig only)
     [sim]      speed (simulated rig only)
     [server]   data_dir, tokens, ... (the HTTP service, server/settings.py)

@@ -4,9 +4,11 @@ It holds the sweep setpoints, obeys commands, checks the safety limits before a 
 heartbeat watchdog, and moves the table. `advance(dt_s)` runs the rig physics for dt_s of rig time and
 returns the accelerometer samples it produced, so a front end or a stream server never touches physics.
 
-States: IDLE -> RUNNING -> DONE; FAULT (refused start, watchdog, injected fault) and ESTOP need RESET.
-Stopping (command, watchdog, e-stop) ramps the table to rest with a C2 fade of `ramp_s` (e-stop: the
-shorter `estop_ramp_s`), so the motion stays physical and the accelerometers see no step.
+States: IDLE -> RUNNING -> DONE; FAULT (refused start, watchdog, injected fault, a rig response that
+cannot be simulated) and ESTOP need RESET. Stopping (command, watchdog, e-stop) ramps the table to rest
+with a C2 fade of `ramp_s` (e-stop, drive and simulation faults: the shorter `estop_ramp_s`), so the
+motion stays physical and the accelerometers see no step. The rig runs with its end stops
+(RigParameters.model(end_stops=True)); every sample it emits is finite.
 """
 from __future__ import annotations
 
@@ -20,6 +22,10 @@ from identify.simulate import simulate
 from .rig import RigParameters
 from .sensors import Accelerometer
 from .sweep import SineSweep, _smoothstep
+
+
+#: Bound on the rig state (m, m/s): far beyond any physical motion of the mass between its end stops.
+BOUND = 10.0
 
 
 class State(enum.IntEnum):
@@ -48,6 +54,7 @@ class Fault(enum.IntEnum):
     WATCHDOG = 6      # heartbeat stopped changing during a sweep
     INJECTED = 7      # drive fault injected for tests
     NOT_READY = 8     # START while not IDLE/DONE
+    SIMULATION = 9    # the rig response left the simulable range (|q| or |q'| > BOUND, or not finite)
 
 
 @dataclass
@@ -107,7 +114,9 @@ class RigPLC:
 
     def __init__(self, config: PLCConfig | None = None):
         self.config = config or PLCConfig()
-        self.model = self.config.rig.model()
+        self.model = self.config.rig.model()                 # the smooth model identification sees
+        self.physics = self.config.rig.model(end_stops=True)  # what runs: with the end stops
+        self.contact_samples = 0     # samples in contact with an end stop since power-on
         self.rng = np.random.default_rng(self.config.seed)
         self.setpoints = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 60.0, "amplitude_mm": 1.0}
         self.state = State.IDLE
@@ -144,6 +153,8 @@ class RigPLC:
             self.state = State.DONE
         elif cmd == Command.RESET and self.state in (State.FAULT, State.ESTOP, State.DONE):
             if self._table_at_rest():
+                if self.fault == Fault.SIMULATION or not np.all(np.isfinite(self.x)):
+                    self.x = np.zeros(2)
                 self.state, self.fault, self.fault_message = State.IDLE, Fault.NONE, ""
         elif cmd == Command.START:
             self._start()
@@ -180,24 +191,52 @@ class RigPLC:
                 self._begin_stop(self.config.ramp_s)
                 self.state, self.fault = State.FAULT, Fault.WATCHDOG
                 self.fault_message = f"heartbeat silent for {silent:.2f} s (watchdog {self.config.limits.watchdog_s:g} s)"
-        S = self.config.substeps
-        # self.x is the state at the last emitted sample, index first - 1; the new samples are
-        # first .. n_end - 1, sample k at rig time k / fs
-        t_fine = (first - 1 + np.arange(n * 2 * S + 1) / (2 * S)) / fs
-        zdd_fine = self._table(t_fine)[2]
-        res = simulate(self.model, 1 / fs, self.x, inputs_fine=zdd_fine[:, None], substeps=S, n_samples=n + 1,
-                       bound=10.0)
-        states = res.states[1:]
-        zdd = zdd_fine[2 * S::2 * S]
-        self.x = states[-1].copy()
-        qdd = self.model.rhs(states, zdd[:, None])[:, 0]
+        zdd, mass = self._physics(first, n)
         samples = np.column_stack([self.config.table_sensor.measure(zdd, self.rng),
-                                   self.config.mass_sensor.measure(qdd + zdd, self.rng)])
+                                   self.config.mass_sensor.measure(mass, self.rng)])
         self.sample_index = n_end
         self.time_s += dt_s
         if self.state == State.RUNNING and self._sweep_time() >= self.sweep.duration_s:
             self.state = State.DONE
         return first, samples
+
+    def _physics(self, first: int, n: int, retry: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Table and mass acceleration (m/s^2) of samples first .. first + n - 1 (sample k at rig time
+        k / fs), from self.x, the state at sample first - 1. Where the response leaves the simulable
+        range: fault SIMULATION, the table stops, the mass restarts from rest; if it leaves again at
+        once, the mass moves with the table for the rest of the call (finite, and the fault says why)."""
+        fs, S = self.config.fs_hz, self.config.substeps
+        t_fine = (first - 1 + np.arange(n * 2 * S + 1) / (2 * S)) / fs
+        zdd_fine = self._table(t_fine)[2]
+        zdd = zdd_fine[2 * S::2 * S]
+        res = simulate(self.physics, 1 / fs, self.x, inputs_fine=zdd_fine[:, None], substeps=S, n_samples=n + 1,
+                       bound=BOUND)
+        states = res.states[1:res.n_valid]
+        mass = self.physics.rhs(states, zdd[:len(states), None])[:, 0] + zdd[:len(states)]
+        finite = np.isfinite(mass)
+        good = len(states) if finite.all() else int(np.argmin(finite))
+        states, mass = states[:good], mass[:good]
+        if good:
+            self.x = states[-1].copy()
+            travel = self.physics.travel.get("q2", np.inf)
+            self.contact_samples += int(np.count_nonzero(np.abs(states[:, 1]) > travel))
+        if good == n:
+            return zdd, mass
+        self._simulation_fault((first + good) / fs)
+        self.x = np.zeros(2)
+        if retry:
+            rest_zdd, rest_mass = self._physics(first + good, n - good, retry=False)
+        else:  # the mass held at rest relative to the table: it reads the table's acceleration
+            rest_zdd = rest_mass = self._table((first + good + np.arange(n - good)) / fs)[2]
+        return np.concatenate([zdd[:good], rest_zdd]), np.concatenate([mass, rest_mass])
+
+    def _simulation_fault(self, t: float) -> None:
+        if self.sweep is not None and self.stop_t is None:
+            self.stop_t, self.stop_ramp = t, self.config.estop_ramp_s
+        if self.fault != Fault.SIMULATION:
+            self.state, self.fault = State.FAULT, Fault.SIMULATION
+            self.fault_message = (f"rig response left the simulable range at t = {t:.4f} s (|q| or |q'| above "
+                                  f"{BOUND:g} or not finite): table stopped, mass state reset to rest")
 
     # -- internals ----------------------------------------------------------------------------------
     def _start(self) -> None:

@@ -6,9 +6,14 @@ q = x - z is the mass displacement relative to the table (m), z'' the table acce
 g the input gain (1 for an ideal rig; Table 1 of the paper identified 1.0243). In state form
 q1 = q' (m/s), q2 = q (m), this is an identify.SparseModel, so the simulator and the identifier share
 one model type and one integrator.
+
+The rail has end stops: beyond a travel d each side (|q| > d) the mass presses into a stiff damped
+bumper, F = -k_c stop(q) - c_c q' contact(q) (identify.terms). Without them the paper's Table 1 model,
+whose +1.162e4 q' q^2 term is negative damping for |q| > 17.9 mm, diverges on a slow sweep.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from identify.effects import CATALOG
@@ -19,11 +24,25 @@ PAPER_MASS_KG = 0.49
 PAPER_SPRING_N_PER_M = 16.7e3   # k_l, each linear spring
 PAPER_PROFILE_PER_M = 4.0       # a, profile f(x) = a x^2 + b
 
+#: End-stop travel (mm, each side): above the 17.10 mm the paper's standard sweep (1-20 Hz, 60 s,
+#: 1.3 mm) reaches on the Table 1 rig, so that sweep never touches the stops, and below the 17.9 mm
+#: where that rig's damping c - 1.162e4 m q^2 turns negative.
+END_STOP_TRAVEL_MM = 17.5
+#: Bumper stiffness (N/m) and damping (N s/m): an elastomer pad. On the 0.49 kg mass the contact
+#: frequency sqrt(k_c/m)/2pi is 200 Hz: 10x the sweep's top frequency, so the stop is a wall to the
+#: rig (a 0.6 m/s impact penetrates 0.33 mm of the 17.5 mm travel, for 2.6 ms), yet RK4 at the PLC's
+#: 2048 Hz x 8 substeps takes ~40 steps per contact (omega_c h = 0.077 < 0.1, identify.simulate's
+#: accuracy target). Damping ratio c_c/(2 sqrt(k_c m)) = 0.24: restitution 0.45, a lossy elastomer;
+#: much less and the mass rattles, much more and the linear pad pulls on release.
+CONTACT_STIFFNESS_N_PER_M = 7.7e5
+CONTACT_DAMPING_NS_PER_M = 300.0
+
 
 @dataclass
 class RigParameters:
     """Mass (kg), viscous damping c (N s/m), linear and cubic stiffness k (N/m), k3 (N/m^3),
-    input gain, and extra effects {catalog name: force coefficient in the effect's unit}."""
+    input gain, extra effects {catalog name: force coefficient in the effect's unit}, and the end
+    stops: travel (mm each side, None or inf: no stops), contact stiffness (N/m) and damping (N s/m)."""
 
     mass_kg: float = PAPER_MASS_KG
     damping_ns_per_m: float = 3.7294 * PAPER_MASS_KG
@@ -31,6 +50,9 @@ class RigParameters:
     cubic_stiffness_n_per_m3: float = 4 * PAPER_SPRING_N_PER_M * PAPER_PROFILE_PER_M**2
     input_gain: float = 1.0
     effects: dict[str, float] = field(default_factory=dict)
+    end_stop_travel_mm: float | None = END_STOP_TRAVEL_MM
+    contact_stiffness_n_per_m: float = CONTACT_STIFFNESS_N_PER_M
+    contact_damping_ns_per_m: float = CONTACT_DAMPING_NS_PER_M
 
     def __post_init__(self):
         unknown = set(self.effects) - set(CATALOG)
@@ -38,6 +60,15 @@ class RigParameters:
             raise ValueError(f"unknown effect(s) {sorted(unknown)}; known: {sorted(CATALOG)}")
         if self.mass_kg <= 0:
             raise ValueError("mass must be positive")
+        if self.end_stop_travel_mm is not None and not self.end_stop_travel_mm > 0:
+            raise ValueError(f"end_stop_travel_mm must be positive (inf: no end stops), got {self.end_stop_travel_mm}")
+        if not (0 < self.contact_stiffness_n_per_m < math.inf and 0 <= self.contact_damping_ns_per_m < math.inf):
+            raise ValueError("contact stiffness must be positive and contact damping non-negative, both finite")
+
+    @property
+    def end_stops(self) -> bool:
+        """True when the rail has end stops (a finite travel)."""
+        return self.end_stop_travel_mm is not None and math.isfinite(self.end_stop_travel_mm)
 
     @classmethod
     def design(cls, prestress_m: float = 1.78e-3, **kw) -> "RigParameters":
@@ -52,18 +83,34 @@ class RigParameters:
         return cls(m, 3.7294 * m, 971.0169 * m, 2.5033e6 * m, 1.0243,
                    {"displacement_dependent_damping": -1.1620e4 * m})
 
-    def model(self) -> SparseModel:
-        """The rig as dq/dt equations (coefficients divided by the mass)."""
+    def model(self, end_stops: bool = False) -> SparseModel:
+        """The rig as dq/dt equations (coefficients divided by the mass): by default the smooth model
+        identification sees; `end_stops=True` adds the bumpers' terms (the physics the rig runs)."""
         m = self.mass_kg
         q1 = {"q1": -self.damping_ns_per_m / m, "q2": -self.stiffness_n_per_m / m,
               "q2^3": -self.cubic_stiffness_n_per_m3 / m, "zdd": -self.input_gain}
         for name, coef in self.effects.items():
             for term in CATALOG[name].terms:
                 q1[term] = q1.get(term, 0.0) - coef / m
-        return SparseModel({"q1_dot": q1, "q2_dot": {"q1": 1.0}})
+        if not (end_stops and self.end_stops):
+            return SparseModel({"q1_dot": q1, "q2_dot": {"q1": 1.0}})
+        q1.update({"stop(q2)": -self.contact_stiffness_n_per_m / m, "q1*contact(q2)": -self.contact_damping_ns_per_m / m})
+        return SparseModel({"q1_dot": q1, "q2_dot": {"q1": 1.0}}, travel={"q2": self.end_stop_travel_mm * 1e-3})
+
+    def end_stop_summary(self) -> dict | None:
+        """The end stops as numbers (travel mm, k_c N/m, c_c N s/m, contact frequency Hz, damping ratio),
+        None without stops."""
+        if not self.end_stops:
+            return None
+        k, c, m = self.contact_stiffness_n_per_m, self.contact_damping_ns_per_m, self.mass_kg
+        return {"travel_mm": self.end_stop_travel_mm, "contact_stiffness_n_per_m": k, "contact_damping_ns_per_m": c,
+                "contact_frequency_hz": math.sqrt(k / m) / (2 * math.pi), "damping_ratio": c / (2 * math.sqrt(k * m))}
 
     def to_dict(self) -> dict:
         return {"mass_kg": self.mass_kg, "damping_ns_per_m": self.damping_ns_per_m,
                 "stiffness_n_per_m": self.stiffness_n_per_m,
                 "cubic_stiffness_n_per_m3": self.cubic_stiffness_n_per_m3, "input_gain": self.input_gain,
-                "effects": dict(self.effects)}
+                "effects": dict(self.effects),
+                "end_stop_travel_mm": self.end_stop_travel_mm if self.end_stops else None,
+                "contact_stiffness_n_per_m": self.contact_stiffness_n_per_m,
+                "contact_damping_ns_per_m": self.contact_damping_ns_per_m}

@@ -19,7 +19,12 @@ class Accelerometer:
     range_ms2: float = np.inf
 
     def measure(self, true_ms2: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Readings (m/s^2) of the true acceleration: beyond the range they read the range (clipped),
+        and follow the motion again as soon as it is back inside. A non-finite input is refused: no
+        reading may stand in for a physics that failed."""
         x = np.asarray(true_ms2, dtype=float)
+        if not np.all(np.isfinite(x)):
+            raise ValueError(f"accelerometer input not finite ({np.count_nonzero(~np.isfinite(x))} samples)")
         std = np.hypot(self.noise_fraction * np.std(x), self.noise_ms2)
         y = x + self.bias_ms2 + std * rng.standard_normal(x.shape)
         if self.lsb_ms2 > 0:

@@ -23,9 +23,28 @@ def test_shipped_examples_load():
     ("[sampling\nfs_hz = 1\n", "not valid TOML"),
     ("[sim]\nspeed = -1\n", "positive"),
     ("[sampling]\nsource = 'can'\n", "source must be"),
+    ("[rig]\nend_stop_travel = 17.5\n", "unknown key.*end_stop_travel"),
+    ("[rig]\nend_stop_travel_mm = -2.0\n", "end_stop_travel_mm must be positive"),
+    ("[rig]\ncontact_stiffness_n_per_m = 0\n", "contact stiffness"),
 ])
 def test_bad_configs_are_refused_by_name(tmp_path, text, message):
     path = tmp_path / "rig.toml"
     path.write_text(text)
     with pytest.raises(ConfigError, match=message):
         load_config(path)
+
+
+def test_end_stops_from_the_rig_section(tmp_path):
+    """[rig] sets the end stops the simulated PLC runs with; inf takes them away; defaults otherwise."""
+    from sim.plc import RigPLC
+
+    path = tmp_path / "rig.toml"
+    path.write_text("[rig]\nend_stop_travel_mm = 20.0\ncontact_stiffness_n_per_m = 5e5\ncontact_damping_ns_per_m = 250\n")
+    plc = RigPLC(load_config(path).plc_config())
+    assert plc.physics.travel == {"q2": pytest.approx(0.020)}
+    assert plc.physics.coefficient("q1_dot", "stop(q2)") == pytest.approx(-5e5 / 0.49)
+    assert plc.physics.coefficient("q1_dot", "q1*contact(q2)") == pytest.approx(-250 / 0.49)
+    assert "stop(q2)" not in plc.model.term_names  # the smooth model, as identification sees it
+    path.write_text("[rig]\nend_stop_travel_mm = inf\n")
+    assert RigPLC(load_config(path).plc_config()).physics.travel == {}
+    assert load_config(EXAMPLES / "sim-rig.toml").rig.end_stop_travel_mm == 17.5
