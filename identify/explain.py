@@ -34,7 +34,7 @@ from scipy.signal import welch
 from .chain import band_gain, reconstruct_states
 from .effects import CATALOG, Effect
 from .errors import IdentificationError
-from .gram import BlockGram, sandwich_covariance
+from .gram import BlockGram, sandwich_covariance, scaled_pinv
 from .identifier import holdout_blocks
 from .library import Library
 from .localise import localise
@@ -152,7 +152,7 @@ class DiscrepancyAnalysis:
             cov = sandwich_covariance(gram, ~held, train.G, S, x[S], 0)
             pos = [int(np.flatnonzero(S == idx[t])[0]) for t in new]
             theta = x[S][pos]
-            wald = float(theta @ np.linalg.pinv(cov[np.ix_(pos, pos)]) @ theta)
+            wald = float(theta @ scaled_pinv(cov[np.ix_(pos, pos)]) @ theta)
             candidates.append({**entry, "score": (mse_base - mse) / mse_base if mse_base > 0 else 0.0,
                                "p_value": float(stats.chi2.sf(wald, len(pos))), "wald": wald,
                                "coefficients": {t: float(x[idx[t]]) for t in new},

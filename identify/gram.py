@@ -91,6 +91,19 @@ class BlockGram:
         return b - G @ x
 
 
+def scaled_pinv(M: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
+    """Pseudo-inverse of a symmetric positive semi-definite matrix, taken on its unit-diagonal scaling.
+
+    Library columns differ in magnitude by many orders (the normal matrix's condition number reaches
+    ~1e20 in raw units, ~10 after scaling columns to unit RMS). `pinv` of the raw matrix cuts singular
+    values relative to the largest, which silently drops the directions of small-valued columns and
+    makes their variances wrong by orders of magnitude; on the scaled matrix only true collinearity is
+    cut. M^+ = D^-1 (D^-1 M D^-1)^+ D^-1 with D = sqrt(diag M)."""
+    d = np.sqrt(np.maximum(np.diag(M), 0.0))
+    d = np.where(d > 0, d, 1.0)
+    return np.linalg.pinv(M / np.outer(d, d), rcond=rcond, hermitian=True) / np.outer(d, d)
+
+
 def sandwich_covariance(gram: BlockGram, blocks, G: np.ndarray, support: np.ndarray, x: np.ndarray,
                         eq: int) -> np.ndarray:
     """Block-robust (cluster sandwich) covariance of least-squares coefficients x on `support`.
@@ -100,5 +113,5 @@ def sandwich_covariance(gram: BlockGram, blocks, G: np.ndarray, support: np.ndar
     G is the normal matrix of the fit (sum over the same blocks)."""
     scores = gram.block_scores(blocks, support, x, eq)
     k = scores.shape[0]
-    bread = np.linalg.pinv(G[np.ix_(support, support)])
+    bread = scaled_pinv(G[np.ix_(support, support)])
     return bread @ (scores.T @ scores * k / max(k - 1, 1)) @ bread
