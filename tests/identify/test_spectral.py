@@ -123,3 +123,34 @@ def test_force_layout_states_equal_the_previous_chain():
     for name, power in (("q2", 0), ("q1", 1), ("q1_dot", 2)):
         assert _close(getattr(s, name), _spectral_op_before(y, fs, (0.0, 200.0), power, s.taper_n)), name
     assert _close(s.input, _spectral_op_before(rec.input, fs, (0.0, 200.0), 0, s.taper_n))
+
+
+def _free_run_before(model, sig):
+    """identify.validation.free_run as it was: full right-hand side, one band_limit per signal."""
+    from identify.simulate import simulate
+    v = sig.valid
+    states = sig.states[v]
+    u = sig.input[v][:, None]
+    scale = 1.5 * np.max(np.abs(states), axis=0)
+    res = simulate(model, 1.0 / sig.fs_hz, states[0], u, state_scale=scale, bound=100.0 * float(np.max(scale)))
+    qdot = np.full(u.shape[0], np.nan)
+    qdot[:res.n_valid] = model.rhs(res.states[:res.n_valid], u[:res.n_valid])[:, 0]
+    sim = np.column_stack([sig.band_limit(res.states[:, 0]), sig.band_limit(res.states[:, 1])])
+    return sim, sig.band_limit(qdot)
+
+
+def test_free_run_equals_the_previous_formulation(table1_run, table1_truth):
+    from identify.model import SparseModel
+    from identify.validation import first_equation, free_run
+    sig = reconstruct_states(table1_run.recording)
+    model = SparseModel(table1_truth)
+    sim, qdot, _, diverged = free_run(model, sig)
+    sim_ref, qdot_ref = _free_run_before(model, sig)
+    assert not diverged
+    assert _close(sim[:, 0], sim_ref[:, 0]) and _close(sim[:, 1], sim_ref[:, 1]) and _close(qdot, qdot_ref)
+    # the first equation alone, for a model whose equations share and do not share terms
+    other = SparseModel({"q1_dot": {"1": 0.2, "q1*|q1|": -3.0, "q2^3": -2e6, "zdd": -1.0},
+                         "q2_dot": {"q1": 1.0, "q2^2": 5.0}})
+    v = sig.valid
+    assert _close(first_equation(other, sig.q1[v], sig.q2[v], sig.input[v][:, None]),
+                  other.rhs(sig.states[v], sig.input[v][:, None])[:, 0])
