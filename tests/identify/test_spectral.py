@@ -154,3 +154,12 @@ def test_free_run_equals_the_previous_formulation(table1_run, table1_truth):
     v = sig.valid
     assert _close(first_equation(other, sig.q1[v], sig.q2[v], sig.input[v][:, None]),
                   other.rhs(sig.states[v], sig.input[v][:, None])[:, 0])
+
+
+def test_band_limit_many_is_band_limit_of_each(table1_run):
+    """More signals than one batch holds (explain band-limits a whole library), each as band_limit."""
+    sig = reconstruct_states(table1_run.recording)
+    v = sig.valid
+    xs = [sig.q1[v] ** k * sig.q2[v] for k in range(6)]
+    for x, y in zip(xs, sig.band_limit_many(xs)):
+        assert _close(y, sig.band_limit(x))
