@@ -47,7 +47,7 @@ def refine_free_run(model: SparseModel, sig: StateSignals, fit_rows: np.ndarray 
         if res.diverged:  # a large but finite penalty: the trust region backs off instead of failing
             return np.full(rows.sum() * len(signals), 1e3 / np.sqrt(rows.sum()))
         # compared like with like: the simulation through the same band as the measured states
-        sim = {"q1": sig.band_limit(res.states[:, 0]), "q2": sig.band_limit(res.states[:, 1])}
+        sim = dict(zip(("q1", "q2"), sig.band_limit_many([res.states[:, 0], res.states[:, 1]])))
         r = np.concatenate([(sim[s][rows] - measured[s][rows]) / norms[s] for s in signals])
         return np.where(np.isfinite(r), r, 1e3) / np.sqrt(rows.sum())
 
