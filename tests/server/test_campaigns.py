@@ -9,6 +9,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import pytest
 
 from .conftest import VIEWER, Service, wait_for
 
@@ -55,8 +56,17 @@ def _table_frequencies(path: Path) -> tuple[float, float]:
     return float(peak(moving[0])), float(peak(moving[-1]))
 
 
+@pytest.fixture(scope="module")
+def service(tmp_path_factory):
+    """One service for the tests that leave the rig at rest (a start costs ~15 s on a loaded machine)."""
+    s = Service(tmp_path_factory.mktemp("campaigns") / "data").start()
+    yield s
+    s.stop()
+
+
 def test_a_campaign_runs_its_sweeps_in_order_and_refuses_what_it_must(service):
     op, viewer = service.client(), service.client(VIEWER)
+    n_campaigns, n_sweeps = len(op.get("/api/campaigns").json()), len(op.get("/api/sweeps").json())
     # every sweep is checked before anything moves: the third (4 mm up) breaks the velocity limit
     unsafe = op.post("/api/campaigns", json={**PLAN, "amplitudes_mm": [1.0, 4.0], "sweep": {**PLAN["sweep"],
                                                                                                "f_end_hz": 20.0}})
@@ -65,7 +75,7 @@ def test_a_campaign_runs_its_sweeps_in_order_and_refuses_what_it_must(service):
                                        "limit 0.5 m/s")
     backwards = op.post("/api/campaigns", json={**PLAN, "sweep": {**PLAN["sweep"], "f_start_hz": 20.0}})
     assert backwards.status_code == 422 and "must be below f_end_hz" in backwards.json()["detail"]
-    assert op.get("/api/campaigns").json() == [] and op.get("/api/sweeps").json() == []
+    assert len(op.get("/api/campaigns").json()) == n_campaigns and len(op.get("/api/sweeps").json()) == n_sweeps
     assert op.get("/api/rig").json()["plc"]["state"] == "idle"  # nothing reached the PLC
     assert viewer.post("/api/campaigns", json=PLAN).status_code == 403
 
@@ -85,7 +95,7 @@ def test_a_campaign_runs_its_sweeps_in_order_and_refuses_what_it_must(service):
     assert order == [(0.7, "up", 3.0, 15.0), (0.7, "down", 15.0, 3.0), (1.3, "up", 3.0, 15.0), (1.3, "down", 15.0, 3.0)]
     assert [it["status"] for it in c["sweeps"]] == ["complete"] * 4
     assert c["recording_ids"] == [it["recording_id"] for it in c["sweeps"]] and len(set(c["recording_ids"])) == 4
-    assert [x["id"] for x in viewer.get("/api/campaigns").json()] == [cid]
+    assert viewer.get("/api/campaigns").json()[0]["id"] == cid  # the newest first
     created = []
     for item in c["sweeps"]:
         rec = viewer.get(f"/api/recordings/{item['recording_id']}").json()
@@ -103,9 +113,8 @@ def test_a_campaign_runs_its_sweeps_in_order_and_refuses_what_it_must(service):
         assert (first < 6 and last > 12) if item["direction"] == "up" else (first > 12 and last < 6), (first, last)
     assert created == sorted(created)  # run in plan order
     # every complete recording is queued for identification at its end, as any sweep's
-    jobs = wait_for(lambda: (j := [x for x in viewer.get("/api/jobs").json() if x["kind"] == "identify"])
-                    and len(j) >= 4 and j, 30, "identify jobs")
-    assert {j["recording_id"] for j in jobs} == set(c["recording_ids"])
+    jobs = [x for x in viewer.get("/api/jobs", params={"limit": 500}).json() if x["kind"] == "identify"]
+    assert set(c["recording_ids"]) <= {j["recording_id"] for j in jobs}
     assert viewer.get(f"/api/campaigns/{cid}").status_code == 200
     assert viewer.get("/api/campaigns/0123456789ab").status_code == 404
     assert op.post(f"/api/campaigns/{cid}/resume").status_code == 409  # completed: nothing to resume
