@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
 import time
 from pathlib import Path
 
@@ -11,7 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
-from .conftest import VIEWER, Service, wait_for
+from .conftest import OPERATOR, SHAKEID, VIEWER, Service, wait_for
 
 # 3-15 Hz over 4 s of rig time (0.4 s of wall time at 10x) per sweep
 PLAN = {"name": "levels", "sweep": {"f_start_hz": 3.0, "f_end_hz": 15.0, "duration_s": 4.0, "settle_s": 0.5},
@@ -171,6 +172,22 @@ def test_estop_pauses_a_campaign_resume_reruns_the_sweep_and_abort_ends_one(serv
     assert sweep["state"] == "aborted" and f"campaign ended ({cid}): aborted by operator" in sweep["error"], sweep
     plc = op.get("/api/rig").json()["plc"]
     assert plc["state"] in ("idle", "done") and plc["position_mm"] == 0.0
+
+
+def test_the_cli_runs_a_campaign_through_the_service(service, tmp_path):
+    plan = tmp_path / "remote.toml"
+    plan.write_text('name = "remote"\namplitudes_mm = [0.9]\ndirections = ["down", "up"]\n'
+                    '[sweep]\nf_start_hz = 3.0\nf_end_hz = 15.0\nduration_s = 4.0\nsettle_s = 0.5\n')
+    p = subprocess.run([SHAKEID, "campaign", str(plan), "--server", service.url, "--token", OPERATOR],
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stdout + p.stderr
+    cid = p.stdout.split("(", 1)[1].split(")", 1)[0]
+    c = _campaign(service.client(), cid)
+    assert c["state"] == "completed" and [(it["direction"], it["f_start_hz"]) for it in c["sweeps"]] == [
+        ("down", 15.0), ("up", 3.0)]
+    assert f"campaign remote ({cid}): completed, 2 of 2 sweeps complete; recordings " \
+           f"{', '.join(c['recording_ids'])}" in p.stdout
+    assert f"sweep 2 of 2 (0.9 mm, up): complete, recording {c['recording_ids'][1]}" in p.stdout
 
 
 def _controller_pid(service) -> int:
