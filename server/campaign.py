@@ -84,7 +84,7 @@ class CampaignService:
         problem = plan_violation(self.ctl.rig.cfg.limits, parsed)
         if problem:
             raise self._refused(422, f"campaign refused: {problem}")
-        campaign = Campaign(parsed)
+        campaign = Campaign(parsed, state="running")
         with self.ctl.starting:  # no single sweep slips in between the checks and the campaign's start
             self._check_rig_free()
             cid, now = new_id(), time.time()
