@@ -55,7 +55,7 @@ class CampaignService:
     def busy(self) -> str | None:
         """Why a single sweep cannot start now: a campaign runs (named), or None."""
         act = self.active
-        if act is None:
+        if act is None or act["campaign"].state not in ("running", "pausing"):  # none, or its thread ending
             return None
         c = act["campaign"]
         now = c.progress()["current"]
@@ -95,7 +95,7 @@ class CampaignService:
 
     def pause(self, campaign_id: str, operator: str = "") -> dict:
         with self._lock:
-            act = self._running(campaign_id, "pause")
+            act = self._running(campaign_id, "pause", ("running", "pausing"))
             act["control"].pause(f"paused by {operator or 'an operator'}")
             if act["campaign"].state == "running":
                 act["campaign"].state = "pausing"  # the running sweep finishes first; the thread says paused
@@ -118,6 +118,8 @@ class CampaignService:
         with self._lock:
             act = self.active
             if act is not None and act["id"] == campaign_id:
+                # running, pausing, or its thread finishing with paused: that thread's last word reads this
+                self._running(campaign_id, "abort", ("running", "pausing", "paused"))
                 act["control"].abort(reason)
                 self._abort_sweep(act)
                 return {"id": campaign_id, "state": "aborting"}
@@ -143,7 +145,9 @@ class CampaignService:
             campaign.state = "paused"
             campaign.reason = f"campaign error: {type(exc).__name__}: {exc}"
         finally:
-            with self._lock:  # the last word, under the lock pause() takes: it cannot leave "pausing" behind
+            with self._lock:  # the last word, under the lock pause() and abort() take
+                if campaign.state == "paused" and act["control"].abort_reason:  # came while this thread ended
+                    campaign.state, campaign.reason = "aborted", act["control"].abort_reason
                 self._save(act)
                 if self.active is act:
                     self.active = None
@@ -208,8 +212,11 @@ class CampaignService:
 
     # -- helpers --------------------------------------------------------------------------------------------
     def _check_rig_free(self) -> None:
-        if self.active is not None:
-            raise self._refused(409, self.busy())
+        act = self.active
+        if act is not None and act["campaign"].state not in ("running", "pausing"):
+            act["thread"].join(5.0)  # it has ended and is writing its last word
+        if (act := self.active) is not None:
+            raise self._refused(409, self.busy() or f"campaign {act['id']} is ending; try again")
         sweep = self.ctl.rig.active
         if sweep is not None and not sweep.get("ending"):
             raise self._refused(409, f"a sweep is running ({sweep['id']}); abort it or wait")
@@ -217,11 +224,13 @@ class CampaignService:
         if refusal:
             raise self._refused(409, f"campaign refused: {refusal}")
 
-    def _running(self, campaign_id: str, what: str) -> dict:
+    def _running(self, campaign_id: str, what: str, states: tuple[str, ...]) -> dict:
+        """The active campaign if it is campaign_id and in one of states; else 409 (404 if unknown)."""
         act = self.active
-        if act is None or act["id"] != campaign_id:
-            row = self._row_or_404(campaign_id)
-            raise self._refused(409, f"campaign {campaign_id} is {row['state']}, not running: nothing to {what}")
+        if act is None or act["id"] != campaign_id or act["campaign"].state not in states:
+            state = act["campaign"].state if act is not None and act["id"] == campaign_id else \
+                self._row_or_404(campaign_id)["state"]
+            raise self._refused(409, f"campaign {campaign_id} is {state}, not running: nothing to {what}")
         return act
 
     def _row_or_404(self, campaign_id: str) -> dict:
