@@ -12,6 +12,7 @@ from pathlib import Path
 
 from identify.errors import ShakeidError
 
+from .campaign_cmd import add_campaign_parser
 from .lab import cmd_controller, cmd_demo, cmd_recordings, cmd_serve, cmd_sim, cmd_sweep
 from .rigcmd import cmd_rig
 
@@ -277,6 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--note", default="")
     q.add_argument("--out", metavar="FILE.h5", help="the recording (with --server: a copy, downloaded)")
     q.set_defaults(func=cmd_sweep)
+    add_campaign_parser(sub)
     q = sub.add_parser("recordings", help="inspect HDF5 recordings (metadata, status, gaps)")
     q.add_argument("files", nargs="+")
     q.add_argument("--recover", action="store_true", help="mark recordings left running by a crash as aborted")
