@@ -1,6 +1,6 @@
 """Silverbox benchmark: identify on the estimation range, free-run simulate the test ranges.
 
-    python benchmarks/silverbox.py --data ../shared/data/silverbox/SNLS80mV.mat --json
+    python benchmarks/silverbox.py --json
 
 Scoring as in the data set's README: free-run simulation from each test set's input; the first 50 outputs
 only set the initial state (here: least-squares fit of (y', y) at the test set's start on those 50
@@ -75,7 +75,7 @@ def run(path: str) -> dict:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared/data/silverbox/SNLS80mV.mat"))
+    p.add_argument("--data", default=str(Path(__file__).resolve().parents[1] / "data/silverbox/SNLS80mV.mat"))
     p.add_argument("--json", action="store_true", help="print one JSON object (the budgeted, refined variant)")
     args = p.parse_args(argv)
     results = run(args.data)
