@@ -23,9 +23,11 @@ import numpy as np
 from .chain import StateSignals, reconstruct_states
 from .errors import IdentificationError
 from .gram import BlockGram, sandwich_covariance
+from .budget import choose_budget
 from .library import Library
 from .model import SparseModel
 from .optimizers import ADMMLasso, STLSQ
+from .optimizers.base import least_squares
 from .physical import RigConstants, physical_parameters
 from .recording import Recording
 from .refine import refine_free_run
@@ -33,6 +35,8 @@ from .selection import DEFAULT_TOLERANCE, select
 from .validation import model_verdict, validate
 
 N_BLOCKS = 50
+BUDGETS = ("equation-error", "free-run")
+N_REPORTED = 10  # budget candidates listed in the result
 
 
 def holdout_blocks(sig: StateSignals, fraction: float = 0.2, first_samples: int | None = None):
@@ -70,6 +74,10 @@ class SparseIdentifier:
         unit-RMS columns (True) or raw coefficients as in the paper's Table 2 (False).
     selection, tolerance : rule ("heldout", "paper", "bic") and its tolerance (None: the rule's default).
     max_terms : optional budget of terms per equation (least costly terms eliminated beyond it).
+    budget : how the budget's terms are chosen: "equation-error" (default; backward elimination by the
+        one-step acceleration error, identify.selection) or "free-run" (q1_dot's terms by the free-run
+        error of candidates refit on it, estimation data only, identify.budget; the kept terms come
+        with their free-run refit coefficients, as with refine="free-run"; slower: minutes on Silverbox).
     refine : None, or "free-run" to refit the kept coefficients on the free-run simulation error of the
         fit samples (identify.refine); standard errors are then those of the equation-error fit.
     holdout_fraction : share of samples held out in interleaved blocks; holdout_samples : hold out
@@ -82,7 +90,7 @@ class SparseIdentifier:
     def __init__(self, degree: int = 4, extra_terms=(), method: str = "admm", n_lambdas: int = 100,
                  lambda_eps: float = 1e-5, threshold: float | None = None, normalize_threshold: bool = True,
                  selection: str = "heldout", tolerance: float | None = None, max_terms: int | None = None,
-                 refine: str | None = None, holdout_fraction: float = 0.2,
+                 budget: str = "equation-error", refine: str | None = None, holdout_fraction: float = 0.2,
                  holdout_samples: int | None = None, band_hz=None, harmonics: float = 5.0,
                  taper_s: float | None = None, rig: RigConstants | None = None, validate: bool = True):
         self.degree = degree
@@ -95,6 +103,7 @@ class SparseIdentifier:
         self.selection = selection
         self.tolerance = tolerance
         self.max_terms = max_terms
+        self.budget = budget
         self.refine = refine
         self.holdout_fraction = holdout_fraction
         self.holdout_samples = holdout_samples
@@ -116,6 +125,8 @@ class SparseIdentifier:
     def fit(self, recording: Recording) -> "SparseIdentifier":
         if self.refine not in (None, "free-run"):  # refused before any work, like an unknown method
             raise IdentificationError(f"unknown refine {self.refine!r} (free-run)")
+        if self.budget not in BUDGETS:
+            raise IdentificationError(f"unknown budget {self.budget!r} ({', '.join(BUDGETS)})")
         self._optimizer()
         timings = {}
         t0 = time.perf_counter()
@@ -143,17 +154,34 @@ class SparseIdentifier:
         duration = (v.stop - v.start) / sig.fs_hz
         n_eff = 2 * (sig.band_hz[1] - sig.band_hz[0]) * duration
         eqs = ["q1_dot", "q2_dot"]
+        by_free_run = self.budget == "free-run" and self.max_terms is not None
         self.selections_ = {eq: select(self.path_, e, train, heldout, self.selection, self.tolerance, n_eff,
-                                       self.max_terms) for e, eq in enumerate(eqs)}
+                                       None if by_free_run and e == 0 else self.max_terms)
+                            for e, eq in enumerate(eqs)}
+        self.heldout_rows_ = np.repeat(held, np.diff(edges))
+        self.budget_ = None
+        sel = self.selections_["q1_dot"]
+        if by_free_run and sel.support.sum() > self.max_terms:
+            start = SparseModel({eq: {lib.names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)}
+                                 for eq, s in self.selections_.items()}, ("q1", "q2"), (sig.input_name,))
+            self.budget_ = choose_budget(start, lib.names, sel.support, self.max_terms, train, sig,
+                                         ~self.heldout_rows_, self.heldout_rows_ if held.any() else None)
+            timings["budget"] = self.budget_.seconds
+            t0 += self.budget_.seconds
+            sel.support = self.budget_.support.copy()
+            sel.coef = least_squares(train.G, train.B[:, 0], sel.support)
         coefs = {eq: {lib.names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)}
                  for eq, s in self.selections_.items()}
         self.standard_errors_ = {eq: self._standard_errors(gram, ~held, train, e, s)
                                  for e, (eq, s) in enumerate(self.selections_.items())}
         timings["selection_refit"] = time.perf_counter() - t0
         self.model_ = SparseModel(coefs, ("q1", "q2"), (sig.input_name,), self.standard_errors_)
-        self.heldout_rows_ = np.repeat(held, np.diff(edges))
         self.refinement_ = None
-        if self.refine is not None:
+        if self.budget_ is not None:  # chosen after its free-run refit: that is the model
+            self.model_ = SparseModel(self.budget_.model.equations, ("q1", "q2"), (sig.input_name,),
+                                      self.standard_errors_)
+            self.refinement_ = self.budget_.refinement
+        elif self.refine is not None:
             t0 = time.perf_counter()
             refined, self.refinement_ = refine_free_run(self.model_, sig, ~self.heldout_rows_)
             self.model_ = SparseModel(refined.equations, refined.states, refined.inputs, self.standard_errors_)
@@ -185,7 +213,7 @@ class SparseIdentifier:
         """The identification result as one JSON-ready dict (the CLI's --json document)."""
         lib = self.library_
         sig = self.states_
-        sel = {"rule": self.selection, "max_terms": self.max_terms,
+        sel = {"rule": self.selection, "max_terms": self.max_terms, "budget": self.budget,
                "tolerance": DEFAULT_TOLERANCE[self.selection] if self.tolerance is None else self.tolerance}
         for eq, s in self.selections_.items():
             e = 0 if eq == "q1_dot" else 1
@@ -210,6 +238,8 @@ class SparseIdentifier:
                       "holdout": ("first %d samples" % self.holdout_samples if self.holdout_samples is not None
                                   else f"{self.holdout_fraction:.0%} in interleaved blocks")},
             "refinement": self.refinement_,
+            "budget": None if self.budget_ is None else {"seconds": self.budget_.seconds,
+                                                         "candidates": self.budget_.candidates[:N_REPORTED]},
             "validation": self.validation_,
             "timings_s": self.timings_,
         }

@@ -81,6 +81,8 @@ class IdentifyIn(ReadOptions):
     selection: Literal["heldout", "paper", "bic"] | None = None
     tolerance: float | None = Field(None, gt=0, le=10)
     max_terms: int | None = Field(None, ge=1, le=100)
+    budget: Literal["equation-error", "free-run"] | None = Field(
+        None, description="how max_terms chooses q1_dot's terms (free-run: by the free-run error, slower)")
     refine: Literal["free-run"] | None = None
     holdout_fraction: float | None = Field(None, gt=0, lt=0.9)
     n_lambdas: int | None = Field(None, ge=2, le=1000)
