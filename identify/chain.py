@@ -55,10 +55,16 @@ class StateSignals:
     valid: slice
     input_name: str
     taper_n: int = 0
+    #: the displacement below the band (m), when identified (identify.inband.slow_displacement)
+    q2_offset: np.ndarray | None = None
 
     @property
     def states(self) -> np.ndarray:
-        return np.column_stack([self.q1, self.q2])
+        """The states a model is written in: q1, and q2 plus the displacement below the band when it
+        is known (accelerometers miss the static offset an even force produces; the terms of a rig's
+        force are those of the true displacement)."""
+        q2 = self.q2 if self.q2_offset is None else self.q2 + self.q2_offset
+        return np.column_stack([self.q1, q2])
 
     def band_limit(self, x: np.ndarray) -> np.ndarray:
         """Pass a signal on the valid rows (a simulation, a library column) through the same band as the
