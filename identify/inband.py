@@ -2,22 +2,21 @@
 
 Accelerometers see no DC, so the chain's displacement q2 is band-limited: it lacks the slow part m(t)
 of the true displacement, the static offset an even force (an asymmetric spring, q2^2) produces and
-which follows the response amplitude through a sweep (the design rig with 2e4 N/m^2: up to 1.9 mm
-at a 12 mm response). Two things follow, and each alone biases the fit (measured on that rig,
-tests/identify/test_even_terms.py):
+which follows the response amplitude through a sweep (the design rig with 3e4 N/m^2: down to -2.6 mm
+at a 12 mm response). Measured on that rig (tests/identify/test_even_terms.py), each of two things
+alone biases the fit:
 
-1. An even term of the band-limited states has a DC and slow part the band-limited target lacks:
-   least squares on raw columns spends a constant, q1^2, q1^2*q2 ... on cancelling it (the issue's
-   spurious terms at 57-142 standard errors). Every column therefore goes through the same band as the
-   target (`band_limited_gram`, the mechanism explain's screen uses): Band(q'') = sum theta Band(phi)
-   holds exactly, and the constant, whose band-limited column is zero, drops out.
+1. An even term of the states has a DC and slow part the band-limited target lacks: least squares on
+   raw columns spends a constant, q1^2, q1^2*q2 ... on cancelling it. Through the same band as the
+   target (`band_limited_gram`, the mechanism explain's screen uses), Band(q'') = sum theta Band(phi)
+   holds exactly and the constant, whose band-limited column is zero, drops out.
 2. A polynomial in q2 + m is a polynomial in q2 with shifted coefficients: (q2 + m)^3 carries
-   3 m q2^2, so on q2 alone the q2^2 coefficient comes out as k2 + 3 k3 m (77 % of the truth in band,
-   25 % with raw columns) and q2^3 at 51-62 %. The terms are written in the true displacement
-   q2 + m, with m from the model itself (`slow_displacement`): below the band the rig's acceleration
-   is ~0, so the model's force must balance there, Low(f(q1, q2 + m, u)) = 0, where Low = 1 - Band.
-   Fit and offset alternate until m settles (identify.identifier); with the true model m matches the
-   simulated truth to 0.01 mm rms.
+   3 m q2^2, so on q2 alone the q2^2 coefficient comes out as ~k2 + 3 k3 m: 77 % of the truth in
+   band, 25 % with raw columns, q2^3 at 51-62 % (2e4 N/m^2, true terms only). The terms are written in
+   the true displacement q2 + m, with m from the force itself (`slow_displacement`): below the band
+   the rig's acceleration is ~0, so the force must balance there, Low(f(q1, q2 + m, u)) = 0 with
+   Low = 1 - Band. With the true model m matches the simulated one to 0.01 mm rms (2.5 %); fitting
+   the whole library and m together (`carry_offset`) recovers every coefficient to 0.05 %.
 
 The displacement origin is the rest position (q2 = 0 before the sweep), so the model has no constant
 force term: a constant force only moves the rest position, which accelerometers cannot see.
@@ -34,7 +33,8 @@ from .library import evaluate_terms
 from .model import SparseModel
 from .optimizers.base import least_squares
 
-#: Newton steps per update of the slow displacement (each: 3 right-hand sides and 2 band operations);
+#: Newton steps per update of the slow displacement (the stiffness is taken once: 3 right-hand sides and
+#: 2 band operations, then 1 and 1 per step);
 #: from zero, the design rig with 2e4 N/m^2 converges 0.36 mm -> 0.017 mm -> 0.001 mm of step.
 OFFSET_NEWTON_STEPS = 3
 #: Fit/offset passes: stop when the offset moved by less than OFFSET_TOLERANCE x the rms displacement.
@@ -125,21 +125,21 @@ def slow_displacement(model: SparseModel, sig: StateSignals, start: np.ndarray |
     return m
 
 
-def carry_offset(library, sig: StateSignals, gram: BlockGram, edges, train_blocks, targets=("q1_dot", "q1"),
-                 cache: dict | None = None):
-    """Fit the whole library in the band and the displacement below the band together.
+def carry_offset(library, sig: StateSignals, edges, train_blocks, targets=("q1_dot", "q1")):
+    """The displacement below the band that the library's force balances there, fitted together.
 
-    `gram` is the band-limited Gram of `sig` (no offset yet; `cache` that of band_limited_gram). Each pass fits every term by least
-    squares on the training blocks (a sparse model selected before the offset is known carries the
-    spurious terms the offset caused, and alternating with it wanders) and asks that force for its
-    offset (slow_displacement); passes are mixed (Anderson) until the offset settles, and the Grams
-    rebuilt on the states with the offset. Returns (states with the settled offset, their Gram, a
-    summary for the result: passes, last relative change, converged, offset rms/min/max in mm)."""
+    Each pass fits every term by least squares in the band (band-limited columns, training blocks; a
+    sparse model selected before the offset is known carries the spurious terms the offset caused, and
+    alternating with it wanders) and asks that force for its offset (slow_displacement); passes are
+    mixed (Anderson) until the offset settles; the first target is the force's. Returns (states with
+    the offset, their band-limited Gram with all `targets`, a summary for the result: passes, last
+    relative change, converged, offset rms/min/max in mm)."""
     v = sig.valid
     ref = float(np.std(sig.q2[v])) or 1.0
     x = np.zeros_like(sig.q2)
     xs, rs = [], []
-    current, cache = sig, {} if cache is None else cache
+    current, cache = sig, {}
+    gram = band_limited_gram(library, sig, [getattr(sig, t)[v] for t in targets], edges, cache)
     info = {"carried": True, "passes": 0, "last_change": None, "converged": False}
     for passes in range(1, MAX_OFFSET_PASSES + 1):
         train = gram.equations(train_blocks)
