@@ -165,7 +165,7 @@ class SparseIdentifier:
             timings["validation"] = time.perf_counter() - t0
         # a fitted model that does not reproduce the motion is kept (a library user may inspect it) but
         # reported as failed: verdict_ = {"status": "ok" | "failed" | "unvalidated", "reason": ...}
-        self.verdict_ = model_verdict(self.validation_)
+        self.verdict_ = model_verdict(self.validation_, self.model_, sig.input_name)
         self.timings_ = timings
         return self
 
