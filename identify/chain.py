@@ -73,6 +73,11 @@ class StateSignals:
         what lies outside the band (e.g. the static offset an asymmetric spring produces)."""
         return spectral_op(x, self.fs_hz, self.band_hz, 0, self.taper_n)
 
+    def band_limit_many(self, xs) -> list[np.ndarray]:
+        """band_limit of several equally long signals (one by one here; a batched transform can
+        replace it without changing callers)."""
+        return [self.band_limit(x) for x in xs]
+
 
 def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARGIN_DB) -> tuple[float, float]:
     """Frequency range (Hz) where the signal's PSD stands `margin_db` above its noise floor."""

@@ -57,6 +57,7 @@ def band_limited_gram(library, sig: StateSignals, targets, edges, cache: dict | 
     m, p = len(library), len(targets)
     AY = np.empty((v.stop - v.start, m + p), order="F")
     cols = library.evaluate((sig.q1, sig.states[:, 1].copy()), sig.input[:, None])
+    todo = []
     for j, name in enumerate(library.names):
         col = cols[:, j]
         if name == sig.input_name:
@@ -65,10 +66,12 @@ def band_limited_gram(library, sig: StateSignals, targets, edges, cache: dict | 
         hit = cache.get(name) if cache is not None else None
         if hit is not None and np.array_equal(hit[0], col):
             AY[:, j] = hit[1]
-            continue
-        AY[:, j] = sig.band_limit(col)[v]
+        else:
+            todo.append(j)
+    for j, y in zip(todo, sig.band_limit_many([cols[:, j] for j in todo])):
+        AY[:, j] = y[v]
         if cache is not None:
-            cache[name] = (col.copy(), AY[:, j].copy())
+            cache[library.names[j]] = (cols[:, j].copy(), AY[:, j].copy())
     for j, y in enumerate(targets):
         AY[:, m + j] = y
     return BlockGram(AY, p, edges)
@@ -110,16 +113,18 @@ def slow_displacement(model: SparseModel, sig: StateSignals, start: np.ndarray |
     def force(q):  # model.rhs on contiguous columns (3x faster than on an (n, 2) array)
         return evaluate_terms(model.space, model.terms, (q1, q), u) @ model.coef_[e]
 
-    slope = None
-    for _ in range(steps):
-        q = q2 + m
-        if slope is None:  # the stiffness below the band, once per call: the offset moves it little
-            slope = low((force(q + h) - force(q - h)) / (2 * h))
-            stiff = -slope[sig.valid]
-            if not np.all(np.isfinite(stiff)) or np.min(stiff) <= 0:
-                return None
-            slope = np.minimum(slope, -np.min(stiff))  # the edges (not fitted) kept stable
-        m = m - low(force(q)) / slope
+    # the stiffness below the band, once per call (the offset moves it little), with the first force
+    q = q2 + m
+    raw = [(force(q + h) - force(q - h)) / (2 * h), force(q)]
+    slope, low_force = (x - bx for x, bx in zip(raw, sig.band_limit_many(raw)))
+    stiff = -slope[sig.valid]
+    if not np.all(np.isfinite(stiff)) or np.min(stiff) <= 0:
+        return None
+    slope = np.minimum(slope, -np.min(stiff))  # the edges (not fitted) kept stable
+    for step in range(steps):
+        if step:
+            low_force = low(force(q2 + m))
+        m = m - low_force / slope
         if not np.all(np.isfinite(m)):
             return None
     return m
