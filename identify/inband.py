@@ -79,7 +79,7 @@ def band_limited_gram(library, sig: StateSignals, targets, edges, cache: dict | 
 
 def has_even_force(model: SparseModel, sig: StateSignals, equation: str = "q1_dot") -> bool:
     """True when the model's force has an even part, f(q1, q2, u) + f(-q1, -q2, -u) != 0 on the data
-    (q2^2, q1*|q1| is odd, |q1| even, ...): only an even force rectifies into a displacement below
+    (q2^2 and |q1| are even, q1*|q1| odd): only an even force rectifies into a displacement below
     the band. An odd force implies next to none (Table 1 rig: 8 um rms, from the sweep's start in the
     band's lower roll-off, against 0.4-0.5 mm for 2-3e4 N/m^2), and carrying that invites the
     full-library fit to pair it with a spurious q2^2 (z = 19 on the Table 1 sweep)."""
