@@ -50,6 +50,24 @@ def even():
               f"  [{off_s}, fit {dt:.2f} s]", flush=True)
 
 
+    print("== even terms, other conditions (seed 2)")
+    design = RigParameters.design
+    t1 = RigParameters.paper_table1()
+    t1q = RigParameters(t1.mass_kg, t1.damping_ns_per_m, t1.stiffness_n_per_m, t1.cubic_stiffness_n_per_m3,
+                        t1.input_gain, {**t1.effects, "quadratic_stiffness": 2e4})
+    for name, rig, sw, noise, fs, extra in (
+            ("2e4, 2 % noise", design(effects={"quadratic_stiffness": 2e4}), SineSweep(1, 20, 40, 1.3), 0.02, 2048.0, ()),
+            ("2e4, 60 s at 1000 Hz", design(effects={"quadratic_stiffness": 2e4}), SineSweep(1, 20, 60, 1.3), 0.005, 1000.0, ()),
+            ("Table 1 rig + 2e4, 1.2 mm", t1q, SineSweep(1, 20, 60, 1.2), 0.005, 2048.0, ()),
+            ("2e4 + Coulomb 0.1 N", design(effects={"quadratic_stiffness": 2e4, "coulomb_friction": 0.1}),
+             SineSweep(1, 20, 40, 1.3), 0.005, 2048.0, ("sign(q1)",)),
+            ("-2e4", design(effects={"quadratic_stiffness": -2e4}), SineSweep(1, 20, 40, 1.3), 0.005, 2048.0, ())):
+        r = run(rig, sw, noise=noise, seed=2, fs_hz=fs)
+        ident = SparseIdentifier(extra_terms=extra).fit(r.recording)
+        print(f"{name}: {terms_vs_truth(ident.model_, rig.model().equations['q1_dot'])} -> {ident.result()['status']}",
+              flush=True)
+
+
 def short():
     print("== short records: 0.5-17 Hz 13 s sweeps ending with the sweep (design rig, 0.5 % noise), 12 seeds")
     for seed in range(12):
