@@ -100,6 +100,8 @@ def choose_budget(model: SparseModel, names, support: np.ndarray, max_terms: int
     results.sort(key=lambda t: (t[0], t[1]))
     best = results[0]
     refit, info = refine_free_run(best[3], sig, fit_rows, equation)  # the winner to the full tolerance
+    if not info["accepted"]:  # already converged at the screening tolerance: that refit is the model
+        refit, info = best[3], best[4]
     table = [{"terms": [names[j] for j in r[1]], "screen": r[5], "refit": r[0]} for r in results]
     table += [{"terms": [names[j] for j in keep], "screen": cost, "refit": None}
               for cost, keep, _ in screened[max(n_refit, 1):]]

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.fft import irfft, next_fast_len, rfft, rfftfreq
+from scipy.stats import chi2
 
 from .errors import IdentificationError
 from .recording import Recording
@@ -55,10 +56,16 @@ class StateSignals:
     valid: slice
     input_name: str
     taper_n: int = 0
+    #: the displacement below the band (m), when identified (identify.inband.slow_displacement)
+    q2_offset: np.ndarray | None = None
 
     @property
     def states(self) -> np.ndarray:
-        return np.column_stack([self.q1, self.q2])
+        """The states a model is written in: q1, and q2 plus the displacement below the band when it
+        is known (accelerometers miss the static offset an even force produces; the terms of a rig's
+        force are those of the true displacement)."""
+        q2 = self.q2 if self.q2_offset is None else self.q2 + self.q2_offset
+        return np.column_stack([self.q1, q2])
 
     def band_limit(self, x: np.ndarray) -> np.ndarray:
         """Pass a signal on the valid rows (a simulation, a library column) through the same band as the
@@ -84,7 +91,7 @@ def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARG
     nper = max(min(nper, n // 2), 16)
     f, p = welch_psd(x, fs_hz, nper)  # = scipy.signal.welch(..., detrend="linear"), 3x faster
     skip = 3  # the lowest bins hold the window's leakage of offsets and drifts, not excitation
-    floor = np.percentile(p[skip:], 10)
+    floor = np.percentile(p[skip:], 10) / _low_decile_of_noise(n, nper)
     above = np.flatnonzero(p[skip:] > floor * 10 ** (margin_db / 10)) + skip
     if above.size == 0:
         raise IdentificationError("the input shows no excited frequency band above its noise floor")
@@ -98,6 +105,22 @@ def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARG
     lo_bin, hi_bin = above[starts[best]], above[stops[best]]
     df = f[1] - f[0]
     return float(max(f[lo_bin] - df, df)), float(min(f[hi_bin] + df, fs_hz / 2))
+
+
+def _low_decile_of_noise(n: int, nper: int) -> float:
+    """The 10th percentile of a Welch estimate of white noise, as a fraction of its mean.
+
+    The floor is the spectrum's 10th percentile (robust to how many bins the excitation fills) divided
+    by this, i.e. the noise level itself. A noise bin of a Welch estimate over K segments (Hann, 50 %
+    overlap) is chi-square with ~2K / (1 + 2 c^2 (K - 1) / K) degrees of freedom, c = 0.167: with
+    K = 14 (60 s at 2048 Hz) its low decile is 0.67 of the mean, with K = 3 (a 13-15 s record) 0.37,
+    so the undivided percentile put the threshold at 3.7x instead of 10x the noise on short records:
+    noise bins crossed it and, merged across MAX_GAP_BINS, pulled f_lo to the spectrum's bottom
+    (0.31 Hz for a response that cannot clear its noise below ~1.5 Hz), leaving the record too short for
+    its own band."""
+    k = 1 + max(n - nper, 0) // (nper - nper // 2)
+    dof = 2 * k / (1 + 2 * 0.167**2 * (k - 1) / k)
+    return float(chi2.ppf(0.1, dof) / dof)
 
 
 def band_gain(f: np.ndarray, band: tuple[float, float], fs_hz: float) -> np.ndarray:

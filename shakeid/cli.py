@@ -124,6 +124,11 @@ def summary(result: dict, source: str) -> str:
         fmt = lambda m: "diverged" if m["fit_percent"] is None else f"{m['fit_percent']:.2f} %"  # noqa: E731
         lines.append(f"free-run fit on {val['heldout_samples']} held-out samples: acceleration {fmt(h['q1_dot'])},"
                      f" velocity {fmt(h['q1'])}, displacement {fmt(h['q2'])}")
+    offset = result.get("chain", {}).get("displacement_below_band") or {}
+    if offset.get("carried"):
+        lines.append(f"displacement below the band carried (an even force rectifies it; the terms are those of the "
+                     f"true displacement): rms {offset['rms_mm']:.3g} mm, {offset['min_mm']:.3g} to {offset['max_mm']:.3g} mm, "
+                     f"{offset['passes']} passes{'' if offset['converged'] else ', NOT converged'}")
     phys = result.get("physical")
     if phys:
         def pv(key, unit, scale=1.0):
