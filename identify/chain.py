@@ -24,12 +24,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.fft import irfft, next_fast_len, rfft, rfftfreq
+from scipy.fft import next_fast_len, rfftfreq
 from scipy.stats import chi2
 
 from .errors import IdentificationError
 from .recording import Recording
-from .spectral import welch_psd
+from .spectral import lowband_irfft, lowband_rfft, welch_psd
 
 #: Band edge roll-off as a fraction of the edge frequency (lower: down to f_lo/2; upper: up to 1.25 f_hi).
 EDGE_FRACTION = 0.5
@@ -135,8 +135,9 @@ def band_gain(f: np.ndarray, band: tuple[float, float], fs_hz: float) -> np.ndar
         g[below] = 0.5 - 0.5 * np.cos(np.pi * np.clip((f[below] - a) / (lo - a), 0, 1))
     top = min(hi * (1 + EDGE_FRACTION / 2), fs_hz / 2)
     if top > hi:
-        above = f > hi
-        g[above] = 0.5 + 0.5 * np.cos(np.pi * np.clip((f[above] - hi) / (top - hi), 0, 1))
+        roll = (f > hi) & (f < top)
+        g[roll] = 0.5 + 0.5 * np.cos(np.pi * np.clip((f[roll] - hi) / (top - hi), 0, 1))
+        g[f >= top] = 0.0  # = 0.5 + 0.5 cos(pi), exactly
     return g
 
 
@@ -148,7 +149,7 @@ def spectral_op(x: np.ndarray, fs_hz: float, band: tuple[float, float], power: i
 def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, taper_n: int) -> list[np.ndarray]:
     """spectral_op for several (signal index, power) `requests` on equally long `signals`, with each
     detrended signal transformed once: integrals of one signal share its spectrum, and all forward
-    and all inverse transforms go through one batched rfft / irfft each."""
+    and all inverse transforms go through one batched rfft / irfft each, of the band's bins only."""
     signals = [np.asarray(x, dtype=float) for x in signals]
     n = signals[0].size
     # integrating: only the mean goes. A line removed from an acceleration is a cubic removed from
@@ -168,19 +169,22 @@ def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, tap
             xd[r, :taper_n] *= ramp
             xd[r, n - taper_n:] *= ramp[::-1]
     nfft = next_fast_len(2 * n, real=True)  # zero-padded: no circular wrap-around of the integrals
-    spectra = rfft(xd, nfft, axis=-1)
-    del xd
     f = rfftfreq(nfft, 1.0 / fs_hz)
     g = band_gain(f, band, fs_hz)
-    out = np.empty((len(requests), spectra.shape[1]), dtype=complex)
+    # bins above the band's roll-off are zeroed: only bins 0..k_max are transformed (identify.spectral)
+    k_max = int(np.flatnonzero(g)[-1])
+    f, g = f[:k_max + 1], g[:k_max + 1]
+    spectra = lowband_rfft(xd, nfft, k_max)
+    del xd
+    out = np.empty((len(requests), k_max + 1), dtype=complex)
     for k, (i, power) in enumerate(requests):
         h = _band_response(f, g, band, power)
         np.multiply(spectra[rows.index((i, power < 0))], h, out=out[k])
     del spectra
-    y = irfft(out, nfft, axis=-1)[:, :n]
+    y = lowband_irfft(out, nfft, n)
     results = []
     for k, (i, power) in enumerate(requests):
-        yk = y[k].copy()
+        yk = y[k]
         if band[0] == 0 and power in (0, 1):
             # DC is in the band: the detrending line is signal, restore it (or its slope)
             x = signals[i]

@@ -163,3 +163,20 @@ def test_band_limit_many_is_band_limit_of_each(table1_run):
     xs = [sig.q1[v] ** k * sig.q2[v] for k in range(6)]
     for x, y in zip(xs, sig.band_limit_many(xs)):
         assert _close(y, sig.band_limit(x))
+
+
+@pytest.mark.parametrize("n", [997, 30_011])
+@pytest.mark.parametrize("band_share", [1.0, 0.4, 0.13, 0.01])
+def test_lowband_transforms_are_the_band_bins_of_the_full_ones(n, band_share):
+    """Polyphase split (M = 1, 2, 6, 8 here) against scipy's full-length transforms."""
+    from identify.spectral import lowband_irfft, lowband_rfft, polyphase_factor
+    nfft = next_fast_len(2 * n, real=True)
+    k_max = min(int(band_share * nfft / 2), nfft // 2)
+    x = np.vstack([_signal(n, 5), _signal(n, 6) ** 2])
+    ref = rfft(x, nfft, axis=-1)
+    assert _close(lowband_rfft(x, nfft, k_max), ref[:, :k_max + 1], 1e-14)
+    low = np.zeros_like(ref)
+    low[:, :k_max + 1] = ref[:, :k_max + 1]
+    y = lowband_irfft(ref[:, :k_max + 1], nfft, n)
+    assert y.shape == (2, n) and _close(y, irfft(low, nfft, axis=-1)[:, :n], 1e-14)
+    assert (polyphase_factor(nfft, k_max) > 1) == (band_share < 0.5)
