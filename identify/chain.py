@@ -33,6 +33,9 @@ from .spectral import lowband_irfft, lowband_rfft, welch_psd
 
 #: Band edge roll-off as a fraction of the edge frequency (lower: down to f_lo/2; upper: up to 1.25 f_hi).
 EDGE_FRACTION = 0.5
+#: Zero padding of the transforms in periods of f_lo (padded_length): what the states lose to wrap-around
+#: is below 1e-9 of their peak from ~20 periods on (docs/identification.md, Benchmarks).
+PAD_PERIODS = 40
 #: Excited = Welch PSD at least this many dB above the noise floor (the spectrum's 10th percentile).
 EXCITATION_MARGIN_DB = 10.0
 #: Guard beyond the taper at an edge where the record is not at rest, in periods of f_lo.
@@ -141,6 +144,15 @@ def band_gain(f: np.ndarray, band: tuple[float, float], fs_hz: float) -> np.ndar
     return g
 
 
+def padded_length(n: int, fs_hz: float, band: tuple[float, float]) -> int:
+    """FFT length for a record of n samples: zero padding long enough that the band-limited operators'
+    impulse responses (they decay within a few periods of f_lo, the roll-off being a half-cosine down
+    to f_lo/2) do not wrap around: PAD_PERIODS periods of f_lo, at most the record's own length (the
+    earlier rule, 2n in all, which a long record pays for with FFTs twice its size for nothing)."""
+    pad = n if band[0] <= 0 else min(n, int(np.ceil(PAD_PERIODS * fs_hz / band[0])))
+    return next_fast_len(n + pad, real=True)
+
+
 def spectral_op(x: np.ndarray, fs_hz: float, band: tuple[float, float], power: int, taper_n: int) -> np.ndarray:
     """Band-limit x and multiply its spectrum by (j w)^power (power < 0 integrates)."""
     return spectral_ops([x], fs_hz, band, [(0, power)], taper_n)[0]
@@ -168,7 +180,7 @@ def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, tap
         if taper_n > 0:
             xd[r, :taper_n] *= ramp
             xd[r, n - taper_n:] *= ramp[::-1]
-    nfft = next_fast_len(2 * n, real=True)  # zero-padded: no circular wrap-around of the integrals
+    nfft = padded_length(n, fs_hz, band)  # zero-padded: no circular wrap-around of the integrals
     f = rfftfreq(nfft, 1.0 / fs_hz)
     g = band_gain(f, band, fs_hz)
     # bins above the band's roll-off are zeroed: only bins 0..k_max are transformed (identify.spectral)
