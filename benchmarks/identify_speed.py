@@ -94,14 +94,14 @@ def anchor(rec, lib, X, U) -> dict:
 
 def chain_transforms(rec, sig) -> dict:
     """The chain's transforms alone, each (wall, cpu) seconds: 3 forward (qdd without its mean, qdd and
-    the input without their end-point lines) and 4 inverse (q1, q2, q1_dot, input) rffts, zero-padded to
-    next_fast_len(2n) and limited to the band's bins as the chain does them (identify.spectral), and the
+    the input without their end-point lines) and 4 inverse (q1, q2, q1_dot, input) rffts, zero-padded as
+    the chain pads (identify.chain.padded_length) and limited to the band's bins as the chain does them (identify.spectral), and the
     two Welch spectra of the band estimate (16384-sample segments)."""
-    from identify.chain import band_gain
+    from identify.chain import band_gain, padded_length
     from identify.spectral import lowband_irfft, lowband_rfft, welch_psd
 
     n = rec.n_samples
-    m = next_fast_len(2 * n, real=True)
+    m = padded_length(n, rec.fs_hz, sig.band_hz)
     k_max = int(np.flatnonzero(band_gain(np.fft.rfftfreq(m, rec.dt), sig.band_hz, rec.fs_hz))[-1])
     rows = np.vstack([rec.output - rec.input, rec.output - rec.input, rec.input])
     out = {}
@@ -241,7 +241,7 @@ def main(argv=None) -> int:
               f"{a['gram'][0]:.3f}/{a['gram'][1]:.3f}, 2 FFT pairs at next_fast_len(n) "
               f"{a['fft_pairs'][0]:.3f}/{a['fft_pairs'][1]:.3f}")
         tr = f["transforms"]
-        print(f"          the chain's transforms (wall/cpu): 3 forward + 4 inverse rfft padded to next_fast_len(2n), band bins "
+        print(f"          the chain's transforms (wall/cpu): 3 forward + 4 inverse rfft, padded as the chain pads, band bins "
               f"{tr['padded_ffts'][0]:.3f}/{tr['padded_ffts'][1]:.3f}, 2 Welch spectra "
               f"{tr['welch'][0]:.3f}/{tr['welch'][1]:.3f} = {(tr['padded_ffts'][1] + tr['welch'][1]) / a['total'][1]:.2f}"
               " x the anchor (cpu)")
