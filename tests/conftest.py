@@ -84,7 +84,7 @@ def can_relay():
 @pytest.fixture(scope="session")
 def dask_cluster(tmp_path_factory):
     """A real Dask cluster as separate processes on loopback: `dask scheduler` and two `dask worker`s
-    (one thread each), on free ports; yields the scheduler address once both workers have joined, and
+    (one thread each, no nanny), on free ports; yields the scheduler address once both workers have joined, and
     terminates all three afterwards."""
     import subprocess
     import sys
@@ -100,7 +100,8 @@ def dask_cluster(tmp_path_factory):
     procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", address.rsplit(":", 1)[1],
                                "--no-dashboard"], **common)]
     try:
-        procs += [subprocess.Popen([dask, "worker", address, "--host", "127.0.0.1", "--nthreads", "1",
+        # --no-nanny: one process per worker, so terminating it leaves nothing behind
+        procs += [subprocess.Popen([dask, "worker", address, "--host", "127.0.0.1", "--nthreads", "1", "--no-nanny",
                                     "--no-dashboard", "--name", f"worker-{i}", "--death-timeout", "60"], **common)
                   for i in range(2)]
         with Client(address, timeout=60) as client:
