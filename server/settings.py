@@ -18,7 +18,8 @@
                                              # reached in this time
 
 Environment (wins over the file): SHAKEID_DATA_DIR, SHAKEID_TOKENS ("token:role,token:role"),
-SHAKEID_SIM_SPEED, SHAKEID_CONTROLLER, SHAKEID_MAX_UPLOAD_MB, SHAKEID_SCHEDULER ([compute] scheduler). With no configuration file the service starts an embedded simulated rig; with no
+SHAKEID_SIM_SPEED, SHAKEID_CONTROLLER, SHAKEID_MAX_UPLOAD_MB, SHAKEID_SCHEDULER ([compute] scheduler).
+With no configuration file the service starts an embedded simulated rig; with no
 token configured it makes one operator token, prints it and keeps it in <data_dir>/operator-token so a
 new user can log in without reading anything first.
 """
