@@ -50,7 +50,8 @@ def create_app(settings: Settings) -> FastAPI:
         catalog = Catalog(settings.data_dir / "catalog.sqlite")
         for note in catalog.recover_after_restart():
             print(f"shakeid serve: {note}", flush=True)
-        jobs = JobQueue(catalog, settings.data_dir / "results", settings.identify_workers)
+        jobs = JobQueue(catalog, settings.data_dir / "results", settings.identify_workers,
+                        settings.scheduler, settings.connect_timeout_s)
         jobs.start()
         link = RigLink(settings, settings.controller,
                        on_event=lambda event: jobs.wake() if event.get("event") == "job_queued" else None)

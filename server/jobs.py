@@ -1,7 +1,9 @@
 """Identification jobs: queued in the catalog, run in a process pool, outside the event loop.
 
 A dispatcher thread takes queued jobs in order and keeps up to `workers` of them in the pool; each job
-writes into <data_dir>/results/<job id>/. Jobs outlive the service: the queue is the catalog, and on
+writes into <data_dir>/results/<job id>/. With a Dask scheduler ([compute] scheduler, server/settings.py)
+the same jobs go to that cluster instead (server/dask_backend.py), as many at a time as it has worker
+threads; same worker function, same result files. Jobs outlive the service: the queue is the catalog, and on
 start `Catalog.recover_after_restart` puts jobs a dead service left running back in the queue.
 """
 from __future__ import annotations
@@ -29,8 +31,10 @@ def queue_job(catalog: Catalog, results_dir: Path, kind: str, recording_id: str,
 
 
 class JobQueue:
-    def __init__(self, catalog: Catalog, results_dir: Path, workers: int = 1):
+    def __init__(self, catalog: Catalog, results_dir: Path, workers: int = 1, scheduler: str | None = None,
+                 connect_timeout_s: float = 10.0):
         self.catalog, self.results_dir, self.workers = catalog, Path(results_dir), workers
+        self.scheduler, self.connect_timeout_s = scheduler, connect_timeout_s
         self.pool = self._new_pool()
         self._wake = threading.Event()
         self._stop = False
@@ -38,7 +42,11 @@ class JobQueue:
         self._pool_lock = threading.Lock()
         self._thread = threading.Thread(target=self._dispatch, name="job-dispatcher", daemon=True)
 
-    def _new_pool(self) -> ProcessPoolExecutor:
+    def _new_pool(self):
+        if self.scheduler:
+            from .dask_backend import DaskPool
+
+            return DaskPool(self.scheduler, self.connect_timeout_s)
         # spawn, not fork: the service has threads (uvicorn, rig, dispatcher) a fork would copy mid-flight
         pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
                                    initializer=worker.die_with_parent, initargs=(os.getpid(),))
@@ -73,7 +81,10 @@ class JobQueue:
 
     def _dispatch(self) -> None:
         while not self._stop:
-            job = self.catalog.next_queued_job() if len(self._running) < self.workers else None
+            with self._pool_lock:
+                pool = self.pool
+            capacity = pool.capacity() if self.scheduler else self.workers
+            job = self.catalog.next_queued_job() if len(self._running) < capacity else None
             if job is None:
                 self._wake.wait(0.5)
                 self._wake.clear()
@@ -85,7 +96,10 @@ class JobQueue:
             self.catalog.update("jobs", job["id"], state="running", attempts=job["attempts"] + 1)
             with self._pool_lock:
                 pool = self.pool
-            fut = pool.submit(worker.run_job, job["kind"], rec["path"], job["options"], job["result_dir"])
+            # absolute paths: a Dask worker does not share our working directory (the data dir must be
+            # mounted at the same path there)
+            fut = pool.submit(worker.run_job, job["kind"], os.path.abspath(rec["path"]), job["options"],
+                              os.path.abspath(job["result_dir"]))
             self._running[job["id"]] = fut
             fut.add_done_callback(lambda f, jid=job["id"], rid=rec["id"], kind=job["kind"], p=pool:
                                   self._done(jid, rid, kind, f, p))

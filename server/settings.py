@@ -10,8 +10,16 @@
     controller = "unix:/run/shakeid/controller.sock"   # attach to a rig controller that runs on its own
                                              # (`shakeid controller`); unset: `shakeid serve` starts one
 
+    [compute]
+    scheduler = "tcp://dask-scheduler:8786"  # run identification jobs on this Dask cluster (its workers
+                                             # must see data_dir at the same path); unset: the embedded
+                                             # process pool of identify_workers processes
+    connect_timeout_s = 10.0                 # a job fails with the reason when the scheduler is not
+                                             # reached in this time
+
 Environment (wins over the file): SHAKEID_DATA_DIR, SHAKEID_TOKENS ("token:role,token:role"),
-SHAKEID_SIM_SPEED, SHAKEID_CONTROLLER, SHAKEID_MAX_UPLOAD_MB. With no configuration file the service starts an embedded simulated rig; with no
+SHAKEID_SIM_SPEED, SHAKEID_CONTROLLER, SHAKEID_MAX_UPLOAD_MB, SHAKEID_SCHEDULER ([compute] scheduler).
+With no configuration file the service starts an embedded simulated rig; with no
 token configured it makes one operator token, prints it and keeps it in <data_dir>/operator-token so a
 new user can log in without reading anything first.
 """
@@ -27,6 +35,7 @@ from sim.config import RigConfig, load_config
 
 ROLES = ("viewer", "operator")
 KEYS = {"data_dir", "tokens", "sim_speed", "identify_workers", "auto_identify", "max_upload_mb", "controller"}
+COMPUTE_KEYS = {"scheduler", "connect_timeout_s"}
 
 
 class SettingsError(ShakeidError):
@@ -45,6 +54,8 @@ class Settings:
     generated_token: str | None = None                   # set when no token was configured
     config_path: Path | None = None                      # the rig configuration file, if any
     controller: str | None = None                        # an existing rig controller; None: start one
+    scheduler: str | None = None                         # a Dask scheduler for jobs; None: process pool
+    connect_timeout_s: float = 10.0                      # reaching the Dask scheduler, seconds
 
     @classmethod
     def load(cls, config_path=None, env=None, data_dir=None) -> "Settings":
@@ -65,6 +76,13 @@ class Settings:
             s.auto_identify = bool(section.get("auto_identify", s.auto_identify))
             s.max_upload_mb = float(section.get("max_upload_mb", s.max_upload_mb))
             s.controller = section.get("controller", s.controller)
+            compute = s.rig.compute
+            unknown = set(compute) - COMPUTE_KEYS
+            if unknown:
+                raise SettingsError(f"{config_path}: unknown key(s) in [compute]: {', '.join(sorted(unknown))}; "
+                                    f"known: {', '.join(sorted(COMPUTE_KEYS))}")
+            s.scheduler = compute.get("scheduler", s.scheduler)
+            s.connect_timeout_s = float(compute.get("connect_timeout_s", s.connect_timeout_s))
         if env.get("SHAKEID_DATA_DIR"):
             s.data_dir = Path(env["SHAKEID_DATA_DIR"])
         if data_dir:
@@ -78,6 +96,12 @@ class Settings:
             s.max_upload_mb = float(env["SHAKEID_MAX_UPLOAD_MB"])
         if env.get("SHAKEID_CONTROLLER"):
             s.controller = env["SHAKEID_CONTROLLER"]
+        if env.get("SHAKEID_SCHEDULER"):
+            s.scheduler = env["SHAKEID_SCHEDULER"]
+        if s.scheduler is not None and not (isinstance(s.scheduler, str) and "://" in s.scheduler):
+            raise SettingsError(f"[compute] scheduler must be a Dask address like tcp://HOST:8786, not {s.scheduler!r}")
+        if s.connect_timeout_s <= 0:
+            raise SettingsError("[compute] connect_timeout_s must be positive")
         if env.get("SHAKEID_SIM_SPEED"):
             s.sim_speed = float(env["SHAKEID_SIM_SPEED"])
         bad = {t: r for t, r in s.tokens.items() if r not in ROLES}

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from identify.errors import ShakeidError
 
+from .batch_cmd import add_batch_parser
 from .campaign_cmd import add_campaign_parser
 from .lab import cmd_controller, cmd_demo, cmd_recordings, cmd_serve, cmd_sim, cmd_sweep
 from .rigcmd import cmd_rig
@@ -254,6 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--accept-faulty", action="store_true",
                    help="identify a recording that is not complete or whose quality flags make it unusable")
     q.set_defaults(func=cmd_identify)
+    add_batch_parser(sub, _add_identify_options)
     q = sub.add_parser("explain", help="where a model misses the rig, which effect is missing, and the fix")
     q.add_argument("file")
     q.add_argument("--model", metavar="MODEL.json", help="baseline model (default: textbook Duffing fitted)")

@@ -13,6 +13,7 @@
     [sensors]  noise_ms2, bias_ms2 (simulated rig only)
     [sim]      speed (simulated rig only)
     [server]   data_dir, tokens, ... (the HTTP service, server/settings.py)
+    [compute]  scheduler, connect_timeout_s (the service's jobs on a Dask cluster, server/settings.py)
 
 Unknown keys are refused by name, so a typo in a limit cannot silently leave the default in force.
 """
@@ -49,6 +50,7 @@ class RigConfig:
     speed: float = 1.0
     source: str = "<defaults>"
     server: dict = field(default_factory=dict)
+    compute: dict = field(default_factory=dict)
 
     def plc_config(self) -> PLCConfig:
         sensor = Accelerometer(noise_fraction=0.0, noise_ms2=self.sensor_noise_ms2, bias_ms2=self.sensor_bias_ms2)
@@ -76,8 +78,10 @@ def load_config(path) -> RigConfig:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
     cfg = RigConfig(source=str(path))
-    _take(doc, {"plc", "stream", "can", "sampling", "limits", "rig", "sensors", "sim", "server"}, "top level", path)
+    _take(doc, {"plc", "stream", "can", "sampling", "limits", "rig", "sensors", "sim", "server", "compute"}, "top level",
+          path)
     cfg.server = dict(doc.get("server", {}))  # checked by the HTTP service (server/settings.py)
+    cfg.compute = dict(doc.get("compute", {}))  # likewise
     cfg.can = dict(_take(doc.get("can", {}), {"interface", "channel", "node"}, "can", path))
     if "plc" in doc:
         cfg.plc = dict(_take(doc["plc"], {"transport", "host", "port", "ams_net_id", "ams_port"}, "plc", path))

@@ -74,3 +74,41 @@ def can_relay():
     finally:
         relay.terminate()
         relay.wait(10)
+
+
+@pytest.fixture(scope="session")
+def dask_cluster(tmp_path_factory):
+    """A real Dask cluster as separate processes on loopback: `dask scheduler` and two `dask worker`s
+    (one thread each, no nanny), on free ports; yields the scheduler address once both workers have joined, and
+    terminates all three afterwards."""
+    import subprocess
+    import sys
+
+    from distributed import Client
+
+    from sim.server import free_port
+
+    dask = str(Path(sys.executable).with_name("dask"))
+    address = f"tcp://127.0.0.1:{free_port()}"
+    log = open(tmp_path_factory.mktemp("dask") / "dask.log", "w")
+    common = dict(stdout=log, stderr=subprocess.STDOUT)
+    procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", address.rsplit(":", 1)[1],
+                               "--no-dashboard"], **common)]
+    try:
+        # --no-nanny: one process per worker, so terminating it leaves nothing behind
+        procs += [subprocess.Popen([dask, "worker", address, "--host", "127.0.0.1", "--nthreads", "1", "--no-nanny",
+                                    "--no-dashboard", "--name", f"worker-{i}", "--death-timeout", "60"], **common)
+                  for i in range(2)]
+        with Client(address, timeout=60) as client:
+            client.wait_for_workers(2, timeout=90)
+        yield address
+    finally:
+        for proc in reversed(procs):
+            proc.terminate()
+        for proc in reversed(procs):
+            try:
+                proc.wait(20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        log.close()

@@ -36,7 +36,7 @@ def test_compose_file_is_valid_and_runs_what_exists():
     assert p.returncode == 0, p.stderr
     doc = yaml.safe_load(p.stdout)
     services = doc["services"]
-    assert set(services) == {"rig-sim", "controller", "server"}
+    assert set(services) == {"rig-sim", "controller", "server", "dask-scheduler", "dask-worker"}
     server, rig, ctl = services["server"], services["rig-sim"], services["controller"]
     assert "controller" in server["depends_on"] and "rig-sim" in ctl["depends_on"]
     for svc in (server, ctl):  # the catalog, the recordings and the controller's socket are shared
@@ -56,6 +56,29 @@ def test_compose_file_is_valid_and_runs_what_exists():
 
     settings = Settings.load(REPO / "deploy" / "compose-rig.toml", env={})
     assert settings.rig.plc["host"] == "rig-sim" and str(settings.data_dir) == "/data"
+    _check_dask_services(services)
+
+
+def _check_dask_services(services: dict) -> None:
+    """The server's jobs go to the compose Dask cluster: its scheduler address is the one the worker
+    dials, the worker sees the data volume where the server does, and both commands parse with
+    distributed's own command-line definitions (a misspelt option fails here)."""
+    from distributed.cli import dask_scheduler, dask_worker
+
+    from server.settings import Settings
+
+    server, sched, work = services["server"], services["dask-scheduler"], services["dask-worker"]
+    assert sched["command"][:2] == ["dask", "scheduler"] and work["command"][:2] == ["dask", "worker"]
+    s_opts = dask_scheduler.main.make_context("dask scheduler", sched["command"][2:]).params
+    w_opts = dask_worker.main.make_context("dask worker", work["command"][2:]).params
+    address = server["environment"]["SHAKEID_SCHEDULER"]
+    assert address == w_opts["scheduler"] == f"tcp://dask-scheduler:{s_opts['port']}"
+    assert Settings.load(REPO / "deploy" / "compose-rig.toml", env=server["environment"]).scheduler == address
+    assert str(s_opts["port"]) in map(str, sched["expose"]) and w_opts["nthreads"] == 1
+    assert "dask-scheduler" in server["depends_on"] and "dask-scheduler" in work["depends_on"]
+    assert ("shakeid-data", "/data") in list(map(_mount, work["volumes"]))
+    for svc in (sched, work):
+        assert (Path(svc["build"]["context"]) / "Dockerfile").exists() and svc["image"] == server["image"]
 
 
 def test_a_broken_compose_file_is_caught(tmp_path):

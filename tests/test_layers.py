@@ -14,7 +14,7 @@ ALLOWED = {
     "daq": {"numpy", "scipy", "h5py", "identify", "sim", "daq", "pymodbus", "pyads", "can", "serial"},
     # the service composes the layers; nothing below it may import it (checked by the sets above)
     "server": {"numpy", "h5py", "matplotlib", "identify", "sim", "daq", "server", "shakeid", "fastapi", "pydantic",
-               "uvicorn"},
+               "uvicorn", "distributed"},  # distributed: jobs on an existing Dask cluster ([compute] scheduler)
 }
 
 

@@ -1,0 +1,103 @@
+"""`shakeid batch`: one model per file, each naming where it was computed, on a real Dask cluster
+(`dask scheduler` + two `dask worker` processes on loopback) and in the local pool; refusals as
+`shakeid identify`'s (the bad file is named, the others are still identified, the exit status says so)."""
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from daq.recorder import Recorder
+from identify.recording import write_csv
+from shakeid.cli import main
+from sim.server import free_port
+from sim.sweep import SineSweep
+
+SHAKEID = str(Path(sys.executable).with_name("shakeid"))
+SHORT = SineSweep(1.0, 20.0, 25.0, 1.3)  # 25 s at 1024 Hz: identifies the Table 1 terms in ~1 s
+
+
+@pytest.fixture(scope="module")
+def recordings(make_run, tmp_path_factory):
+    """Three short sweeps of the Table 1 rig (two CSV, one DAQ HDF5; different noise seeds) and a CSV
+    without the mass accelerometer column."""
+    d = tmp_path_factory.mktemp("batch")
+    paths = []
+    for seed in range(3):
+        rec = make_run(sweep=SHORT, fs_hz=1024.0, seed=seed).recording
+        if seed < 2:
+            write_csv(d / f"sweep{seed}.csv", rec)
+            paths.append(d / f"sweep{seed}.csv")
+        else:
+            r = Recorder(d / "sweep2.h5", fs_hz=rec.fs_hz)
+            r.append(0, np.column_stack([rec.input, rec.output]))
+            r.close("complete")
+            paths.append(d / "sweep2.h5")
+    bad = d / "bad.csv"
+    bad.write_text("t,table_acc\n0,1\n0.001,2\n")
+    return paths, bad
+
+
+def _support(model: dict) -> set[str]:
+    return {t for t, c in model["model"]["q1_dot"].items() if c}
+
+
+def test_batch_on_a_dask_cluster_gives_one_model_per_file_each_naming_its_worker(dask_cluster, recordings, tmp_path,
+                                                                                  true_q1_terms, capsys):
+    from distributed import Client
+
+    good, bad = recordings
+    with Client(dask_cluster, timeout=30) as client:
+        workers = set(client.scheduler_info()["workers"])
+    out = tmp_path / "models"
+    proc = subprocess.run([SHAKEID, "batch", *map(str, good), str(bad), "--scheduler", dask_cluster, "--json",
+                           "--out", str(out)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2, proc.stderr  # one file refused: as `shakeid identify` on it
+    reason = f"{bad}: missing column(s) 'mass_acc'; found 't', 'table_acc'"
+    assert proc.stderr.strip().splitlines() == [f"shakeid: error: {reason}"]
+    doc = json.loads(proc.stdout)
+    assert list(doc["models"]) == [p.name for p in good] and doc["scheduler"] == dask_cluster
+    for name, model in doc["models"].items():
+        assert model["computed_on"] in workers, (name, model["computed_on"], workers)
+        assert model["status"] == "ok" and _support(model) == true_q1_terms
+        assert json.loads((out / f"{Path(name).stem}.model.json").read_text()) == model
+    assert doc["failed"] == {"bad.csv": {"reason": reason, "computed_on": doc["failed"]["bad.csv"]["computed_on"]}}
+    assert doc["failed"]["bad.csv"]["computed_on"] in workers
+    assert json.loads((out / "batch.json").read_text()) == doc
+    # the same code path as `shakeid identify`: the same model, coefficient for coefficient
+    assert main(["identify", str(good[0]), "--json"]) == 0
+    alone = json.loads(capsys.readouterr().out)
+    batch = doc["models"][good[0].name]
+    assert batch["model"] == alone["model"] and batch["validation"] == alone["validation"]
+
+
+def test_batch_in_the_local_pool_names_the_worker_process(recordings, capsys, true_q1_terms):
+    good, _ = recordings
+    assert main(["batch", str(good[0]), str(good[2]), "--workers", "2"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[-1] == "2 of 2 file(s) identified on local"
+    per_file = {line.split(":", 1)[0]: line for line in lines[:-1]}
+    assert set(per_file) == {good[0].name, good[2].name}
+    for line in per_file.values():
+        assert line.split(": ", 1)[1].startswith("ok, held-out fit ")
+        assert "q1_dot: " + " ".join(sorted(true_q1_terms)) + ";" in line
+        pid = int(line.rsplit("(computed on local:", 1)[1].rstrip(")"))
+        assert pid != os.getpid()  # a pool process, not this one
+
+
+def test_option_errors_refuse_before_any_work(recordings, tmp_path, capsys):
+    good, _ = recordings
+    twin = tmp_path / good[0].name
+    twin.write_bytes(good[0].read_bytes())
+    cases = [(["--workers", "0"], "--workers must be at least 1"),
+             (["--lambdas", "1"], "--lambdas must be at least 2"),
+             ([str(twin)], f"two files named {good[0].name!r}"),
+             (["--scheduler", f"tcp://127.0.0.1:{free_port()}", "--connect-timeout", "1"],
+              "cannot reach the Dask scheduler tcp://127.0.0.1:")]
+    for extra, message in cases:
+        assert main(["batch", str(good[0]), *extra]) == 2, extra
+        captured = capsys.readouterr()
+        assert captured.out == "" and captured.err.startswith(f"shakeid: error: {message}"), (extra, captured.err)
