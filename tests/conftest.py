@@ -1,6 +1,8 @@
 """Shared fixtures: synthetic sweeps of the simulated rig with known coefficients (the ground truth)."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from identify.recording import write_csv
