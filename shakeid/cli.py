@@ -244,8 +244,19 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+def _version() -> str:
+    """The installed package's version (pyproject.toml), or 'unknown' when run from a bare source tree."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("shakeid")
+    except PackageNotFoundError:
+        return "unknown"
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="shakeid", description="Sparse nonlinear identification of shaker rigs")
+    p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
     q = sub.add_parser("identify", help="identify a sparse ODE model from a recording (CSV, MAT, HDF5)")
     q.add_argument("file")

@@ -84,3 +84,11 @@ def test_simulate_writes_recording_and_truth(tmp_path):
     assert all(abs(round(v / 0.01) * 0.01 - v) < 1e-9 for v in table) and abs(sum(table) / len(table) - 0.05) < 0.01
     bad = run("simulate", "--out", out, "--effect", "warp_drive=1")
     assert bad.returncode == 2 and "unknown effect" in bad.stderr
+
+
+def test_version_is_the_packages():
+    import tomllib
+
+    declared = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml").read_text())["project"]["version"]
+    out = run("--version")
+    assert out.returncode == 0 and out.stdout.strip() == f"shakeid {declared}"
