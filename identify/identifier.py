@@ -22,7 +22,8 @@ import numpy as np
 
 from .chain import StateSignals, reconstruct_states
 from .errors import IdentificationError
-from .gram import BlockGram, sandwich_covariance
+from . import uncertainty as unc
+from .gram import BlockGram
 from .library import Library
 from .model import SparseModel
 from .optimizers import ADMMLasso, STLSQ
@@ -77,6 +78,9 @@ class SparseIdentifier:
     band_hz, harmonics, taper_s : measurement-chain settings (identify.chain.reconstruct_states).
     rig : RigConstants for physical parameters (base-excited layout only).
     validate : run the free-run validation.
+    bias_replicates : SIMEX replicates of the measurement chain for its bias (0: none, coefficients and
+        standard errors then ignore it); placements : random held-out placements for the inclusion
+        probabilities (0: none). identify.uncertainty.
     """
 
     def __init__(self, degree: int = 4, extra_terms=(), method: str = "admm", n_lambdas: int = 100,
@@ -84,7 +88,8 @@ class SparseIdentifier:
                  selection: str = "heldout", tolerance: float | None = None, max_terms: int | None = None,
                  refine: str | None = None, holdout_fraction: float = 0.2,
                  holdout_samples: int | None = None, band_hz=None, harmonics: float = 5.0,
-                 taper_s: float | None = None, rig: RigConstants | None = None, validate: bool = True):
+                 taper_s: float | None = None, rig: RigConstants | None = None, validate: bool = True,
+                 bias_replicates: int = unc.N_REPLICATES, placements: int = unc.N_PLACEMENTS):
         self.degree = degree
         self.extra_terms = tuple(extra_terms)
         self.method = method
@@ -103,6 +108,8 @@ class SparseIdentifier:
         self.taper_s = taper_s
         self.rig = rig
         self.validate = validate
+        self.bias_replicates = bias_replicates
+        self.placements = placements
 
     # ------------------------------------------------------------------------------------------------
     def _optimizer(self):
@@ -128,41 +135,40 @@ class SparseIdentifier:
 
     def _fit_signals(self, sig: StateSignals, timings: dict) -> "SparseIdentifier":
         lib = self.library_
-        v = sig.valid
         t0 = time.perf_counter()
         edges, held = holdout_blocks(sig, self.holdout_fraction, self.holdout_samples)
-        # q2_dot = q1 by construction of the chain, so the second target is q1 itself
-        gram = BlockGram.from_library(lib, (sig.q1[v], sig.q2[v]), sig.input[v][:, None],
-                                      (sig.q1_dot[v], sig.q1[v]), edges)
+        gram = self._gram(sig, edges)
         train, heldout = gram.equations(~held), gram.equations(held) if held.any() else None
         timings["library_gram"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         self.path_ = self._optimizer().fit_path(train)
         timings["path"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        duration = (v.stop - v.start) / sig.fs_hz
-        n_eff = 2 * (sig.band_hz[1] - sig.band_hz[0]) * duration
-        eqs = ["q1_dot", "q2_dot"]
-        self.selections_ = {eq: select(self.path_, e, train, heldout, self.selection, self.tolerance, n_eff,
-                                       self.max_terms) for e, eq in enumerate(eqs)}
-        coefs = {eq: {lib.names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)}
-                 for eq, s in self.selections_.items()}
-        self.standard_errors_ = {eq: self._standard_errors(gram, ~held, train, e, s)
-                                 for e, (eq, s) in enumerate(self.selections_.items())}
-        timings["selection_refit"] = time.perf_counter() - t0
-        self.model_ = SparseModel(coefs, ("q1", "q2"), (sig.input_name,), self.standard_errors_)
+        self.selections_ = self._select(self.path_, train, heldout, sig)
+        timings["selection"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
         self.heldout_rows_ = np.repeat(held, np.diff(edges))
+        # the selection-time fit (training blocks only) is what the held-out validation scores; the
+        # reported coefficients are the kept terms refit on all rows, less the chain's bias
+        # (identify.uncertainty, docs/identification.md section 5)
+        self.training_model_ = SparseModel({eq: {lib.names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)}
+                                            for eq, s in self.selections_.items()}, ("q1", "q2"), (sig.input_name,))
+        coefs, self.standard_errors_, self.uncertainty_ = self._trust(sig, gram, held)
+        timings["refit_uncertainty"] = time.perf_counter() - t0
+        self.model_ = SparseModel(coefs, ("q1", "q2"), (sig.input_name,), self.standard_errors_)
+        validated = self.training_model_
         self.refinement_ = None
-        if self.refine is not None:
+        if self.refine is not None:  # free-run refit of the training fit, reported and validated as such
             t0 = time.perf_counter()
-            refined, self.refinement_ = refine_free_run(self.model_, sig, ~self.heldout_rows_)
-            self.model_ = SparseModel(refined.equations, refined.states, refined.inputs, self.standard_errors_)
+            refined, self.refinement_ = refine_free_run(self.training_model_, sig, ~self.heldout_rows_)
+            self.model_ = validated = SparseModel(refined.equations, refined.states, refined.inputs,
+                                                  self.standard_errors_)
             timings["refine"] = time.perf_counter() - t0
         self.validation_ = None
         if self.validate:
             t0 = time.perf_counter()
             self.validation_, self.simulated_states_, self.simulated_q1_dot_ = validate(
-                self.model_, sig, self.heldout_rows_ if held.any() else np.ones_like(self.heldout_rows_))
+                validated, sig, self.heldout_rows_ if held.any() else np.ones_like(self.heldout_rows_))
             timings["validation"] = time.perf_counter() - t0
         # a fitted model that does not reproduce the motion is kept (a library user may inspect it) but
         # reported as failed: verdict_ = {"status": "ok" | "failed" | "unvalidated", "reason": ...}
@@ -170,15 +176,38 @@ class SparseIdentifier:
         self.timings_ = timings
         return self
 
-    def _standard_errors(self, gram: BlockGram, blocks, train, eq: int, sel) -> dict:
-        """Block sandwich (cluster-robust) standard errors: residuals of a band-limited record are
-        correlated over many samples, so the i.i.d. formula would understate them."""
-        S = np.flatnonzero(sel.support)
-        if S.size == 0:
-            return {}
-        cov = sandwich_covariance(gram, blocks, train.G, S, sel.coef[S], eq)
-        se = np.sqrt(np.maximum(np.diag(cov), 0))
-        return {self.library_.names[j]: float(se[i]) for i, j in enumerate(S)}
+    def _gram(self, sig: StateSignals, edges) -> BlockGram:
+        v = sig.valid  # q2_dot = q1 by construction of the chain, so the second target is q1 itself
+        return BlockGram.from_library(self.library_, (sig.q1[v], sig.q2[v]), sig.input[v][:, None],
+                                      (sig.q1_dot[v], sig.q1[v]), edges)
+
+    def _select(self, path, train, heldout, sig: StateSignals) -> dict:
+        n_eff = 2 * (sig.band_hz[1] - sig.band_hz[0]) * (sig.valid.stop - sig.valid.start) / sig.fs_hz
+        return {eq: select(path, e, train, heldout, self.selection, self.tolerance, n_eff, self.max_terms)
+                for e, eq in enumerate(("q1_dot", "q2_dot"))}
+
+    def _trust(self, sig: StateSignals, gram: BlockGram, held) -> tuple[dict, dict, dict]:
+        """Reported coefficients, standard errors and inclusion probabilities (identify.uncertainty)."""
+        names, eqs = self.library_.names, list(self.selections_)
+        sups = {e: s.support for e, s in enumerate(self.selections_.values())}
+        bias_of = None
+        if self.bias_replicates and getattr(self, "recording_", None) is not None:
+            def bias_of(sups, coefs):
+                return unc.chain_bias(self.recording_, sig, sups, coefs,
+                                      lambda rec: reconstruct_states(rec, sig.band_hz, self.harmonics, self.taper_s),
+                                      lambda s2: self._gram(s2, gram.edges), self.bias_replicates)
+        optimizer = self._optimizer()
+
+        def fit_and_select(train, heldout):
+            return [s.support for s in self._select(optimizer.fit_path(train), train, heldout, sig).values()]
+
+        coefs, var, info = unc.assess(gram, held, sups, bias_of,
+                                      fit_and_select if self.selection == "heldout" else None, self.placements)
+        named = {eqs[e]: {names[j]: j for j in np.flatnonzero(sups[e])} for e in sups}
+        info = unc.name_info(info, eqs, names, sups)
+        return ({eq: {n: float(coefs[e][j]) for n, j in named[eq].items()} for e, eq in enumerate(eqs)},
+                {eq: {n: float(np.sqrt(var[e][j])) for n, j in named[eq].items()} for e, eq in enumerate(eqs)},
+                info)
 
     # ------------------------------------------------------------------------------------------------
     def result(self) -> dict:

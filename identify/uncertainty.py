@@ -1,0 +1,163 @@
+"""What the identified model can be trusted for: reported coefficients, their standard errors, and
+how sure the selection is of each term.
+
+Three things, all on the per-block normal equations (identify.gram), so they cost little beside the
+measurement chain:
+
+1. **Reported coefficients: refit on all rows.** Selection needs held-out blocks, but a weak term
+   (q1*q2^2 of the Table 1 rig) is carried by the few seconds around the jump; whether a held-out
+   block covers them moved its training-only estimate by 0.5-4 % (docs/identification.md section 6).
+   The kept support is refit by least squares on every block, so the reported coefficients do not
+   depend on where the held-out blocks fall. (Validation keeps the training-only fit: identify.identifier.)
+2. **Standard errors** = block sandwich over all blocks (residuals of a band-limited record are
+   correlated, identify.gram.sandwich_covariance) **plus the measurement chain's bias**: the states are
+   integrated from noisy accelerations, so the regressors carry noise correlated with the target's
+   (errors in variables), which biases the least-squares coefficients by a multiple of the noise
+   variance (Table 1 rig, 1.3 mm, 5 % noise: q2 +0.15 %, q2^3 -0.23 %, up to 2 sandwich SE). The bias
+   is estimated by SIMEX (Cook & Stefanski 1994): the raw channels get fresh white noise at their own
+   noise level (estimated from their spectrum above the integration band, where a white sensor noise is
+   all there is), the chain and the refit run again in the same band on the same rows, and the shift of
+   the coefficients, which to first order equals the bias at the recorded noise level, is subtracted.
+   Its Monte Carlo error (replicate spread / sqrt(replicates)) is added to the variance.
+3. **Inclusion probability** of each library term: the fraction of random choices of which blocks are
+   held out (same number of blocks) for which path + selection keep the term. Resampling rows, as
+   PySINDy's ensembles do, perturbs only the sampling noise and understates how much the selection
+   depends on the split; resampling the held-out blocks reruns exactly the decision that was made.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy.signal import welch
+
+from .gram import BlockGram, sandwich_covariance
+from .optimizers.base import least_squares
+
+#: Random held-out placements for the inclusion probabilities (a probability to +-0.1 at worst).
+N_PLACEMENTS = 24
+#: SIMEX replicates of the measurement chain (each: the chain's FFTs and one Gram pass).
+N_REPLICATES = 8
+#: The noise floor is read above this multiple of the band top (past the band edge's roll-off, 1.25 f_hi).
+NOISE_FLOOR_ABOVE = 1.3
+#: ... up to this fraction of Nyquist (anti-alias filters roll off beyond).
+NOISE_FLOOR_BELOW = 0.95
+
+
+def refit_all_rows(gram: BlockGram, support: np.ndarray, eq: int, covariance: bool = True):
+    """(m,) least squares on `support` over every block, and its block sandwich covariance (|S| x |S|;
+    None unless `covariance`)."""
+    everything = np.ones(gram.n_blocks, dtype=bool)
+    ne = gram.equations(everything)
+    coef = least_squares(ne.G, ne.B[:, eq], support)
+    if not covariance:
+        return coef, None
+    S = np.flatnonzero(support)
+    cov = sandwich_covariance(gram, everything, ne.G, S, coef[S], eq) if S.size else np.zeros((0, 0))
+    return coef, cov
+
+
+def white_noise_std(x: np.ndarray, fs_hz: float, band_hz) -> float | None:
+    """Std of a channel's white noise from its Welch spectrum above the integration band (median over
+    NOISE_FLOOR_ABOVE f_hi .. NOISE_FLOOR_BELOW Nyquist, robust to a stray harmonic). None when the band
+    leaves less than a tenth of the spectrum above it to read the floor from."""
+    nyq = fs_hz / 2
+    lo, hi = NOISE_FLOOR_ABOVE * band_hz[1], NOISE_FLOOR_BELOW * nyq
+    if hi - lo < 0.1 * nyq:
+        return None
+    f, p = welch(x - np.mean(x), fs_hz, nperseg=int(min(1024, max(x.size // 8, 64))))
+    sel = (f >= lo) & (f <= hi)
+    if np.count_nonzero(sel) < 8:
+        return None
+    return float(np.sqrt(np.median(p[sel]) * nyq))
+
+
+def chain_bias(recording, sig, supports: dict, coefs: dict, states_of, gram_of, n_replicates: int = N_REPLICATES,
+               seed: int = 0) -> dict | None:
+    """SIMEX estimate of the bias the noisy measurement chain puts into each equation's refit.
+
+    supports, coefs : {equation index: (m,) support, (m,) all-rows coefficients}.
+    states_of(recording) -> StateSignals in the same band; gram_of(sig) -> BlockGram on sig.valid rows.
+    Returns None when a channel's noise floor cannot be read, else {"noise_std": (input, output),
+    "bias": {e: (m,)}, "mc_var": {e: (m,)}, "replicates": n}; bias is what to subtract."""
+    s_in = white_noise_std(recording.input, recording.fs_hz, sig.band_hz)
+    s_out = white_noise_std(recording.output, recording.fs_hz, sig.band_hz)
+    if s_in is None or s_out is None or n_replicates < 2:
+        return None
+    rng = np.random.default_rng(seed)
+    shifts = {e: [] for e in supports}
+    n = recording.input.size
+    for _ in range(n_replicates):
+        noisier = dataclasses.replace(recording, input=recording.input + s_in * rng.standard_normal(n),
+                                      output=recording.output + s_out * rng.standard_normal(n))
+        sig2 = dataclasses.replace(states_of(noisier), valid=sig.valid)
+        g2 = gram_of(sig2)
+        for e, sup in supports.items():
+            shifts[e].append(refit_all_rows(g2, sup, e, covariance=False)[0] - coefs[e])
+    bias = {e: np.mean(d, axis=0) for e, d in shifts.items()}
+    mc_var = {e: np.var(d, axis=0, ddof=1) / n_replicates for e, d in shifts.items()}
+    return {"noise_std": (s_in, s_out), "bias": bias, "mc_var": mc_var, "replicates": n_replicates}
+
+
+def placements(held: np.ndarray, n: int, seed: int = 0) -> list[np.ndarray]:
+    """`n` random held-out masks with as many blocks as `held` (never the given one twice in a row)."""
+    rng = np.random.default_rng(seed)
+    k, nb = int(held.sum()), held.size
+    out = []
+    for _ in range(n):
+        m = np.zeros(nb, dtype=bool)
+        m[rng.choice(nb, size=k, replace=False)] = True
+        out.append(m)
+    return out
+
+
+def inclusion_probabilities(gram: BlockGram, held: np.ndarray, fit_and_select, n: int = N_PLACEMENTS,
+                            seed: int = 0) -> np.ndarray | None:
+    """(p, m) fraction of `n` random held-out placements for which the selection keeps each term.
+
+    fit_and_select(train, heldout) -> sequence of (m,) supports, one per equation (the identifier's own
+    path and rule, so the probability is that of the decision actually made). None without held-out blocks."""
+    if not held.any() or held.all():
+        return None
+    counts = np.zeros((gram.p, gram.m))
+    for mask in placements(held, n, seed):
+        for e, support in enumerate(fit_and_select(gram.equations(~mask), gram.equations(mask))):
+            counts[e] += support
+    return counts / n
+
+
+def assess(gram: BlockGram, held: np.ndarray, supports: dict, bias_of=None, fit_and_select=None,
+           n_placements: int = N_PLACEMENTS):
+    """Reported coefficients {e: (m,)}, their variances {e: (m,)} and what they rest on.
+
+    supports : {equation index: (m,) kept terms}; bias_of(supports, coefs) -> chain_bias(...) or None;
+    fit_and_select : see inclusion_probabilities (None: no inclusion probabilities)."""
+    coefs, var = {}, {}
+    for e, sup in supports.items():
+        coefs[e], cov = refit_all_rows(gram, sup, e)
+        var[e] = np.zeros(sup.size)
+        var[e][sup] = np.maximum(np.diag(cov), 0.0)
+    bias = bias_of(supports, coefs) if bias_of is not None else None
+    if bias is not None:
+        coefs = {e: np.where(supports[e], c - bias["bias"][e], 0.0) for e, c in coefs.items()}
+        var = {e: v + np.where(supports[e], bias["mc_var"][e], 0.0) for e, v in var.items()}
+    p_in = None
+    if fit_and_select is not None and n_placements:
+        p_in = inclusion_probabilities(gram, held, fit_and_select, n_placements)
+    return coefs, var, {"bias": bias, "inclusion": p_in, "placements": n_placements if p_in is not None else 0}
+
+
+def name_info(info: dict, eqs, names, supports: dict) -> dict:
+    """The JSON-ready account of `assess`'s info: by equation and term name."""
+    bias, p_in = info["bias"], info["inclusion"]
+    out = {"coefficients": "kept terms refit on all rows" + (", chain bias removed (SIMEX)" if bias else ""),
+           "chain_bias": None, "inclusion_probability": None, "placements": info["placements"]}
+    if bias is not None:
+        out["chain_bias"] = {"noise_std": {"input": bias["noise_std"][0], "output": bias["noise_std"][1]},
+                             "replicates": bias["replicates"],
+                             **{eqs[e]: {names[j]: float(b[j]) for j in np.flatnonzero(supports[e])}
+                                for e, b in bias["bias"].items()}}
+    if p_in is not None:  # every kept term, and every term some placement kept
+        out["inclusion_probability"] = {eq: {n: float(p_in[e, j]) for j, n in enumerate(names)
+                                             if p_in[e, j] > 0 or supports[e][j]} for e, eq in enumerate(eqs)}
+    return out
