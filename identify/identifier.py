@@ -227,6 +227,8 @@ class SparseIdentifier:
             "reason": self.verdict_["reason"],
             "model": self.model_.to_dict()["model"],
             "standard_errors": self.standard_errors_,
+            "inclusion_probability": self.uncertainty_["inclusion_probability"],
+            "uncertainty": {k: v for k, v in self.uncertainty_.items() if k != "inclusion_probability"},
             "states": {"q1": "relative velocity" if sig.input_name == "zdd" else "output derivative",
                        "q2": "relative displacement" if sig.input_name == "zdd" else "output"},
             "inputs": [sig.input_name],

@@ -36,8 +36,9 @@ from .optimizers.base import least_squares
 
 #: Random held-out placements for the inclusion probabilities (a probability to +-0.1 at worst).
 N_PLACEMENTS = 24
-#: SIMEX replicates of the measurement chain (each: the chain's FFTs and one Gram pass).
-N_REPLICATES = 8
+#: SIMEX replicates of the measurement chain (each: the chain's FFTs and one Gram pass). The replicates' spread
+#: is also a variance estimate; 16 put its relative error near 1/sqrt(2 x 15) = 18 %.
+N_REPLICATES = 16
 #: The noise floor is read above this multiple of the band top (past the band edge's roll-off, 1.25 f_hi).
 NOISE_FLOOR_ABOVE = 1.3
 #: ... up to this fraction of Nyquist (anti-alias filters roll off beyond).
@@ -95,8 +96,9 @@ def chain_bias(recording, sig, supports: dict, coefs: dict, states_of, gram_of, 
         for e, sup in supports.items():
             shifts[e].append(refit_all_rows(g2, sup, e, covariance=False)[0] - coefs[e])
     bias = {e: np.mean(d, axis=0) for e, d in shifts.items()}
-    mc_var = {e: np.var(d, axis=0, ddof=1) / n_replicates for e, d in shifts.items()}
-    return {"noise_std": (s_in, s_out), "bias": bias, "mc_var": mc_var, "replicates": n_replicates}
+    spread = {e: np.var(d, axis=0, ddof=1) for e, d in shifts.items()}
+    return {"noise_std": (s_in, s_out), "bias": bias, "spread_var": spread,
+            "mc_var": {e: v / n_replicates for e, v in spread.items()}, "replicates": n_replicates}
 
 
 def placements(held: np.ndarray, n: int, seed: int = 0) -> list[np.ndarray]:
@@ -140,7 +142,9 @@ def assess(gram: BlockGram, held: np.ndarray, supports: dict, bias_of=None, fit_
     bias = bias_of(supports, coefs) if bias_of is not None else None
     if bias is not None:
         coefs = {e: np.where(supports[e], c - bias["bias"][e], 0.0) for e, c in coefs.items()}
-        var = {e: v + np.where(supports[e], bias["mc_var"][e], 0.0) for e, v in var.items()}
+        # the larger of the sandwich and the replicates' spread, plus the bias estimate's own error
+        var = {e: np.maximum(v, np.where(supports[e], bias["spread_var"][e], 0.0))
+               + np.where(supports[e], bias["mc_var"][e], 0.0) for e, v in var.items()}
     p_in = None
     if fit_and_select is not None and n_placements:
         p_in = inclusion_probabilities(gram, held, fit_and_select, n_placements)

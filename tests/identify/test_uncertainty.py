@@ -1,0 +1,154 @@
+"""Identification you can trust (issue 11), against simulated rigs with known coefficients:
+standard errors that cover the truth, inclusion probabilities that tell real terms from spurious ones,
+and reported coefficients that do not depend on where the held-out blocks fall."""
+import numpy as np
+import pytest
+
+from identify.gram import BlockGram, sandwich_covariance
+from identify.identifier import SparseIdentifier, holdout_blocks
+from identify.optimizers.base import least_squares
+from identify.uncertainty import white_noise_std
+from identify.validation import validate
+from sim.rig import RigParameters
+from sim.sensors import Accelerometer
+from sim.synth import run_sweep
+from sim.sweep import SineSweep
+
+WEAK = "q1*q2^2"
+TABLE1_WEAK = 1.1620e4
+
+
+def _sensors(noise):
+    return dict(table_sensor=Accelerometer(noise_fraction=noise), mass_sensor=Accelerometer(noise_fraction=noise))
+
+
+def _random_case(rng):
+    """The Table 1 rig or the design rig with a random pre-stress and damping; 0.8-1.3 mm; noise
+    log-uniform 0.3-6 % on both accelerometers."""
+    if rng.random() < 0.5:
+        rig = RigParameters.paper_table1()
+    else:
+        rig = RigParameters.design(prestress_m=rng.uniform(1.5e-3, 2.2e-3),
+                                   damping_ns_per_m=3.7294 * 0.49 * rng.uniform(0.7, 1.5))
+    return rig, rng.uniform(0.8, 1.3), float(np.exp(rng.uniform(np.log(0.003), np.log(0.06))))
+
+
+def test_standard_errors_cover_the_truth_on_randomised_rigs():
+    """Truth within 2 SE for ~95 % and 3 SE for ~99 % of terms x cases. 24 cases give ~110 trials,
+    correlated within a case; at a true coverage of 95 % / 99 % the binomial 3-sigma lower bounds for
+    110 independent trials are 0.89 / 0.96, so we ask 0.88 / 0.96. The SE must not be inflated either:
+    at most 90 % within 1 SE (Gaussian: 68 %; an SE twice too large gives 95 %). The estimator before
+    issue 11 gave 0.80 / 0.93 on the same cases (benchmarks/coverage.py prints both)."""
+    rng = np.random.default_rng(11)
+    z = []
+    for _ in range(24):
+        rig, amp, noise = _random_case(rng)
+        run = run_sweep(rig, SineSweep(1, 20, 30, amp), fs_hz=2048, seed=int(rng.integers(1 << 31)),
+                        **_sensors(noise))
+        truth = run.truth["model"]["q1_dot"]
+        ident = SparseIdentifier(validate=False, placements=0).fit(run.recording)
+        se = ident.standard_errors_["q1_dot"]
+        z += [abs(c - truth.get(t, 0.0)) / se[t] for t, c in ident.model_.equations["q1_dot"].items()]
+    z = np.array(z)
+    assert z.size >= 100
+    assert np.mean(z < 2) >= 0.88 and np.mean(z < 3) >= 0.96, (np.mean(z < 2), np.mean(z < 3), z.max())
+    assert np.mean(z < 1) <= 0.90, np.mean(z < 1)
+
+
+@pytest.fixture(scope="module")
+def issue_case():
+    """The issue's case: Table 1 rig, 1-20 Hz, 60 s, 1.3 mm, 0.5 % noise, seed 1 (q1*q2^2 was 5.5 SE off)."""
+    run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 60, 1.3), seed=1, **_sensors(0.005))
+    return run, SparseIdentifier().fit(run.recording)
+
+
+def test_the_issue_case_is_covered(issue_case):
+    run, ident = issue_case
+    truth = run.truth["model"]["q1_dot"]
+    assert set(ident.model_.equations["q1_dot"]) == set(truth)
+    for t, c in ident.model_.equations["q1_dot"].items():
+        assert abs(c - truth[t]) < 3 * ident.standard_errors_["q1_dot"][t], t
+
+
+def test_chain_bias_is_measured_and_removed():
+    """At 5 % noise the integrated states' noise biases q2 and q2^3 (errors in variables). The noise
+    floors read from the spectra match the sensors' true noise, and the bias estimate removes most of the
+    bias: mean over 4 records of the error with and without the correction."""
+    rig = RigParameters.paper_table1()
+    before, after = [], []
+    for seed in range(4):
+        run = run_sweep(rig, SineSweep(1, 20, 30, 1.3), seed=seed, **_sensors(0.05))
+        ident = SparseIdentifier(validate=False, placements=0).fit(run.recording)
+        cb = ident.uncertainty_["chain_bias"]
+        assert cb["noise_std"]["input"] == pytest.approx(0.05 * np.std(run.table_acc_true), rel=0.05)
+        assert cb["noise_std"]["output"] == pytest.approx(0.05 * np.std(run.mass_acc_true), rel=0.05)
+        truth, eq = run.truth["model"]["q1_dot"], ident.model_.equations["q1_dot"]
+        after.append([eq[t] / truth[t] - 1 for t in ("q2", "q2^3")])
+        before.append([(eq[t] + cb["q1_dot"][t]) / truth[t] - 1 for t in ("q2", "q2^3")])
+    before, after = np.mean(before, 0), np.mean(after, 0)
+    assert np.all(np.abs(before) > 5e-4), before  # a bias worth removing: > 0.05 %
+    assert np.all(np.abs(after) < 0.5 * np.abs(before)), (before, after)
+
+
+def test_white_noise_floor_needs_room_above_the_band():
+    rng = np.random.default_rng(0)
+    x = 0.1 * rng.standard_normal(20000)
+    assert white_noise_std(x, 1000.0, (1.0, 100.0)) == pytest.approx(0.1, rel=0.05)
+    assert white_noise_std(x, 1000.0, (1.0, 400.0)) is None  # band top 400 Hz x 1.3 is past 0.9 Nyquist
+
+
+def test_inclusion_probabilities_tell_real_from_spurious_terms(issue_case):
+    run, ident = issue_case
+    p = ident.result()["inclusion_probability"]
+    truth = run.truth["model"]["q1_dot"]
+    for term in ident.library_.names:
+        if term in truth:
+            assert p["q1_dot"][term] >= 0.9, term
+        else:
+            assert p["q1_dot"].get(term, 0.0) <= 0.25, term
+    assert p["q2_dot"] == {"q1": 1.0}
+
+
+def test_reported_coefficients_do_not_depend_on_the_heldout_placement():
+    """Table 1 rig, a 40 s sweep followed by 150 s of rest: the default blocks take a large share of the
+    resonance region out of the training fit, whose q1*q2^2 came out 6 % off (docs/identification.md
+    section 6). The reported coefficients are refit on all rows: the weak term spreads <= 1 % over
+    held-out fractions 10-30 % and the paper's split, and lies within 1 % of the truth."""
+    run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 40, 1.3), fs_hz=1024, settle_s=150, seed=0,
+                    table_sensor=Accelerometer(noise_fraction=0, noise_ms2=0.02),
+                    mass_sensor=Accelerometer(noise_fraction=0, noise_ms2=0.02))
+    weak, training = [], []
+    for kw in ({"holdout_fraction": 0.1}, {"holdout_fraction": 0.2}, {"holdout_fraction": 0.3},
+               {"holdout_samples": 15000}):
+        ident = SparseIdentifier(validate=False, placements=0, **kw).fit(run.recording)
+        weak.append(ident.model_.equations["q1_dot"][WEAK])
+        training.append(ident.training_model_.equations["q1_dot"].get(WEAK, 0.0))
+    weak = np.array(weak)
+    assert np.ptp(weak) <= 0.01 * TABLE1_WEAK, weak
+    assert np.all(np.abs(weak / TABLE1_WEAK - 1) < 0.01), weak
+    assert np.ptp(training) > 0.01 * TABLE1_WEAK, training  # the lottery the refit removes
+
+
+def test_validation_scores_a_fit_that_never_saw_the_heldout_rows(issue_case):
+    run, ident = issue_case
+    sig, held_rows = ident.states_, ident.heldout_rows_
+    edges, held = holdout_blocks(sig)
+    v = sig.valid
+    gram = BlockGram.from_library(ident.library_, (sig.q1[v], sig.q2[v]), sig.input[v][:, None],
+                                  (sig.q1_dot[v], sig.q1[v]), edges)
+    train = gram.equations(~held)
+    names = ident.library_.names
+    sup = np.array([n in ident.model_.equations["q1_dot"] for n in names])
+    x = least_squares(train.G, train.B[:, 0], sup)
+    assert ident.training_model_.equations["q1_dot"] == pytest.approx({n: x[j] for j, n in enumerate(names) if sup[j]})
+    assert ident.model_.equations["q1_dot"] != ident.training_model_.equations["q1_dot"]
+    again = validate(ident.training_model_, sig, held_rows)[0]
+    assert again["heldout"] == ident.validation_["heldout"]
+    # the reported standard errors are at least the all-rows block sandwich (never the training one)
+    everything = np.ones(gram.n_blocks, bool)
+    ne = gram.equations(everything)
+    xa = least_squares(ne.G, ne.B[:, 0], sup)
+    S = np.flatnonzero(sup)
+    sand = np.sqrt(np.diag(sandwich_covariance(gram, everything, ne.G, S, xa[S], 0)))
+    se = ident.standard_errors_["q1_dot"]
+    assert all(se[names[j]] >= 0.999 * sand[i] for i, j in enumerate(S))
