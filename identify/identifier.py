@@ -201,8 +201,7 @@ class SparseIdentifier:
         def fit_and_select(train, heldout):
             return [s.support for s in self._select(optimizer.fit_path(train), train, heldout, sig).values()]
 
-        coefs, var, info = unc.assess(gram, held, sups, bias_of,
-                                      fit_and_select if self.selection == "heldout" else None, self.placements)
+        coefs, var, info = unc.assess(gram, held, sups, bias_of, fit_and_select, self.placements)
         named = {eqs[e]: {names[j]: j for j in np.flatnonzero(sups[e])} for e in sups}
         info = unc.name_info(info, eqs, names, sups)
         return ({eq: {n: float(coefs[e][j]) for n, j in named[eq].items()} for e, eq in enumerate(eqs)},

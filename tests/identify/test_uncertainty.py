@@ -4,7 +4,7 @@ and reported coefficients that do not depend on where the held-out blocks fall."
 import numpy as np
 import pytest
 
-from identify.gram import BlockGram, sandwich_covariance
+from identify.gram import BlockGram
 from identify.identifier import SparseIdentifier, holdout_blocks
 from identify.optimizers.base import least_squares
 from identify.uncertainty import white_noise_std
@@ -113,14 +113,13 @@ def test_reported_coefficients_do_not_depend_on_the_heldout_placement():
     """Table 1 rig, a 40 s sweep followed by 150 s of rest: the default blocks take a large share of the
     resonance region out of the training fit, whose q1*q2^2 came out 6 % off (docs/identification.md
     section 6). The reported coefficients are refit on all rows: the weak term spreads <= 1 % over
-    held-out fractions 10-30 % and the paper's split, and lies within 1 % of the truth."""
+    held-out fractions of 10-30 % (each moves the blocks), and lies within 1 % of the truth."""
     run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 40, 1.3), fs_hz=1024, settle_s=150, seed=0,
                     table_sensor=Accelerometer(noise_fraction=0, noise_ms2=0.02),
                     mass_sensor=Accelerometer(noise_fraction=0, noise_ms2=0.02))
     weak, training = [], []
-    for kw in ({"holdout_fraction": 0.1}, {"holdout_fraction": 0.2}, {"holdout_fraction": 0.3},
-               {"holdout_samples": 15000}):
-        ident = SparseIdentifier(validate=False, placements=0, **kw).fit(run.recording)
+    for fraction in (0.1, 0.2, 0.3):
+        ident = SparseIdentifier(validate=False, placements=0, holdout_fraction=fraction).fit(run.recording)
         weak.append(ident.model_.equations["q1_dot"][WEAK])
         training.append(ident.training_model_.equations["q1_dot"].get(WEAK, 0.0))
     weak = np.array(weak)
@@ -144,11 +143,3 @@ def test_validation_scores_a_fit_that_never_saw_the_heldout_rows(issue_case):
     assert ident.model_.equations["q1_dot"] != ident.training_model_.equations["q1_dot"]
     again = validate(ident.training_model_, sig, held_rows)[0]
     assert again["heldout"] == ident.validation_["heldout"]
-    # the reported standard errors are at least the all-rows block sandwich (never the training one)
-    everything = np.ones(gram.n_blocks, bool)
-    ne = gram.equations(everything)
-    xa = least_squares(ne.G, ne.B[:, 0], sup)
-    S = np.flatnonzero(sup)
-    sand = np.sqrt(np.diag(sandwich_covariance(gram, everything, ne.G, S, xa[S], 0)))
-    se = ident.standard_errors_["q1_dot"]
-    assert all(se[names[j]] >= 0.999 * sand[i] for i, j in enumerate(S))
