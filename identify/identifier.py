@@ -193,9 +193,8 @@ class SparseIdentifier:
         bias_of = None
         if self.bias_replicates and getattr(self, "recording_", None) is not None:
             def bias_of(sups, coefs):
-                return unc.chain_bias(self.recording_, sig, sups, coefs,
-                                      lambda rec: reconstruct_states(rec, sig.band_hz, self.harmonics, self.taper_s),
-                                      lambda s2: self._gram(s2, gram.edges), self.bias_replicates)
+                return unc.chain_bias(self.recording_, sig, sups, coefs, lambda s2: self._gram(s2, gram.edges),
+                                      self.bias_replicates)
         optimizer = self._optimizer()
 
         def fit_and_select(train, heldout):
