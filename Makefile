@@ -34,7 +34,7 @@ test: $(STAMP) tools
 bench: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[bench]'
 	$(PY) benchmarks/identify_speed.py
-	$(PY) benchmarks/silverbox.py --data ../shared/data/silverbox/SNLS80mV.mat
+	$(PY) benchmarks/silverbox.py
 	$(PY) benchmarks/stream_throughput.py
 	$(PY) benchmarks/daq_throughput.py
 	$(PY) benchmarks/service_latency.py

@@ -25,10 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.fft import irfft, next_fast_len, rfft, rfftfreq
-from scipy.signal import welch
+from scipy.stats import chi2
 
 from .errors import IdentificationError
 from .recording import Recording
+from .spectral import welch_psd
 
 #: Band edge roll-off as a fraction of the edge frequency (lower: down to f_lo/2; upper: up to 1.25 f_hi).
 EDGE_FRACTION = 0.5
@@ -55,10 +56,16 @@ class StateSignals:
     valid: slice
     input_name: str
     taper_n: int = 0
+    #: the displacement below the band (m), when identified (identify.inband.slow_displacement)
+    q2_offset: np.ndarray | None = None
 
     @property
     def states(self) -> np.ndarray:
-        return np.column_stack([self.q1, self.q2])
+        """The states a model is written in: q1, and q2 plus the displacement below the band when it
+        is known (accelerometers miss the static offset an even force produces; the terms of a rig's
+        force are those of the true displacement)."""
+        q2 = self.q2 if self.q2_offset is None else self.q2 + self.q2_offset
+        return np.column_stack([self.q1, q2])
 
     def band_limit(self, x: np.ndarray) -> np.ndarray:
         """Pass a signal on the valid rows (a simulation, a library column) through the same band as the
@@ -66,15 +73,25 @@ class StateSignals:
         what lies outside the band (e.g. the static offset an asymmetric spring produces)."""
         return spectral_op(x, self.fs_hz, self.band_hz, 0, self.taper_n)
 
+    def band_limit_many(self, xs) -> list[np.ndarray]:
+        """band_limit of several equally long signals, their transforms batched (a few at a time, so a
+        long record's padded spectra stay within a few hundred MB)."""
+        xs = list(xs)
+        out = []
+        for a in range(0, len(xs), 4):
+            group = xs[a:a + 4]
+            out += spectral_ops(group, self.fs_hz, self.band_hz, [(i, 0) for i in range(len(group))], self.taper_n)
+        return out
+
 
 def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARGIN_DB) -> tuple[float, float]:
     """Frequency range (Hz) where the signal's PSD stands `margin_db` above its noise floor."""
     n = x.size
     nper = int(min(n, 2 ** int(np.ceil(np.log2(fs_hz * 8.0)))))  # ~0.125 Hz resolution
     nper = max(min(nper, n // 2), 16)
-    f, p = welch(x, fs_hz, nperseg=nper, detrend="linear")
+    f, p = welch_psd(x, fs_hz, nper)  # = scipy.signal.welch(..., detrend="linear"), 3x faster
     skip = 3  # the lowest bins hold the window's leakage of offsets and drifts, not excitation
-    floor = np.percentile(p[skip:], 10)
+    floor = np.percentile(p[skip:], 10) / _low_decile_of_noise(n, nper)
     above = np.flatnonzero(p[skip:] > floor * 10 ** (margin_db / 10)) + skip
     if above.size == 0:
         raise IdentificationError("the input shows no excited frequency band above its noise floor")
@@ -90,48 +107,99 @@ def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARG
     return float(max(f[lo_bin] - df, df)), float(min(f[hi_bin] + df, fs_hz / 2))
 
 
+def _low_decile_of_noise(n: int, nper: int) -> float:
+    """The 10th percentile of a Welch estimate of white noise, as a fraction of its mean.
+
+    The floor is the spectrum's 10th percentile (robust to how many bins the excitation fills) divided
+    by this, i.e. the noise level itself. A noise bin of a Welch estimate over K segments (Hann, 50 %
+    overlap) is chi-square with ~2K / (1 + 2 c^2 (K - 1) / K) degrees of freedom, c = 0.167: with
+    K = 14 (60 s at 2048 Hz) its low decile is 0.67 of the mean, with K = 3 (a 13-15 s record) 0.37,
+    so the undivided percentile put the threshold at 3.7x instead of 10x the noise on short records:
+    noise bins crossed it and, merged across MAX_GAP_BINS, pulled f_lo to the spectrum's bottom
+    (0.31 Hz for a response that cannot clear its noise below ~1.5 Hz), leaving the record too short for
+    its own band."""
+    k = 1 + max(n - nper, 0) // (nper - nper // 2)
+    dof = 2 * k / (1 + 2 * 0.167**2 * (k - 1) / k)
+    return float(chi2.ppf(0.1, dof) / dof)
+
+
 def band_gain(f: np.ndarray, band: tuple[float, float], fs_hz: float) -> np.ndarray:
-    """1 inside [f_lo, f_hi], half-cosine roll-off outside, 0 beyond."""
+    """1 inside [f_lo, f_hi], half-cosine roll-off outside, 0 beyond (the cosines evaluated on the
+    roll-off bins only: on a record's million FFT bins they were most of the operator's cost)."""
     lo, hi = band
+    f = np.asarray(f, dtype=float)
     g = np.ones_like(f)
     if lo > 0:
         a = lo * (1 - EDGE_FRACTION)
-        g = np.where(f < lo, 0.5 - 0.5 * np.cos(np.pi * np.clip((f - a) / (lo - a), 0, 1)), g)
+        below = f < lo
+        g[below] = 0.5 - 0.5 * np.cos(np.pi * np.clip((f[below] - a) / (lo - a), 0, 1))
     top = min(hi * (1 + EDGE_FRACTION / 2), fs_hz / 2)
     if top > hi:
-        g = np.where(f > hi, 0.5 + 0.5 * np.cos(np.pi * np.clip((f - hi) / (top - hi), 0, 1)), g)
+        above = f > hi
+        g[above] = 0.5 + 0.5 * np.cos(np.pi * np.clip((f[above] - hi) / (top - hi), 0, 1))
     return g
 
 
 def spectral_op(x: np.ndarray, fs_hz: float, band: tuple[float, float], power: int, taper_n: int) -> np.ndarray:
     """Band-limit x and multiply its spectrum by (j w)^power (power < 0 integrates)."""
-    x = np.asarray(x, dtype=float)
-    n = x.size
-    if power < 0:
-        # integrating: only the mean goes. A line removed from an acceleration is a cubic removed from
-        # the displacement, which leaks into the band; the taper alone makes the edges continuous.
-        line = np.full(n, x.mean())
-    else:
-        # differentiating/filtering: the line's own derivative is known exactly and is restored below
-        line = x[0] + (x[-1] - x[0]) * np.arange(n) / max(n - 1, 1)
-    xd = x - line
-    if taper_n > 0:
-        ramp = 0.5 - 0.5 * np.cos(np.pi * (np.arange(taper_n) + 0.5) / taper_n)
-        xd[:taper_n] *= ramp
-        xd[n - taper_n:] *= ramp[::-1]
-    nfft = next_fast_len(2 * n, real=True)
+    return spectral_ops([x], fs_hz, band, [(0, power)], taper_n)[0]
+
+
+def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, taper_n: int) -> list[np.ndarray]:
+    """spectral_op for several (signal index, power) `requests` on equally long `signals`, with each
+    detrended signal transformed once: integrals of one signal share its spectrum, and all forward
+    and all inverse transforms go through one batched rfft / irfft each."""
+    signals = [np.asarray(x, dtype=float) for x in signals]
+    n = signals[0].size
+    # integrating: only the mean goes. A line removed from an acceleration is a cubic removed from
+    # the displacement, which leaks into the band; the taper alone makes the edges continuous.
+    # Differentiating/filtering: the straight line through the end samples, whose own derivative is
+    # known exactly and is restored below when DC is in the band.
+    rows = sorted({(i, power < 0) for i, power in requests})
+    lines = []
+    xd = np.empty((len(rows), n))
+    ramp = 0.5 - 0.5 * np.cos(np.pi * (np.arange(taper_n) + 0.5) / taper_n) if taper_n > 0 else None
+    for r, (i, integrating) in enumerate(rows):
+        x = signals[i]
+        line = np.full(n, x.mean()) if integrating else x[0] + (x[-1] - x[0]) * np.arange(n) / max(n - 1, 1)
+        lines.append(line)
+        np.subtract(x, line, out=xd[r])
+        if taper_n > 0:
+            xd[r, :taper_n] *= ramp
+            xd[r, n - taper_n:] *= ramp[::-1]
+    nfft = next_fast_len(2 * n, real=True)  # zero-padded: no circular wrap-around of the integrals
+    spectra = rfft(xd, nfft, axis=-1)
+    del xd
     f = rfftfreq(nfft, 1.0 / fs_hz)
-    jw = 2j * np.pi * f
-    h = band_gain(f, band, fs_hz).astype(complex)
-    if power:
+    g = band_gain(f, band, fs_hz)
+    out = np.empty((len(requests), spectra.shape[1]), dtype=complex)
+    for k, (i, power) in enumerate(requests):
+        h = _band_response(f, g, band, power)
+        np.multiply(spectra[rows.index((i, power < 0))], h, out=out[k])
+    del spectra
+    y = irfft(out, nfft, axis=-1)[:, :n]
+    results = []
+    for k, (i, power) in enumerate(requests):
+        yk = y[k].copy()
+        if band[0] == 0 and power in (0, 1):
+            # DC is in the band: the detrending line is signal, restore it (or its slope)
+            x = signals[i]
+            yk += lines[rows.index((i, False))] if power == 0 else (x[-1] - x[0]) * fs_hz / max(n - 1, 1)
+        results.append(yk)
+    return results
+
+
+def _band_response(f: np.ndarray, g: np.ndarray, band: tuple[float, float], power: int) -> np.ndarray:
+    """Band gain g times (j w)^power, w = 2 pi f, as g w^power times the constant j^power (one real
+    array and one exact rotation instead of a complex power of every bin); 0 at DC unless filtering
+    with DC in the band."""
+    if power == 0:
+        h = g.astype(complex)
+    else:
         with np.errstate(divide="ignore", invalid="ignore"):
-            h *= jw ** power
-        h[0] = 0.0 if power < 0 or band[0] > 0 else h[0]
-    y = irfft(rfft(xd, nfft) * h, nfft)[:n]
-    if band[0] == 0 and power in (0, 1):
-        # DC is in the band: the detrending line is signal, restore it (or its slope)
-        y += line if power == 0 else (x[-1] - x[0]) * fs_hz / max(n - 1, 1)
-    return y
+            h = (g * (2.0 * np.pi * f) ** power) * (1j ** power)
+    h[0] = 0.0 if power < 0 or band[0] > 0 else g[0] * (power == 0)
+    return h
 
 
 def reconstruct_states(rec: Recording, band_hz: tuple[float, float] | None = None, harmonics: float = 5.0,
@@ -172,16 +240,10 @@ def reconstruct_states(rec: Recording, band_hz: tuple[float, float] | None = Non
     band = (lo, hi)
     if rec.layout == "base":
         qdd = rec.output - rec.input  # relative acceleration q'' = x'' - z''
-        q1 = spectral_op(qdd, fs, band, -1, taper_n)
-        q2 = spectral_op(qdd, fs, band, -2, taper_n)
-        q1_dot = spectral_op(qdd, fs, band, 0, taper_n)
-        u = spectral_op(rec.input, fs, band, 0, taper_n)
+        q1, q2, q1_dot, u = spectral_ops([qdd, rec.input], fs, band, [(0, -1), (0, -2), (0, 0), (1, 0)], taper_n)
     else:
-        y = rec.output
-        q2 = spectral_op(y, fs, band, 0, taper_n)
-        q1 = spectral_op(y, fs, band, 1, taper_n)
-        q1_dot = spectral_op(y, fs, band, 2, taper_n)
-        u = spectral_op(rec.input, fs, band, 0, taper_n)
+        q2, q1, q1_dot, u = spectral_ops([rec.output, rec.input], fs, band, [(0, 0), (0, 1), (0, 2), (1, 0)],
+                                         taper_n)
     return StateSignals(q1, q2, q1_dot, u, fs, band, slice(trims[0], rec.n_samples - trims[1]),
                         "zdd" if rec.layout == "base" else "u", taper_n)
 

@@ -126,7 +126,7 @@ class DiscrepancyAnalysis:
         # whereas a sharp sign(q1) against a band-limited q'' is attenuated (Coulomb level at 0.1 N:
         # 83 % of truth with raw columns, 97 % band-limited). The library is small, so it is built whole.
         cols = lib.evaluate((sig.q1[v], sig.q2[v]), sig.input[v][:, None])
-        AY = np.column_stack([sig.band_limit(c) for c in cols.T] + [sig.q1_dot[v]])
+        AY = np.column_stack(sig.band_limit_many(cols.T) + [sig.q1_dot[v]])
         gram = BlockGram(AY, 1, edges)
         train, heldout = gram.equations(~held), gram.equations(held)
         b = train.B[:, 0]

@@ -23,10 +23,13 @@ import numpy as np
 from .chain import StateSignals, reconstruct_states
 from .errors import IdentificationError
 from . import uncertainty as unc
+from .budget import choose_budget
 from .gram import BlockGram
+from .inband import band_limited_gram, carry_offset, has_even_force
 from .library import Library
 from .model import SparseModel
 from .optimizers import ADMMLasso, STLSQ
+from .optimizers.base import least_squares
 from .physical import RigConstants, physical_parameters
 from .recording import Recording
 from .refine import refine_free_run
@@ -34,6 +37,8 @@ from .selection import DEFAULT_TOLERANCE, select
 from .validation import model_verdict, validate
 
 N_BLOCKS = 50
+BUDGETS = ("equation-error", "free-run")
+N_REPORTED = 10  # budget candidates listed in the result
 
 
 def holdout_blocks(sig: StateSignals, fraction: float = 0.2, first_samples: int | None = None):
@@ -71,6 +76,10 @@ class SparseIdentifier:
         unit-RMS columns (True) or raw coefficients as in the paper's Table 2 (False).
     selection, tolerance : rule ("heldout", "paper", "bic") and its tolerance (None: the rule's default).
     max_terms : optional budget of terms per equation (least costly terms eliminated beyond it).
+    budget : how the budget's terms are chosen: "equation-error" (default; backward elimination by the
+        one-step acceleration error, identify.selection) or "free-run" (q1_dot's terms by the free-run
+        error of candidates refit on it, estimation data only, identify.budget; the kept terms come
+        with their free-run refit coefficients, as with refine="free-run"; slower: minutes on Silverbox).
     refine : None, or "free-run" to refit the kept coefficients on the free-run simulation error of the
         fit samples (identify.refine); standard errors are then those of the equation-error fit.
     holdout_fraction : share of samples held out in interleaved blocks; holdout_samples : hold out
@@ -86,7 +95,7 @@ class SparseIdentifier:
     def __init__(self, degree: int = 4, extra_terms=(), method: str = "admm", n_lambdas: int = 100,
                  lambda_eps: float = 1e-5, threshold: float | None = None, normalize_threshold: bool = True,
                  selection: str = "heldout", tolerance: float | None = None, max_terms: int | None = None,
-                 refine: str | None = None, holdout_fraction: float = 0.2,
+                 budget: str = "equation-error", refine: str | None = None, holdout_fraction: float = 0.2,
                  holdout_samples: int | None = None, band_hz=None, harmonics: float = 5.0,
                  taper_s: float | None = None, rig: RigConstants | None = None, validate: bool = True,
                  bias_replicates: int = unc.N_REPLICATES, placements: int = unc.N_PLACEMENTS):
@@ -100,6 +109,7 @@ class SparseIdentifier:
         self.selection = selection
         self.tolerance = tolerance
         self.max_terms = max_terms
+        self.budget = budget
         self.refine = refine
         self.holdout_fraction = holdout_fraction
         self.holdout_samples = holdout_samples
@@ -123,6 +133,8 @@ class SparseIdentifier:
     def fit(self, recording: Recording) -> "SparseIdentifier":
         if self.refine not in (None, "free-run"):  # refused before any work, like an unknown method
             raise IdentificationError(f"unknown refine {self.refine!r} (free-run)")
+        if self.budget not in BUDGETS:
+            raise IdentificationError(f"unknown budget {self.budget!r} ({', '.join(BUDGETS)})")
         self._optimizer()
         timings = {}
         t0 = time.perf_counter()
@@ -135,30 +147,38 @@ class SparseIdentifier:
 
     def _fit_signals(self, sig: StateSignals, timings: dict) -> "SparseIdentifier":
         lib = self.library_
-        t0 = time.perf_counter()
         edges, held = holdout_blocks(sig, self.holdout_fraction, self.holdout_samples)
+        t0 = time.perf_counter()
         gram = self._gram(sig, edges)
-        train, heldout = gram.equations(~held), gram.equations(held) if held.any() else None
         timings["library_gram"] = time.perf_counter() - t0
+        train, heldout, coefs = self._fit_pass(sig, gram, held, timings)
+        # The terms are those of the true displacement: when the selected force has an even part (an
+        # asymmetric spring) it rectifies into a displacement below the band the chain cannot see; find
+        # it (identify.inband) and fit again on q2 + offset. An odd force (the textbook rig) needs none.
         t0 = time.perf_counter()
-        self.path_ = self._optimizer().fit_path(train)
-        timings["path"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        self.selections_ = self._select(self.path_, train, heldout, sig)
-        timings["selection"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
+        self.offset_ = {"carried": False, "passes": 0}
+        if sig.band_hz[0] > 0 and has_even_force(SparseModel(coefs, ("q1", "q2"), (sig.input_name,)), sig):
+            sig, gram, self.offset_ = carry_offset(lib, sig, edges, ~held)
+            train, heldout, coefs = self._fit_pass(sig, gram, held, timings)
+        timings["offset"] = time.perf_counter() - t0
+        self.states_ = sig
         self.heldout_rows_ = np.repeat(held, np.diff(edges))
+        coefs = self._budget_by_free_run(sig, train, held, coefs, timings)
+        t0 = time.perf_counter()
         # the selection-time fit (training blocks only) is what the held-out validation scores; the
         # reported coefficients are the kept terms refit on all rows, less the chain's bias
         # (identify.uncertainty, docs/identification.md section 5)
-        self.training_model_ = SparseModel({eq: {lib.names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)}
-                                            for eq, s in self.selections_.items()}, ("q1", "q2"), (sig.input_name,))
-        coefs, self.standard_errors_, self.uncertainty_ = self._trust(sig, gram, held)
+        self.training_model_ = SparseModel(coefs, ("q1", "q2"), (sig.input_name,))
+        reported, self.standard_errors_, self.uncertainty_ = self._trust(sig, gram, held)
         timings["refit_uncertainty"] = time.perf_counter() - t0
-        self.model_ = SparseModel(coefs, ("q1", "q2"), (sig.input_name,), self.standard_errors_)
+        self.model_ = SparseModel(reported, ("q1", "q2"), (sig.input_name,), self.standard_errors_)
         validated = self.training_model_
         self.refinement_ = None
-        if self.refine is not None:  # free-run refit of the training fit, reported and validated as such
+        if self.budget_ is not None:  # chosen after its free-run refit: that model is reported and validated
+            self.model_ = validated = SparseModel(self.budget_.model.equations, ("q1", "q2"), (sig.input_name,),
+                                                  self.standard_errors_)
+            self.refinement_ = self.budget_.refinement
+        elif self.refine is not None:  # free-run refit of the training fit, reported and validated as such
             t0 = time.perf_counter()
             refined, self.refinement_ = refine_free_run(self.training_model_, sig, ~self.heldout_rows_)
             self.model_ = validated = SparseModel(refined.equations, refined.states, refined.inputs,
@@ -172,19 +192,64 @@ class SparseIdentifier:
             timings["validation"] = time.perf_counter() - t0
         # a fitted model that does not reproduce the motion is kept (a library user may inspect it) but
         # reported as failed: verdict_ = {"status": "ok" | "failed" | "unvalidated", "reason": ...}
-        self.verdict_ = model_verdict(self.validation_)
+        self.verdict_ = model_verdict(self.validation_, self.model_, sig.input_name)
         self.timings_ = timings
         return self
 
     def _gram(self, sig: StateSignals, edges) -> BlockGram:
-        v = sig.valid  # q2_dot = q1 by construction of the chain, so the second target is q1 itself
-        return BlockGram.from_library(self.library_, (sig.q1[v], sig.q2[v]), sig.input[v][:, None],
-                                      (sig.q1_dot[v], sig.q1[v]), edges)
+        """Per-block normal equations of the library on the model's states. With an offset carried
+        (an even force) every column goes through the chain's band (identify.inband, as explain's
+        screen does): an even term's DC and slow part are not in the measured acceleration, and on
+        raw columns an offset a few % off shows as a spurious constant, q1^4, q2^4 (3e4 N/m^2 rig).
+        Without one (odd forces) the columns stay as they are and are streamed in chunks: through the
+        band, the degree-4 even terms fit the chain's low-frequency error on short sweeps (exact
+        supports 9 of 24 instead of 21 of 24, docs/identification.md), while raw, their DC costs."""
+        v = sig.valid
+        # q2_dot = q1 by construction of the chain, so the second target is q1 itself
+        targets = (sig.q1_dot[v], sig.q1[v])
+        if sig.q2_offset is not None:
+            return band_limited_gram(self.library_, sig, targets, edges)
+        return BlockGram.from_library(self.library_, (sig.q1[v], sig.q2[v]), sig.input[v][:, None], targets, edges)
+
+    def _fit_pass(self, sig: StateSignals, gram: BlockGram, held, timings: dict):
+        """Path, selection and refit per equation on the Grams of the states.
+        Returns (training and held-out normal equations, coefficients by equation)."""
+        lib = self.library_
+        train, heldout = gram.equations(~held), gram.equations(held) if held.any() else None
+        t0 = time.perf_counter()
+        self.path_ = self._optimizer().fit_path(train)
+        timings["path"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        self.selections_ = self._select(self.path_, train, heldout, sig)
+        coefs = {eq: {lib.names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)}
+                 for eq, s in self.selections_.items()}
+        timings["selection_refit"] = time.perf_counter() - t0
+        return train, heldout, coefs
 
     def _select(self, path, train, heldout, sig: StateSignals) -> dict:
+        """The rule's choice per equation on a path (no side effects: the inclusion probabilities rerun it)."""
         n_eff = 2 * (sig.band_hz[1] - sig.band_hz[0]) * (sig.valid.stop - sig.valid.start) / sig.fs_hz
-        return {eq: select(path, e, train, heldout, self.selection, self.tolerance, n_eff, self.max_terms)
+        by_free_run = self.budget == "free-run" and self.max_terms is not None  # then chosen after the offset
+        return {eq: select(path, e, train, heldout, self.selection, self.tolerance, n_eff,
+                           None if by_free_run and e == 0 else self.max_terms)
                 for e, eq in enumerate(("q1_dot", "q2_dot"))}
+
+    def _budget_by_free_run(self, sig: StateSignals, train, held, coefs: dict, timings: dict) -> dict:
+        """With budget="free-run", the first equation's max_terms terms chosen by free-run error
+        (identify.budget); sets budget_ (None otherwise) and returns the coefficients by equation."""
+        self.budget_ = None
+        sel = self.selections_["q1_dot"]
+        if self.budget != "free-run" or self.max_terms is None or sel.support.sum() <= self.max_terms:
+            return coefs
+        lib = self.library_
+        start = SparseModel(coefs, ("q1", "q2"), (sig.input_name,))
+        self.budget_ = choose_budget(start, lib.names, sel.support, self.max_terms, train, sig,
+                                     ~self.heldout_rows_, self.heldout_rows_ if held.any() else None)
+        timings["budget"] = self.budget_.seconds
+        sel.support = self.budget_.support.copy()
+        sel.coef = least_squares(train.G, train.B[:, 0], sel.support)
+        return {eq: {lib.names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)}
+                for eq, s in self.selections_.items()}
 
     def _trust(self, sig: StateSignals, gram: BlockGram, held) -> tuple[dict, dict, dict]:
         """Reported coefficients, standard errors and inclusion probabilities (identify.uncertainty)."""
@@ -212,7 +277,7 @@ class SparseIdentifier:
         """The identification result as one JSON-ready dict (the CLI's --json document)."""
         lib = self.library_
         sig = self.states_
-        sel = {"rule": self.selection, "max_terms": self.max_terms,
+        sel = {"rule": self.selection, "max_terms": self.max_terms, "budget": self.budget,
                "tolerance": DEFAULT_TOLERANCE[self.selection] if self.tolerance is None else self.tolerance}
         for eq, s in self.selections_.items():
             e = 0 if eq == "q1_dot" else 1
@@ -237,8 +302,11 @@ class SparseIdentifier:
                       "fit_samples": int(np.count_nonzero(~self.heldout_rows_)),
                       "heldout_samples": int(np.count_nonzero(self.heldout_rows_)),
                       "holdout": ("first %d samples" % self.holdout_samples if self.holdout_samples is not None
-                                  else f"{self.holdout_fraction:.0%} in interleaved blocks")},
+                                  else f"{self.holdout_fraction:.0%} in interleaved blocks"),
+                      "displacement_below_band": self.offset_},
             "refinement": self.refinement_,
+            "budget": None if self.budget_ is None else {"seconds": self.budget_.seconds,
+                                                         "candidates": self.budget_.candidates[:N_REPORTED]},
             "validation": self.validation_,
             "timings_s": self.timings_,
         }

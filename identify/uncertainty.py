@@ -31,10 +31,9 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy.fft import irfft, next_fast_len, rfft, rfftfreq
 from scipy.signal import welch
 
-from .chain import band_gain
+from .chain import spectral_ops
 from .gram import BlockGram, scaled_pinv
 from .optimizers.base import least_squares
 
@@ -91,55 +90,24 @@ def white_noise_std(x: np.ndarray, fs_hz: float, band_hz) -> float | None:
 
 
 class NoiseChain:
-    """The measurement chain (identify.chain.reconstruct_states in `sig`'s band and taper) applied to
-    added noise alone. Every step of the chain (detrending, taper, FFT, band-limited (j w)^p, trimming)
-    is linear, so the states of a record plus noise are sig's states plus these; the transfer functions
-    are built once and signals that share a detrending share one FFT, which makes a SIMEX replicate
-    ~3x cheaper than rerunning the chain (tests/identify/test_uncertainty.py checks it against the chain)."""
+    """The measurement chain (identify.chain, in `sig`'s band and taper) applied to added noise alone.
+    Every step of the chain (detrending, taper, FFT, band-limited (j w)^p, trimming) is linear, so the
+    states of a record plus noise are sig's states plus these: a SIMEX replicate needs the batched
+    transforms of the noise (chain.spectral_ops), not a rerun of the chain with its band search
+    (tests/identify/test_uncertainty.py checks it against the chain)."""
 
     def __init__(self, sig, n: int, layout: str):
-        self.n, self.layout, self.band, self.fs = n, layout, tuple(sig.band_hz), sig.fs_hz
-        self.nfft = next_fast_len(2 * n, real=True)
-        f = rfftfreq(self.nfft, 1.0 / self.fs)
-        jw = 2j * np.pi * f
-        gain = band_gain(f, self.band, self.fs).astype(complex)
-        self.h = {}
-        for p in ((-1, -2, 0) if layout == "base" else (0, 1, 2)):
-            h = gain.copy()
-            if p:
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    h *= jw ** p
-                h[0] = 0.0 if p < 0 or self.band[0] > 0 else h[0]
-            self.h[p] = h
-        t = sig.taper_n
-        self.ramp = 0.5 - 0.5 * np.cos(np.pi * (np.arange(t) + 0.5) / t) if t > 0 else None
-        self.ramp_t = np.arange(n) / max(n - 1, 1)
-
-    def _spectrum(self, x, integrate: bool):
-        line = np.full(self.n, x.mean()) if integrate else x[0] + (x[-1] - x[0]) * self.ramp_t
-        xd = x - line
-        if self.ramp is not None:
-            t = self.ramp.size
-            xd[:t] *= self.ramp
-            xd[self.n - t:] *= self.ramp[::-1]
-        return rfft(xd, self.nfft), line, x
-
-    def _op(self, spec, p):
-        X, line, x = spec
-        y = irfft(X * self.h[p], self.nfft)[:self.n]
-        if self.band[0] == 0 and p in (0, 1):
-            y += line if p == 0 else (x[-1] - x[0]) * self.fs / max(self.n - 1, 1)
-        return y
+        self.n, self.layout, self.band, self.fs, self.taper_n = n, layout, tuple(sig.band_hz), sig.fs_hz, sig.taper_n
 
     def __call__(self, e_in: np.ndarray, e_out: np.ndarray):
         """(q1, q2, q1_dot, input) that noise e_in, e_out on the raw channels adds, on all rows."""
-        u = self._op(self._spectrum(e_in, False), 0)
         if self.layout == "base":
-            qdd = e_out - e_in
-            integ, filt = self._spectrum(qdd, True), self._spectrum(qdd, False)
-            return self._op(integ, -1), self._op(integ, -2), self._op(filt, 0), u
-        y = self._spectrum(e_out, False)
-        return self._op(y, 1), self._op(y, 0), self._op(y, 2), u
+            q1, q2, q1_dot, u = spectral_ops([e_out - e_in, e_in], self.fs, self.band,
+                                             [(0, -1), (0, -2), (0, 0), (1, 0)], self.taper_n)
+        else:
+            q2, q1, q1_dot, u = spectral_ops([e_out, e_in], self.fs, self.band,
+                                             [(0, 0), (0, 1), (0, 2), (1, 0)], self.taper_n)
+        return q1, q2, q1_dot, u
 
 
 def chain_bias(recording, sig, supports: dict, coefs: dict, gram_of, n_replicates: int = N_REPLICATES,

@@ -177,6 +177,41 @@ def create_app(settings: Settings) -> FastAPI:
             raise HTTPException(409, f"sweep {sweep_id} is {sweep['state']}, not running")
         return {"id": sweep_id, "state": "aborting"}
 
+    # -- campaigns ------------------------------------------------------------------------------------------
+    campaign_errors = {**errors, 404: {"model": schemas.Problem}, 409: {"model": schemas.Problem},
+                       503: {"model": schemas.Problem}}
+
+    @app.post("/api/campaigns", status_code=202, response_model=schemas.Accepted, tags=["campaigns"],
+              responses={**campaign_errors, 422: {"model": schemas.Problem}})
+    async def start_campaign(body: schemas.CampaignIn, who: str = operator):
+        """Start a campaign: its sweeps one after another in the rig controller. Every sweep is checked
+        against the limits first (422 naming the sweep and the limit, nothing moves); 409 while a sweep or a
+        campaign runs or the PLC is in emergency stop or fault."""
+        return await controller("start_campaign", plan=body.model_dump(), operator=who)
+
+    @app.get("/api/campaigns", response_model=list[schemas.CampaignOut], tags=["campaigns"],
+             dependencies=[viewer], responses=errors)
+    def list_campaigns(limit: int = Query(50, ge=1, le=500)):
+        return catalog().list("campaigns", limit=limit)
+
+    @app.get("/api/campaigns/{campaign_id}", response_model=schemas.CampaignOut, tags=["campaigns"],
+             dependencies=[viewer], responses={**errors, 404: {"model": schemas.Problem}})
+    async def get_campaign(campaign_id: str = Id()):
+        """State, plan, each sweep with its recording and status, progress, and why it paused or aborted."""
+        campaign = catalog().get("campaigns", campaign_id)
+        if campaign is None:
+            raise HTTPException(404, f"no campaign {campaign_id}")
+        return campaign
+
+    @app.post("/api/campaigns/{campaign_id}/{action}", status_code=202, response_model=schemas.Accepted,
+              tags=["campaigns"], responses=campaign_errors)
+    async def campaign_action(action: Literal["pause", "resume", "abort"], campaign_id: str = Id(),
+                              who: str = operator):
+        """pause: no next sweep (the running one finishes; state pausing, then paused). resume: re-run the
+        sweep that failed and go on (409 while the PLC is in emergency stop or fault: reset it first).
+        abort: the running sweep is stopped and the campaign ends aborted."""
+        return await controller(f"{action}_campaign", campaign_id=campaign_id, operator=who)
+
     # -- recordings -------------------------------------------------------------------------------------
     @app.get("/api/recordings", response_model=list[schemas.RecordingOut], tags=["recordings"],
              dependencies=[viewer], responses=errors)

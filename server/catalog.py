@@ -1,4 +1,4 @@
-"""The service's catalog in SQLite: recordings, sweeps and jobs, so a restart loses nothing.
+"""The service's catalog in SQLite: recordings, sweeps, jobs and campaigns, so a restart loses nothing.
 
 One connection shared by the service's threads behind a lock (SQLite serialises writers anyway; the
 queries are short). WAL mode: readers do not wait for the writer, and a killed process leaves a
@@ -28,8 +28,13 @@ CREATE TABLE IF NOT EXISTS sweeps (
 CREATE TABLE IF NOT EXISTS jobs (
     id TEXT PRIMARY KEY, created REAL, updated REAL, kind TEXT, recording_id TEXT, options TEXT,
     state TEXT, attempts INTEGER, error TEXT, result_dir TEXT);
+CREATE TABLE IF NOT EXISTS campaigns (
+    id TEXT PRIMARY KEY, created REAL, updated REAL, name TEXT, state TEXT, reason TEXT, operator TEXT,
+    plan TEXT, sweeps TEXT, progress TEXT, recording_ids TEXT);
 """
-JSON_FIELDS = {"info", "request", "options"}
+#: columns stored as JSON text, per table (a name can mean a number in one table and JSON in another)
+JSON_FIELDS = {"recordings": {"info"}, "sweeps": {"request"}, "jobs": {"options"},
+               "campaigns": {"plan", "sweeps", "progress", "recording_ids"}}
 
 
 def new_id() -> str:
@@ -54,16 +59,16 @@ class Catalog:
             self.db.close()
 
     # -- generic ------------------------------------------------------------------------------------
-    def _row(self, row) -> dict | None:
+    def _row(self, table: str, row) -> dict | None:
         if row is None:
             return None
         d = dict(row)
-        for k in JSON_FIELDS & d.keys():
+        for k in JSON_FIELDS[table] & d.keys():
             d[k] = json.loads(d[k]) if d[k] else {}
         return d
 
     def insert(self, table: str, **values) -> dict:
-        values = {k: json.dumps(v) if k in JSON_FIELDS else v for k, v in values.items()}
+        values = {k: json.dumps(v) if k in JSON_FIELDS[table] else v for k, v in values.items()}
         cols = ", ".join(values)
         with self.lock:
             self.db.execute(f"INSERT INTO {table} ({cols}) VALUES ({', '.join('?' * len(values))})",
@@ -73,7 +78,7 @@ class Catalog:
     def update(self, table: str, id: str, **values) -> None:
         if table != "recordings":
             values["updated"] = time.time()
-        values = {k: json.dumps(v) if k in JSON_FIELDS else v for k, v in values.items()}
+        values = {k: json.dumps(v) if k in JSON_FIELDS[table] else v for k, v in values.items()}
         with self.lock:
             self.db.execute(f"UPDATE {table} SET {', '.join(f'{k} = ?' for k in values)} WHERE id = ?",
                             (*values.values(), id))
@@ -84,12 +89,12 @@ class Catalog:
 
     def get(self, table: str, id: str) -> dict | None:
         with self.lock:
-            return self._row(self.db.execute(f"SELECT * FROM {table} WHERE id = ?", (id,)).fetchone())
+            return self._row(table, self.db.execute(f"SELECT * FROM {table} WHERE id = ?", (id,)).fetchone())
 
     def list(self, table: str, where: str = "", args: tuple = (), limit: int = 200) -> list[dict]:
         sql = f"SELECT * FROM {table} {('WHERE ' + where) if where else ''} ORDER BY created DESC LIMIT ?"
         with self.lock:
-            return [self._row(r) for r in self.db.execute(sql, (*args, limit)).fetchall()]
+            return [self._row(table, r) for r in self.db.execute(sql, (*args, limit)).fetchall()]
 
     def count(self, table: str, where: str = "1", args: tuple = ()) -> int:
         with self.lock:
@@ -98,7 +103,7 @@ class Catalog:
     # -- jobs -----------------------------------------------------------------------------------------
     def next_queued_job(self) -> dict | None:
         with self.lock:
-            return self._row(self.db.execute(
+            return self._row("jobs", self.db.execute(
                 "SELECT * FROM jobs WHERE state = 'queued' ORDER BY created LIMIT 1").fetchone())
 
     def recover_after_restart(self, max_attempts: int = 2) -> list[str]:

@@ -36,6 +36,7 @@ from daq.recorder import recover_directory
 from daq.sweep import SweepRequest
 from sim.plc import State
 
+from .campaign import CampaignService
 from .catalog import Catalog, new_id
 from .ipc import Line, parse_address
 from .jobs import queue_job
@@ -77,6 +78,10 @@ class RigController:
         self.stop_reason = "the rig controller is stopping"
         self._lock = threading.Lock()
         self._listener: socket.socket | None = None
+        # held while a sweep or a campaign is being started (checks, then the start): never by the estop path
+        self.starting = threading.RLock()
+        self._closed = False  # set once stopping: no sweep starts after the rig was stopped
+        self.campaigns = CampaignService(self)
 
     # -- lifecycle ------------------------------------------------------------------------------------
     def start(self) -> "RigController":
@@ -110,7 +115,11 @@ class RigController:
     def run(self) -> None:
         """Serve until stopped; then stop the table, close the recording, and release everything."""
         self.stopping.wait()
+        self.campaigns.halt(self.stop_reason)  # no next sweep; the catalog says paused (resumable)
+        with self.starting:  # a sweep being started right now is active once this lock is free
+            self._closed = True
         self.rig.stop(self.stop_reason)  # aborts a running sweep (the table is commanded to stop) and waits
+        self.campaigns.join()
         if self._listener is not None:
             self._listener.close()
         family, addr = parse_address(self.address)
@@ -121,7 +130,7 @@ class RigController:
 
     def _recover(self) -> None:
         """What a dead controller left: recordings marked running become aborted (their data kept)."""
-        for note in self.catalog.abort_interrupted_sweeps():
+        for note in self.catalog.abort_interrupted_sweeps() + self.campaigns.recover():
             print(f"shakeid controller: {note}", flush=True)
         for path in recover_directory(self.settings.data_dir / "recordings"):
             self.catalog.update("recordings", path.stem, status="aborted")
@@ -182,6 +191,7 @@ class RigController:
                 self._web_server_gone()
 
     def _web_server_gone(self) -> None:
+        self.campaigns.halt(WEB_SERVER_GONE)  # a campaign pauses: no sweep starts without a web server
         act = self.rig.active
         if act is not None:
             print(f"shakeid controller: {WEB_SERVER_GONE} (sweep {act['id']})", flush=True)
@@ -219,9 +229,13 @@ class RigController:
         return {"pid": os.getpid(), "active_sweep": self.rig.active["id"] if self.rig.active else None}
 
     def op_status(self) -> dict:
-        return self.rig.status()
+        act = self.campaigns.active
+        return {**self.rig.status(), "active_campaign": act["id"] if act else None}
 
     def op_estop(self) -> dict:
+        # a running campaign is halted first: a few attribute writes (no lock, no I/O, microseconds), so
+        # that no next sweep can start between the stop reaching the PLC and the bookkeeping after it
+        self.campaigns.halt("emergency stop")
         return self.rig.emergency_stop()
 
     def op_reset(self) -> dict:
@@ -247,7 +261,36 @@ class RigController:
                 "done": buffer.done and len(points) < LIVE_BATCH}
 
     def op_start_sweep(self, body: dict, operator: str = "") -> dict:
-        """Checked here, synchronously: limits (422), another sweep or a PLC in estop/fault (409)."""
+        """Checked here, synchronously: limits (422), another sweep, a running campaign or a PLC in
+        estop/fault (409)."""
+        with self.starting:
+            busy = self.campaigns.busy()
+            if busy:
+                raise Refused(409, f"sweep refused: {busy}")
+            return self.launch_sweep(body, operator)
+
+    # campaigns: server/campaign.py
+    def op_start_campaign(self, plan: dict, operator: str = "") -> dict:
+        return self.campaigns.start(plan, operator)
+
+    def op_pause_campaign(self, campaign_id: str, operator: str = "") -> dict:
+        return self.campaigns.pause(campaign_id, operator)
+
+    def op_resume_campaign(self, campaign_id: str, operator: str = "") -> dict:
+        return self.campaigns.resume(campaign_id, operator)
+
+    def op_abort_campaign(self, campaign_id: str, operator: str = "") -> dict:
+        return self.campaigns.abort(campaign_id, operator)
+
+    def launch_sweep(self, body: dict, operator: str = "", after_end=None, held=None) -> dict | None:
+        """Start one sweep (single or a campaign's): limits (422), another sweep or a PLC in estop/fault
+        (409), the rig unreachable (503). after_end(result, error) is called after the catalog has the
+        sweep's end; held() -> reason, asked last before the start: None is returned (nothing started)
+        if it gives one (a campaign paused or halted meanwhile)."""
+        with self.starting:
+            return self._launch_sweep(body, operator, after_end, held)
+
+    def _launch_sweep(self, body, operator, after_end, held) -> dict | None:
         req = SweepRequest(float(body["f_start_hz"]), float(body["f_end_hz"]), float(body["duration_s"]),
                            float(body["amplitude_mm"]), float(body.get("settle_s", 2.0)), operator=operator,
                            note=str(body.get("note", "")))
@@ -262,6 +305,10 @@ class RigController:
         refusal = self.rig.not_ready()
         if refusal:
             raise Refused(409, f"sweep refused: {refusal}")
+        if self._closed:
+            raise Refused(503, f"sweep refused: {self.stop_reason}")
+        if held is not None and held():
+            return None
         sweep_id, rec_id = new_id(), new_id()
         path = self.settings.data_dir / "recordings" / f"{rec_id}.h5"
         now = time.time()
@@ -278,9 +325,15 @@ class RigController:
         # in the catalog before the sweep thread exists, so its end always finds both rows
         cat.insert("recordings", id=rec_id, created=now, origin="sweep", filename=path.name, path=str(path),
                    status="running", sweep_id=sweep_id, info={"sweep": body})
+        def on_end(result, error):
+            try:
+                self._sweep_ended(sweep_id, rec_id, path, result, error)
+            finally:
+                if after_end is not None:
+                    after_end(result, error)
+
         try:
-            self.rig.begin_sweep(sweep_id, req, path, on_progress,
-                                 lambda result, error: self._sweep_ended(sweep_id, rec_id, path, result, error))
+            self.rig.begin_sweep(sweep_id, req, path, on_progress, on_end)
         except RigBusy as busy:  # lost a race with another request: as if it had come first
             cat.delete("recordings", rec_id)
             cat.delete("sweeps", sweep_id)

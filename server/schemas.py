@@ -1,12 +1,15 @@
 """Request and response bodies of the HTTP API (pydantic: validated in, documented in the OpenAPI)."""
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from daq.campaign import MAX_SWEEPS, NAME_PATTERN
+
 SweepState = Literal["queued", "running", "completed", "aborted", "failed"]
 JobState = Literal["queued", "running", "completed", "failed"]
+CampaignState = Literal["running", "pausing", "paused", "completed", "aborted"]
 
 
 class Strict(BaseModel):
@@ -78,6 +81,8 @@ class IdentifyIn(ReadOptions):
     selection: Literal["heldout", "paper", "bic"] | None = None
     tolerance: float | None = Field(None, gt=0, le=10)
     max_terms: int | None = Field(None, ge=1, le=100)
+    budget: Literal["equation-error", "free-run"] | None = Field(
+        None, description="how max_terms chooses q1_dot's terms (free-run: by the free-run error, slower)")
     refine: Literal["free-run"] | None = None
     holdout_fraction: float | None = Field(None, gt=0, lt=0.9)
     n_lambdas: int | None = Field(None, ge=2, le=1000)
@@ -98,6 +103,71 @@ class JobOut(BaseModel):
     attempts: int
     error: str | None = None
     options: dict = {}
+    created: float
+    updated: float
+
+
+class CampaignSweepDefaults(Strict):
+    """Every sweep of a campaign: an "up" sweep goes f_start_hz -> f_end_hz, a "down" one back."""
+    f_start_hz: float = Field(gt=0, le=1e4, description="the lower frequency, Hz (below f_end_hz)")
+    f_end_hz: float = Field(gt=0, le=1e4, description="the upper frequency, Hz")
+    duration_s: float = Field(gt=0, le=1e5, description="each sweep's duration, s")
+    settle_s: float = Field(2.0, ge=0, le=60, description="recording after each sweep ends, s")
+
+
+class AmplitudeRange(Strict):
+    """Amplitudes start, start + step, ... up to stop (included when it is on the grid), mm."""
+    start: float = Field(gt=0, le=1e3)
+    stop: float = Field(gt=0, le=1e3)
+    step: float = Field(gt=0, le=1e3)
+
+
+class CampaignIn(Strict):
+    """A campaign's plan (the same keys as a `shakeid campaign` TOML plan): for each repeat, for each
+    amplitude, for each direction, one sweep; `rest_between_s` of wall time with the table at rest between two."""
+    name: str = Field(pattern=NAME_PATTERN, description="letters, digits, . _ - (1-64)")
+    sweep: CampaignSweepDefaults
+    amplitudes_mm: list[Annotated[float, Field(gt=0, le=1e3)]] | AmplitudeRange = Field(
+        description="table displacement amplitudes, mm: a list or {start, stop, step}")
+    directions: list[Literal["up", "down"]] = Field(["up"], min_length=1, max_length=2)
+    repeats: int = Field(1, ge=1, le=MAX_SWEEPS)
+    rest_between_s: float = Field(0.0, ge=0, le=86400, description="table at rest between two sweeps, s")
+    note: str = Field("", max_length=500)
+
+
+class CampaignSweepOut(BaseModel):
+    index: int = Field(description="1-based, in run order")
+    amplitude_mm: float
+    direction: Literal["up", "down"]
+    repeat: int
+    f_start_hz: float = Field(description="where this sweep starts (the plan's f_end_hz for a down sweep)")
+    f_end_hz: float
+    duration_s: float
+    settle_s: float
+    status: Literal["planned", "running", "complete", "failed"]
+    sweep_id: str | None = None
+    recording_id: str | None = None
+    path: str | None = None
+    reason: str | None = Field(None, description="why a failed sweep does not count")
+    attempts: list[dict] = Field([], description="earlier attempts of this sweep (re-run on resume)")
+
+
+class CampaignProgress(BaseModel):
+    done: int
+    total: int
+    current: int | None = Field(None, description="index of the sweep running now")
+
+
+class CampaignOut(BaseModel):
+    id: str
+    name: str
+    state: CampaignState
+    reason: str | None = Field(None, description="why it is paused or aborted")
+    operator: str | None = None
+    plan: dict
+    sweeps: list[CampaignSweepOut]
+    progress: CampaignProgress
+    recording_ids: list[str] = Field(description="complete recordings in plan order (for a joint identification)")
     created: float
     updated: float
 

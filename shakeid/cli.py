@@ -12,6 +12,7 @@ from pathlib import Path
 
 from identify.errors import ShakeidError
 
+from .campaign_cmd import add_campaign_parser
 from .lab import cmd_controller, cmd_demo, cmd_recordings, cmd_serve, cmd_sim, cmd_sweep
 from .rigcmd import cmd_rig
 
@@ -39,6 +40,9 @@ def _add_identify_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--selection", choices=("heldout", "paper", "bic"), default="heldout")
     g.add_argument("--tolerance", type=float, help="selection tolerance (paper 0.25, heldout 0.003)")
     g.add_argument("--max-terms", type=int, help="at most this many terms per equation")
+    g.add_argument("--budget", choices=("equation-error", "free-run"), default="equation-error",
+                   help="how --max-terms chooses q1_dot's terms: by one-step acceleration error (default) or "
+                        "by the free-run error of refit candidates on the data (slower; implies the refit)")
     g.add_argument("--refine", choices=("free-run",),
                    help="refit the kept coefficients on the free-run simulation error")
     g.add_argument("--holdout-samples", type=int, help="hold out the first N samples (the paper: 30000)")
@@ -69,7 +73,7 @@ def _identifier(args):
     return SparseIdentifier(degree=args.degree, extra_terms=extra, method=args.method, n_lambdas=args.lambdas,
                             threshold=args.threshold, normalize_threshold=not args.raw_threshold,
                             selection=args.selection, tolerance=args.tolerance, max_terms=args.max_terms,
-                            refine=args.refine,
+                            budget=args.budget, refine=args.refine,
                             holdout_fraction=args.holdout_fraction, holdout_samples=args.holdout_samples,
                             band_hz=tuple(args.band) if args.band else None,
                             rig=RigConstants(mass_kg=args.mass_kg), bias_replicates=args.bias_replicates,
@@ -127,6 +131,11 @@ def summary(result: dict, source: str) -> str:
         fmt = lambda m: "diverged" if m["fit_percent"] is None else f"{m['fit_percent']:.2f} %"  # noqa: E731
         lines.append(f"free-run fit on {val['heldout_samples']} held-out samples: acceleration {fmt(h['q1_dot'])},"
                      f" velocity {fmt(h['q1'])}, displacement {fmt(h['q2'])}")
+    offset = result.get("chain", {}).get("displacement_below_band") or {}
+    if offset.get("carried"):
+        lines.append(f"displacement below the band carried (an even force rectifies it; the terms are those of the "
+                     f"true displacement): rms {offset['rms_mm']:.3g} mm, {offset['min_mm']:.3g} to {offset['max_mm']:.3g} mm, "
+                     f"{offset['passes']} passes{'' if offset['converged'] else ', NOT converged'}")
     phys = result.get("physical")
     if phys:
         def pv(key, unit, scale=1.0):
@@ -284,6 +293,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--note", default="")
     q.add_argument("--out", metavar="FILE.h5", help="the recording (with --server: a copy, downloaded)")
     q.set_defaults(func=cmd_sweep)
+    add_campaign_parser(sub)
     q = sub.add_parser("recordings", help="inspect HDF5 recordings (metadata, status, gaps)")
     q.add_argument("files", nargs="+")
     q.add_argument("--recover", action="store_true", help="mark recordings left running by a crash as aborted")

@@ -1,17 +1,12 @@
 """Shared fixtures: synthetic sweeps of the simulated rig with known coefficients (the ground truth)."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 from identify.recording import write_csv
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep
-
-REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
 
 
 def sweep_run(noise: float = 0.005, seed: int = 0, **kw):

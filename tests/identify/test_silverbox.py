@@ -1,4 +1,4 @@
-"""Real data: the Silverbox benchmark (shared/data/silverbox, beside the repository as in CI).
+"""Real data: the Silverbox benchmark (data/silverbox/SNLS80mV.mat, vendored in the repository).
 
 Identification on the usual estimation range, free-run on the multisine test range, scored as the
 literature does (1000 * RMSE after the first 50 samples, in mV). The default (equation-error) model
@@ -11,13 +11,13 @@ from identify.identifier import SparseIdentifier
 from identify.recording import read_recording
 from identify.simulate import simulate
 
-DATA = __import__("pathlib").Path(__file__).resolve().parents[3] / "shared/data/silverbox/SNLS80mV.mat"
+DATA = __import__("pathlib").Path(__file__).resolve().parents[2] / "data/silverbox/SNLS80mV.mat"
 FS = 1e7 / 2**14
 
 
 @pytest.fixture(scope="module")
 def silverbox():
-    assert DATA.exists(), f"Silverbox data expected at {DATA} (shared/ beside the repository)"
+    assert DATA.exists(), f"Silverbox data expected at {DATA} (vendored in the repository)"
     return read_recording(DATA, "force", "V1", "V2", fs_hz=FS)
 
 

@@ -35,6 +35,17 @@ def test_identify_options_and_report(table1_csv, tmp_path):
     assert doc["method"] == "stlsq" and doc["selection"]["rule"] == "paper" and len(doc["library"]["terms"]) == 11
 
 
+def test_identify_budget_option(table1_csv, table1_truth):
+    """--budget reaches the identifier; the rule's support already fits the budget here, so no candidates
+    are screened (tests/identify/test_budget.py runs the choice itself)."""
+    proc = run("identify", table1_csv, "--max-terms", "5", "--budget", "free-run", "--json")
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads(proc.stdout)
+    assert doc["selection"]["budget"] == "free-run" and doc["selection"]["max_terms"] == 5
+    assert doc["budget"] is None and set(doc["model"]["q1_dot"]) == set(table1_truth["q1_dot"])
+    assert run("identify", table1_csv, "--budget", "aic").returncode == 2
+
+
 @pytest.mark.parametrize("content,args,message", [
     (None, [], "no such file"),
     ("t,table_acc\n0,1\n", [], "missing column"),

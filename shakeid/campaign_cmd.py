@@ -1,0 +1,230 @@
+"""`shakeid campaign`: a plan of sweeps (daq/campaign.py) run on the rig of --config, or through a
+running service (--server).
+
+With --config the sweeps run here, one after another, each recorded to OUT/<name>-<k>.h5 (k from 1, in
+run order) through the same SweepRunner as `shakeid sweep --config`; OUT/<name>.campaign.json holds the
+campaign's state after every change. A sweep that does not end complete and usable pauses the
+campaign: the command exits 1 naming the sweep and the reason, and `--resume` (after `shakeid rig reset
+--config RIG.toml` if the PLC is in fault or estop) re-runs that sweep (the earlier file is kept as
+<name>-<k>.attempt-<j>.h5) and goes on. Ctrl-C stops the table, closes the file "aborted" and ends the
+campaign aborted (exit 130); an aborted or completed campaign is not resumed.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+
+from identify.errors import ShakeidError
+
+CTRL_C = "operator abort (Ctrl-C)"
+
+
+def add_campaign_parser(sub) -> None:
+    q = sub.add_parser("campaign", help="run a plan of sweeps (amplitudes, up and down, repeats) on the rig of "
+                                        "--config, or through a running shakeid serve (--server)")
+    q.add_argument("plan", metavar="PLAN.toml", help="the campaign's plan (examples/campaign.toml)")
+    where = q.add_mutually_exclusive_group(required=True)
+    where.add_argument("--config", metavar="RIG.toml", help="drive the rig directly")
+    where.add_argument("--server", metavar="URL", help="through the HTTP service, e.g. http://127.0.0.1:8000")
+    q.add_argument("--token", help="with --server: an operator token (default: $SHAKEID_TOKEN)")
+    q.add_argument("--out", metavar="DIR", help="with --config: the recordings <name>-<k>.h5 and <name>.campaign.json")
+    q.add_argument("--resume", action="store_true",
+                   help="with --config: go on with the paused campaign of the same name in --out")
+    q.add_argument("--operator", default="")
+    q.set_defaults(func=cmd_campaign)
+
+
+def cmd_campaign(args) -> int:
+    from daq.campaign import load_plan
+
+    plan = load_plan(args.plan)
+    if args.server:
+        return _remote(args, plan)
+    if not args.out:
+        raise ShakeidError("--out DIR is needed with --config (the recordings and the campaign's state go there)")
+    return _local(args, plan)
+
+
+def _state_path(out: Path, name: str) -> Path:
+    return out / f"{name}.campaign.json"
+
+
+def _load(args, plan, out: Path):
+    """The campaign to run: a new one, or (--resume) the paused one of the same name in out."""
+    from daq.campaign import Campaign
+
+    path = _state_path(out, plan.name)
+    if not path.exists():
+        if args.resume:
+            raise ShakeidError(f"--resume: no campaign {plan.name} in {out} ({path.name} missing)")
+        return Campaign(plan)
+    saved = json.loads(path.read_text())
+    done = sum(1 for it in saved["sweeps"] if it["status"] == "complete")
+    if not args.resume:
+        raise ShakeidError(f"campaign {plan.name} is already in {out} ({saved['state']}, {done} of "
+                           f"{len(saved['sweeps'])} sweeps done): --resume to go on, or another name or --out")
+    if saved["state"] in ("completed", "aborted"):
+        raise ShakeidError(f"campaign {plan.name} in {out} is {saved['state']}: nothing to resume")
+    if saved["plan"] != plan.to_dict():
+        raise ShakeidError(f"{args.plan} is not the plan campaign {plan.name} in {out} was started with; "
+                           "give the campaign another name to run a new plan")
+    return Campaign(plan, state="paused", reason=saved.get("reason"), items=saved["sweeps"])
+
+
+def _local(args, plan) -> int:
+    from daq.campaign import CampaignControl, plan_violation, run_campaign
+    from daq.devices import DeviceError, open_plc
+    from daq.realtime import CONTROLLER_PRIORITY, make_realtime
+    from daq.recorder import recover_directory
+    from daq.sweep import SweepRefused, SweepRunner
+    from sim.config import load_config
+    from sim.plc import Fault, State
+
+    from .lab import _progress_bar, _sweep_devices
+
+    cfg = load_config(args.config)
+    problem = plan_violation(cfg.limits, plan)
+    if problem:
+        raise ShakeidError(f"{args.plan}: campaign refused: {problem} (nothing was sent to the PLC)")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    for path in recover_directory(out):  # crashed recordings, found on start
+        print(f"{path}: was left running by a crash; marked aborted, its data kept")
+    campaign = _load(args, plan, out)
+    state_path = _state_path(out, plan.name)
+    make_realtime(CONTROLLER_PRIORITY, round_robin=True)  # where allowed: the heartbeat is never late
+    control = CampaignControl()
+    current: dict = {}
+
+    def on_sigint(*_):  # the table is stopped by the sweep's own path; no next sweep starts
+        control.abort(CTRL_C)
+        runner = current.get("runner")
+        if runner is not None:
+            runner.abort(CTRL_C)
+
+    def save(c) -> None:
+        tmp = state_path.with_suffix(".tmp")
+        tmp.write_text(json.dumps({**c.to_dict(), "updated": time.time()}, indent=1))
+        os.replace(tmp, state_path)
+
+    def run_sweep(planned, item) -> dict:
+        path = out / f"{plan.name}-{planned.index}.h5"
+        if path.exists():  # an earlier attempt of this sweep: kept beside it
+            j = 1
+            while (aside := out / f"{plan.name}-{planned.index}.attempt-{j}.h5").exists():
+                j += 1
+            path.rename(aside)
+            for attempt in item["attempts"]:
+                if attempt.get("path") == str(path):
+                    attempt["path"] = str(aside)
+        print(f"{planned.label(campaign.total)}: {planned.f_start_hz:g} -> {planned.f_end_hz:g} Hz over "
+              f"{planned.duration_s:g} s -> {path}", flush=True)
+        try:
+            plc, source = _sweep_devices(cfg)
+        except DeviceError as exc:
+            return {"status": "refused", "reason": f"rig not reachable: {exc}"}
+        devices = [plc, source]
+        try:
+            devices.append(open_plc(cfg.plc))  # the heartbeat's own link: never behind a status poll
+            runner = SweepRunner(plc, source, cfg.limits, float(cfg.stream["sensitivity_counts_per_ms2"]),
+                                 cfg.channels, on_progress=_progress_bar, heartbeat_plc=devices[2],
+                                 rig_config={"source": cfg.source, "plc": cfg.plc})
+            if control.held():
+                return {"status": "held"}
+            current["runner"] = runner
+            note = f"campaign {plan.name}: {planned.label(campaign.total)}" + (f"; {plan.note}" if plan.note else "")
+            result = runner.run(planned.request(args.operator, note), path)
+        except SweepRefused as exc:
+            return {"status": "refused", "reason": str(exc)}
+        except DeviceError as exc:
+            return {"status": "refused", "reason": f"rig not reachable: {exc}"}
+        finally:
+            current.pop("runner", None)
+            sys.stderr.write("\n")
+            for dev in devices:
+                dev.close()
+        print(f"  {path.name}: {result['status']}{' (' + result['reason'] + ')' if result['reason'] else ''}, "
+              f"{result['samples']} samples, {result['gaps']} gap(s)", flush=True)
+        return {"status": result["status"], "reason": result["reason"], "quality": result.get("quality"),
+                "path": str(path)}
+
+    links: dict = {}
+
+    def check() -> str | None:
+        """Between sweeps: the PLC in estop or fault, or the table moving, pauses the campaign."""
+        try:
+            if "plc" not in links:
+                links["plc"] = open_plc(cfg.plc)
+            st = links["plc"].status()
+        except DeviceError as exc:
+            links.pop("plc", None)
+            return f"the PLC does not answer: {exc}"
+        if st.state in (State.IDLE, State.DONE):
+            return None
+        return ("the PLC is in emergency stop" if st.state == State.ESTOP else "the table is moving"
+                if st.state == State.RUNNING else f"the PLC is in fault ({Fault(st.fault_code).name.lower()})")
+
+    print(f"campaign {plan.name}: {campaign.total} sweeps ({campaign.done} done), rig of {args.config} -> {out}",
+          flush=True)
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        run_campaign(campaign, run_sweep, control, save, check)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if "plc" in links:
+            links["plc"].close()
+    print(f"campaign {plan.name}: {campaign.state}, {campaign.done} of {campaign.total} sweeps complete"
+          + (f"; {campaign.reason}" if campaign.reason else "") + f" ({state_path})")
+    if campaign.state == "paused":
+        print(f"to go on: reset the PLC if needed (`shakeid rig reset --config {args.config}`), then "
+              f"`shakeid campaign {args.plan} --config {args.config} --out {args.out} --resume`")
+        return 1
+    if campaign.state == "aborted":
+        return 130 if campaign.reason == CTRL_C else 1
+    return 0
+
+
+def _remote(args, plan) -> int:
+    """The same plan through a running service: started, followed sweep by sweep, aborted on Ctrl-C."""
+    from .remote import ServiceClient
+
+    token = args.token or os.environ.get("SHAKEID_TOKEN", "")
+    if not token:
+        raise ShakeidError("--server needs a token: --token or SHAKEID_TOKEN (an operator's)")
+    client = ServiceClient(args.server, token)
+    cid = client.request("POST", "/api/campaigns", plan.to_dict())["id"]
+    print(f"campaign {plan.name} ({cid}) started on {args.server}", flush=True)
+    seen: dict = {}
+    try:
+        while True:
+            c = client.request("GET", f"/api/campaigns/{cid}")
+            _report(c, seen)
+            if c["state"] not in ("running", "pausing"):
+                break
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        client.request("POST", f"/api/campaigns/{cid}/abort")
+        while (c := client.request("GET", f"/api/campaigns/{cid}"))["state"] in ("running", "pausing"):
+            time.sleep(0.2)
+        _report(c, seen)
+    print(f"campaign {plan.name} ({cid}): {c['state']}, {c['progress']['done']} of {c['progress']['total']} sweeps "
+          f"complete{'; ' + c['reason'] if c['reason'] else ''}; recordings {', '.join(c['recording_ids']) or '-'}")
+    if c["state"] == "paused":
+        print(f"to go on: POST {args.server}/api/campaigns/{cid}/resume (after POST /api/rig/reset if needed)")
+    return 0 if c["state"] == "completed" else 1
+
+
+def _report(c: dict, seen: dict) -> None:
+    """One line per sweep as it starts and as it ends."""
+    for it in c["sweeps"]:
+        key = (it["index"], it["sweep_id"], it["status"])
+        if it["status"] == "planned" or seen.get(it["index"]) == key:
+            continue
+        seen[it["index"]] = key
+        what = (f"sweep {it['index']} of {c['progress']['total']} ({it['amplitude_mm']:g} mm, {it['direction']})")
+        print(f"{what}: {it['status']}" + (f", recording {it['recording_id']}" if it["recording_id"] else "")
+              + (f" ({it['reason']})" if it["reason"] else ""), flush=True)

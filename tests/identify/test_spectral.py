@@ -1,0 +1,165 @@
+"""The fast FFT mechanics compute what the straightforward formulation computed.
+
+The references below are the chain's previous code, kept verbatim: one scipy welch per signal, and one
+padded rfft / irfft pair per (signal, power) with the band gain and (j w)^power evaluated on every bin.
+"""
+import numpy as np
+import pytest
+from scipy.fft import irfft, next_fast_len, rfft, rfftfreq
+from scipy.signal import welch
+
+from identify import chain
+from identify.chain import EDGE_FRACTION, band_gain, excited_band, reconstruct_states, spectral_op, spectral_ops
+from identify.recording import Recording
+from identify.spectral import welch_psd
+
+FS = 2048.0
+
+
+def _band_gain_before(f, band, fs_hz):
+    lo, hi = band
+    g = np.ones_like(f)
+    if lo > 0:
+        a = lo * (1 - EDGE_FRACTION)
+        g = np.where(f < lo, 0.5 - 0.5 * np.cos(np.pi * np.clip((f - a) / (lo - a), 0, 1)), g)
+    top = min(hi * (1 + EDGE_FRACTION / 2), fs_hz / 2)
+    if top > hi:
+        g = np.where(f > hi, 0.5 + 0.5 * np.cos(np.pi * np.clip((f - hi) / (top - hi), 0, 1)), g)
+    return g
+
+
+def _spectral_op_before(x, fs_hz, band, power, taper_n):
+    x = np.asarray(x, dtype=float)
+    n = x.size
+    if power < 0:
+        line = np.full(n, x.mean())
+    else:
+        line = x[0] + (x[-1] - x[0]) * np.arange(n) / max(n - 1, 1)
+    xd = x - line
+    if taper_n > 0:
+        ramp = 0.5 - 0.5 * np.cos(np.pi * (np.arange(taper_n) + 0.5) / taper_n)
+        xd[:taper_n] *= ramp
+        xd[n - taper_n:] *= ramp[::-1]
+    nfft = next_fast_len(2 * n, real=True)
+    f = rfftfreq(nfft, 1.0 / fs_hz)
+    jw = 2j * np.pi * f
+    h = _band_gain_before(f, band, fs_hz).astype(complex)
+    if power:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            h *= jw ** power
+        h[0] = 0.0 if power < 0 or band[0] > 0 else h[0]
+    y = irfft(rfft(xd, nfft) * h, nfft)[:n]
+    if band[0] == 0 and power in (0, 1):
+        y += line if power == 0 else (x[-1] - x[0]) * fs_hz / max(n - 1, 1)
+    return y
+
+
+def _signal(n, seed=0):
+    """A chirp with an offset, a drift and noise: nothing periodic, nothing zero at the edges."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / FS
+    return (np.sin(2 * np.pi * (1.0 * t + 0.4 * t**2)) + 0.3 + 0.01 * t + 0.02 * rng.standard_normal(n))
+
+
+def _close(a, b, tol=1e-12):
+    return np.max(np.abs(a - b)) <= tol * np.max(np.abs(b))
+
+
+@pytest.mark.parametrize("n,nperseg", [(50_001, 16384), (20_000, 4096), (3_000, 16384), (4_097, 256)])
+def test_welch_psd_is_scipy_welch_with_linear_detrend(n, nperseg):
+    x = np.vstack([_signal(n, 1), 5.0 * _signal(n, 2) ** 3])
+    for row in x:
+        f_ref, p_ref = welch(row, FS, nperseg=min(nperseg, n), detrend="linear")
+        f, p = welch_psd(row, FS, nperseg)
+        assert np.array_equal(f, f_ref)
+        assert _close(p, p_ref)
+    f, p2 = welch_psd(x, FS, nperseg)  # several signals in one call: one PSD per row
+    assert p2.shape == (2, f.size)
+    assert all(_close(p2[k], welch(x[k], FS, nperseg=min(nperseg, n), detrend="linear")[1]) for k in range(2))
+
+
+def test_band_gain_is_unchanged():
+    f = rfftfreq(200_000, 1 / FS)
+    for band in [(2.5, 106.25), (0.0, 200.0), (1.0, 1000.0), (0.3, 0.9)]:
+        assert np.array_equal(band_gain(f, band, FS), _band_gain_before(f, band, FS))
+
+
+@pytest.mark.parametrize("band", [(2.0, 60.0), (0.0, 80.0)])
+@pytest.mark.parametrize("taper_n", [0, 700])
+def test_spectral_ops_equal_the_one_signal_operator(band, taper_n):
+    """Every power on two signals in one batched call, against the previous per-signal operator."""
+    x, u = _signal(30_011, 3), _signal(30_011, 4)
+    requests = [(0, -2), (0, -1), (0, 0), (0, 1), (0, 2), (1, 0), (1, -1)]
+    out = spectral_ops([x, u], FS, band, requests, taper_n)
+    for (i, power), y in zip(requests, out):
+        ref = _spectral_op_before((x, u)[i], FS, band, power, taper_n)
+        assert _close(y, ref), (i, power)
+        assert _close(spectral_op((x, u)[i], FS, band, power, taper_n), ref)
+
+
+def test_reconstruct_states_equals_the_previous_chain(table1_run, monkeypatch):
+    rec = table1_run.recording
+    s = reconstruct_states(rec)
+    bands = [excited_band(x, rec.fs_hz) for x in (rec.input, rec.output - rec.input)]
+    # the bands, estimated with scipy's welch as before, are the same bands
+    monkeypatch.setattr(chain, "welch_psd", lambda x, fs, nper: welch(x, fs, nperseg=nper, detrend="linear"))
+    assert [excited_band(x, rec.fs_hz) for x in (rec.input, rec.output - rec.input)] == bands
+    assert reconstruct_states(rec).band_hz == s.band_hz
+    qdd = rec.output - rec.input
+    ref = {"q1": _spectral_op_before(qdd, rec.fs_hz, s.band_hz, -1, s.taper_n),
+           "q2": _spectral_op_before(qdd, rec.fs_hz, s.band_hz, -2, s.taper_n),
+           "q1_dot": _spectral_op_before(qdd, rec.fs_hz, s.band_hz, 0, s.taper_n),
+           "input": _spectral_op_before(rec.input, rec.fs_hz, s.band_hz, 0, s.taper_n)}
+    for name, y in ref.items():
+        assert _close(getattr(s, name), y), name
+
+
+def test_force_layout_states_equal_the_previous_chain():
+    fs = 610.35
+    t = np.arange(int(20 * fs)) / fs
+    y = 0.1 * np.sin(2 * np.pi * 10 * t) + 0.02 * np.sin(2 * np.pi * 68 * t + 1.9) + 0.01
+    rec = Recording(np.sin(2 * np.pi * 11 * t), y, fs, "force", "u", "y")
+    s = reconstruct_states(rec, band_hz=(0.0, 200.0))
+    for name, power in (("q2", 0), ("q1", 1), ("q1_dot", 2)):
+        assert _close(getattr(s, name), _spectral_op_before(y, fs, (0.0, 200.0), power, s.taper_n)), name
+    assert _close(s.input, _spectral_op_before(rec.input, fs, (0.0, 200.0), 0, s.taper_n))
+
+
+def _free_run_before(model, sig):
+    """identify.validation.free_run as it was: full right-hand side, one band_limit per signal."""
+    from identify.simulate import simulate
+    v = sig.valid
+    states = sig.states[v]
+    u = sig.input[v][:, None]
+    scale = 1.5 * np.max(np.abs(states), axis=0)
+    res = simulate(model, 1.0 / sig.fs_hz, states[0], u, state_scale=scale, bound=100.0 * float(np.max(scale)))
+    qdot = np.full(u.shape[0], np.nan)
+    qdot[:res.n_valid] = model.rhs(res.states[:res.n_valid], u[:res.n_valid])[:, 0]
+    sim = np.column_stack([sig.band_limit(res.states[:, 0]), sig.band_limit(res.states[:, 1])])
+    return sim, sig.band_limit(qdot)
+
+
+def test_free_run_equals_the_previous_formulation(table1_run, table1_truth):
+    from identify.model import SparseModel
+    from identify.validation import first_equation, free_run
+    sig = reconstruct_states(table1_run.recording)
+    model = SparseModel(table1_truth)
+    sim, qdot, _, diverged = free_run(model, sig)
+    sim_ref, qdot_ref = _free_run_before(model, sig)
+    assert not diverged
+    assert _close(sim[:, 0], sim_ref[:, 0]) and _close(sim[:, 1], sim_ref[:, 1]) and _close(qdot, qdot_ref)
+    # the first equation alone, for a model whose equations share and do not share terms
+    other = SparseModel({"q1_dot": {"1": 0.2, "q1*|q1|": -3.0, "q2^3": -2e6, "zdd": -1.0},
+                         "q2_dot": {"q1": 1.0, "q2^2": 5.0}})
+    v = sig.valid
+    assert _close(first_equation(other, sig.q1[v], sig.q2[v], sig.input[v][:, None]),
+                  other.rhs(sig.states[v], sig.input[v][:, None])[:, 0])
+
+
+def test_band_limit_many_is_band_limit_of_each(table1_run):
+    """More signals than one batch holds (explain band-limits a whole library), each as band_limit."""
+    sig = reconstruct_states(table1_run.recording)
+    v = sig.valid
+    xs = [sig.q1[v] ** k * sig.q2[v] for k in range(6)]
+    for x, y in zip(xs, sig.band_limit_many(xs)):
+        assert _close(y, sig.band_limit(x))
