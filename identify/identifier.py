@@ -34,7 +34,7 @@ from .physical import RigConstants, physical_parameters
 from .recording import Recording
 from .refine import refine_free_run
 from .selection import DEFAULT_TOLERANCE, select
-from .validation import model_verdict, validate
+from .validation import model_verdict, physics_verdict, validate
 
 N_BLOCKS = 50
 BUDGETS = ("equation-error", "free-run")
@@ -192,7 +192,13 @@ class SparseIdentifier:
             timings["validation"] = time.perf_counter() - t0
         # a fitted model that does not reproduce the motion is kept (a library user may inspect it) but
         # reported as failed: verdict_ = {"status": "ok" | "failed" | "unvalidated", "reason": ...}
-        self.verdict_ = model_verdict(self.validation_, self.model_, sig.input_name)
+        # judged on the validated fit (the training-only one, unless a budget or refine replaced both) and,
+        # when the reported all-rows fit differs, on its physics too: failed if either cannot be the rig
+        self.verdict_ = model_verdict(self.validation_, validated, sig.input_name)
+        if self.verdict_["status"] != "failed" and validated is not self.model_:
+            physics = physics_verdict(self.model_, sig.input_name)
+            if physics:
+                self.verdict_ = {"status": "failed", "reason": "the reported all-rows fit: " + physics}
         self.timings_ = timings
         return self
 
