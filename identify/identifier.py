@@ -22,8 +22,9 @@ import numpy as np
 
 from .chain import StateSignals, reconstruct_states
 from .errors import IdentificationError
-from .gram import BlockGram, sandwich_covariance
+from . import uncertainty as unc
 from .budget import choose_budget
+from .gram import BlockGram
 from .inband import band_limited_gram, carry_offset, has_even_force
 from .library import Library
 from .model import SparseModel
@@ -33,7 +34,7 @@ from .physical import RigConstants, physical_parameters
 from .recording import Recording
 from .refine import refine_free_run
 from .selection import DEFAULT_TOLERANCE, select
-from .validation import model_verdict, validate
+from .validation import model_verdict, physics_verdict, validate
 
 N_BLOCKS = 50
 BUDGETS = ("equation-error", "free-run")
@@ -86,6 +87,9 @@ class SparseIdentifier:
     band_hz, harmonics, taper_s : measurement-chain settings (identify.chain.reconstruct_states).
     rig : RigConstants for physical parameters (base-excited layout only).
     validate : run the free-run validation.
+    bias_replicates : SIMEX replicates of the measurement chain for its bias (0: none, coefficients and
+        standard errors then ignore it); placements : random held-out placements for the inclusion
+        probabilities (0: none). identify.uncertainty.
     """
 
     def __init__(self, degree: int = 4, extra_terms=(), method: str = "admm", n_lambdas: int = 100,
@@ -93,7 +97,8 @@ class SparseIdentifier:
                  selection: str = "heldout", tolerance: float | None = None, max_terms: int | None = None,
                  budget: str = "equation-error", refine: str | None = None, holdout_fraction: float = 0.2,
                  holdout_samples: int | None = None, band_hz=None, harmonics: float = 5.0,
-                 taper_s: float | None = None, rig: RigConstants | None = None, validate: bool = True):
+                 taper_s: float | None = None, rig: RigConstants | None = None, validate: bool = True,
+                 bias_replicates: int = unc.N_REPLICATES, placements: int = unc.N_PLACEMENTS):
         self.degree = degree
         self.extra_terms = tuple(extra_terms)
         self.method = method
@@ -113,6 +118,8 @@ class SparseIdentifier:
         self.taper_s = taper_s
         self.rig = rig
         self.validate = validate
+        self.bias_replicates = bias_replicates
+        self.placements = placements
 
     # ------------------------------------------------------------------------------------------------
     def _optimizer(self):
@@ -140,7 +147,6 @@ class SparseIdentifier:
 
     def _fit_signals(self, sig: StateSignals, timings: dict) -> "SparseIdentifier":
         lib = self.library_
-        v = sig.valid
         edges, held = holdout_blocks(sig, self.holdout_fraction, self.holdout_samples)
         t0 = time.perf_counter()
         gram = self._gram(sig, edges)
@@ -159,29 +165,40 @@ class SparseIdentifier:
         self.heldout_rows_ = np.repeat(held, np.diff(edges))
         coefs = self._budget_by_free_run(sig, train, held, coefs, timings)
         t0 = time.perf_counter()
-        self.standard_errors_ = {eq: self._standard_errors(gram, ~held, train, e, s)
-                                 for e, (eq, s) in enumerate(self.selections_.items())}
-        timings["selection_refit"] += time.perf_counter() - t0
-        self.model_ = SparseModel(coefs, ("q1", "q2"), (sig.input_name,), self.standard_errors_)
+        # the selection-time fit (training blocks only) is what the held-out validation scores; the
+        # reported coefficients are the kept terms refit on all rows, less the chain's bias
+        # (identify.uncertainty, docs/identification.md section 5)
+        self.training_model_ = SparseModel(coefs, ("q1", "q2"), (sig.input_name,))
+        reported, self.standard_errors_, self.uncertainty_ = self._trust(sig, gram, held)
+        timings["refit_uncertainty"] = time.perf_counter() - t0
+        self.model_ = SparseModel(reported, ("q1", "q2"), (sig.input_name,), self.standard_errors_)
+        validated = self.training_model_
         self.refinement_ = None
-        if self.budget_ is not None:  # chosen after its free-run refit: that is the model
-            self.model_ = SparseModel(self.budget_.model.equations, ("q1", "q2"), (sig.input_name,),
-                                      self.standard_errors_)
+        if self.budget_ is not None:  # chosen after its free-run refit: that model is reported and validated
+            self.model_ = validated = SparseModel(self.budget_.model.equations, ("q1", "q2"), (sig.input_name,),
+                                                  self.standard_errors_)
             self.refinement_ = self.budget_.refinement
-        elif self.refine is not None:
+        elif self.refine is not None:  # free-run refit of the training fit, reported and validated as such
             t0 = time.perf_counter()
-            refined, self.refinement_ = refine_free_run(self.model_, sig, ~self.heldout_rows_)
-            self.model_ = SparseModel(refined.equations, refined.states, refined.inputs, self.standard_errors_)
+            refined, self.refinement_ = refine_free_run(self.training_model_, sig, ~self.heldout_rows_)
+            self.model_ = validated = SparseModel(refined.equations, refined.states, refined.inputs,
+                                                  self.standard_errors_)
             timings["refine"] = time.perf_counter() - t0
         self.validation_ = None
         if self.validate:
             t0 = time.perf_counter()
             self.validation_, self.simulated_states_, self.simulated_q1_dot_ = validate(
-                self.model_, sig, self.heldout_rows_ if held.any() else np.ones_like(self.heldout_rows_))
+                validated, sig, self.heldout_rows_ if held.any() else np.ones_like(self.heldout_rows_))
             timings["validation"] = time.perf_counter() - t0
         # a fitted model that does not reproduce the motion is kept (a library user may inspect it) but
         # reported as failed: verdict_ = {"status": "ok" | "failed" | "unvalidated", "reason": ...}
-        self.verdict_ = model_verdict(self.validation_, self.model_, sig.input_name)
+        # judged on the validated fit (the training-only one, unless a budget or refine replaced both) and,
+        # when the reported all-rows fit differs, on its physics too: failed if either cannot be the rig
+        self.verdict_ = model_verdict(self.validation_, validated, sig.input_name)
+        if self.verdict_["status"] != "failed" and validated is not self.model_:
+            physics = physics_verdict(self.model_, sig.input_name)
+            if physics:
+                self.verdict_ = {"status": "failed", "reason": "the reported all-rows fit: " + physics}
         self.timings_ = timings
         return self
 
@@ -203,22 +220,25 @@ class SparseIdentifier:
     def _fit_pass(self, sig: StateSignals, gram: BlockGram, held, timings: dict):
         """Path, selection and refit per equation on the Grams of the states.
         Returns (training and held-out normal equations, coefficients by equation)."""
-        lib, v = self.library_, sig.valid
+        lib = self.library_
         train, heldout = gram.equations(~held), gram.equations(held) if held.any() else None
         t0 = time.perf_counter()
         self.path_ = self._optimizer().fit_path(train)
         timings["path"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        duration = (v.stop - v.start) / sig.fs_hz
-        n_eff = 2 * (sig.band_hz[1] - sig.band_hz[0]) * duration
-        by_free_run = self.budget == "free-run" and self.max_terms is not None  # then chosen after the offset
-        self.selections_ = {eq: select(self.path_, e, train, heldout, self.selection, self.tolerance, n_eff,
-                                       None if by_free_run and e == 0 else self.max_terms)
-                            for e, eq in enumerate(("q1_dot", "q2_dot"))}
+        self.selections_ = self._select(self.path_, train, heldout, sig)
         coefs = {eq: {lib.names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)}
                  for eq, s in self.selections_.items()}
         timings["selection_refit"] = time.perf_counter() - t0
         return train, heldout, coefs
+
+    def _select(self, path, train, heldout, sig: StateSignals) -> dict:
+        """The rule's choice per equation on a path (no side effects: the inclusion probabilities rerun it)."""
+        n_eff = 2 * (sig.band_hz[1] - sig.band_hz[0]) * (sig.valid.stop - sig.valid.start) / sig.fs_hz
+        by_free_run = self.budget == "free-run" and self.max_terms is not None  # then chosen after the offset
+        return {eq: select(path, e, train, heldout, self.selection, self.tolerance, n_eff,
+                           None if by_free_run and e == 0 else self.max_terms)
+                for e, eq in enumerate(("q1_dot", "q2_dot"))}
 
     def _budget_by_free_run(self, sig: StateSignals, train, held, coefs: dict, timings: dict) -> dict:
         """With budget="free-run", the first equation's max_terms terms chosen by free-run error
@@ -237,15 +257,26 @@ class SparseIdentifier:
         return {eq: {lib.names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)}
                 for eq, s in self.selections_.items()}
 
-    def _standard_errors(self, gram: BlockGram, blocks, train, eq: int, sel) -> dict:
-        """Block sandwich (cluster-robust) standard errors: residuals of a band-limited record are
-        correlated over many samples, so the i.i.d. formula would understate them."""
-        S = np.flatnonzero(sel.support)
-        if S.size == 0:
-            return {}
-        cov = sandwich_covariance(gram, blocks, train.G, S, sel.coef[S], eq)
-        se = np.sqrt(np.maximum(np.diag(cov), 0))
-        return {self.library_.names[j]: float(se[i]) for i, j in enumerate(S)}
+    def _trust(self, sig: StateSignals, gram: BlockGram, held) -> tuple[dict, dict, dict]:
+        """Reported coefficients, standard errors and inclusion probabilities (identify.uncertainty)."""
+        names, eqs = self.library_.names, list(self.selections_)
+        sups = {e: s.support for e, s in enumerate(self.selections_.values())}
+        bias_of = None
+        if self.bias_replicates and getattr(self, "recording_", None) is not None:
+            def bias_of(sups, coefs):
+                return unc.chain_bias(self.recording_, sig, sups, coefs, lambda s2: self._gram(s2, gram.edges),
+                                      self.bias_replicates)
+        optimizer = self._optimizer()
+
+        def fit_and_select(train, heldout):
+            return [s.support for s in self._select(optimizer.fit_path(train), train, heldout, sig).values()]
+
+        coefs, var, info = unc.assess(gram, held, sups, bias_of, fit_and_select, self.placements)
+        named = {eqs[e]: {names[j]: j for j in np.flatnonzero(sups[e])} for e in sups}
+        info = unc.name_info(info, eqs, names, sups)
+        return ({eq: {n: float(coefs[e][j]) for n, j in named[eq].items()} for e, eq in enumerate(eqs)},
+                {eq: {n: float(np.sqrt(var[e][j])) for n, j in named[eq].items()} for e, eq in enumerate(eqs)},
+                info)
 
     # ------------------------------------------------------------------------------------------------
     def result(self) -> dict:
@@ -265,6 +296,8 @@ class SparseIdentifier:
             "reason": self.verdict_["reason"],
             "model": self.model_.to_dict()["model"],
             "standard_errors": self.standard_errors_,
+            "inclusion_probability": self.uncertainty_["inclusion_probability"],
+            "uncertainty": {k: v for k, v in self.uncertainty_.items() if k != "inclusion_probability"},
             "states": {"q1": "relative velocity" if sig.input_name == "zdd" else "output derivative",
                        "q2": "relative displacement" if sig.input_name == "zdd" else "output"},
             "inputs": [sig.input_name],

@@ -50,6 +50,10 @@ def _add_identify_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--holdout-fraction", type=float, default=0.2,
                    help="share held out in interleaved blocks when --holdout-samples is not given (0.2)")
     g.add_argument("--band", type=float, nargs=2, metavar=("F_LO", "F_HI"), help="integration band in Hz")
+    g.add_argument("--bias-replicates", type=int, default=16,
+                   help="SIMEX replicates for the measurement chain's bias (16; 0: none, faster)")
+    g.add_argument("--placements", type=int, default=24,
+                   help="random held-out placements for the inclusion probabilities (24; 0: none, faster)")
     g.add_argument("--mass-kg", type=float, default=0.49, help="moving mass for physical parameters (0.49)")
 
 
@@ -61,6 +65,8 @@ def _identifier(args):
         raise ShakeidError("--lambdas must be at least 2")
     if not 0 <= args.holdout_fraction < 0.9:
         raise ShakeidError("--holdout-fraction must be in [0, 0.9)")
+    if args.bias_replicates < 0 or args.placements < 0:
+        raise ShakeidError("--bias-replicates and --placements must be >= 0")
     extra = tuple(t.strip() for t in args.extra_terms.split(",") if t.strip())
     from identify.library import Library
 
@@ -71,7 +77,8 @@ def _identifier(args):
                             budget=args.budget, refine=args.refine,
                             holdout_fraction=args.holdout_fraction, holdout_samples=args.holdout_samples,
                             band_hz=tuple(args.band) if args.band else None,
-                            rig=RigConstants(mass_kg=args.mass_kg))
+                            rig=RigConstants(mass_kg=args.mass_kg), bias_replicates=args.bias_replicates,
+                            placements=args.placements)
 
 
 def _read(args):

@@ -25,10 +25,13 @@ FIGURES = ("input.png", "output.png", "lambda_path.png", "validation.png")
 
 
 def coefficient_table(result: dict) -> str:
-    """Markdown table in the layout of the paper's Table 1 (zeros shown as 0)."""
+    """Markdown table in the layout of the paper's Table 1 (zeros shown as 0), then per equation the
+    term's inclusion probability: the share of random held-out placements whose selection kept it."""
     model, se = result["model"], result.get("standard_errors", {})
+    p_in = result.get("inclusion_probability") or {}
     eqs = list(model)
-    lines = ["| term | " + " | ".join(eqs) + " |", "|---|" + "---:|" * len(eqs)]
+    heads = eqs + [f"P(kept) {eq}" for eq in eqs if eq in p_in]
+    lines = ["| term | " + " | ".join(heads) + " |", "|---|" + "---:|" * len(heads)]
     for term in result["library"]["terms"]:
         cells = []
         for eq in eqs:
@@ -38,6 +41,7 @@ def coefficient_table(result: dict) -> str:
             else:
                 s = se.get(eq, {}).get(term)
                 cells.append(f"{c:.5g}" + (f" ± {s:.2g}" if s else ""))
+        cells += [f"{p_in[eq].get(term, 0.0):.2f}" for eq in eqs if eq in p_in]
         lines.append(f"| {term} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -145,7 +149,7 @@ def _shade(ax, t, mask):
 def _index_html(out: Path, result: dict, table: str):
     rows = "".join("<tr>" + "".join(f"<td>{html.escape(c.strip())}</td>" for c in ln.strip("|").split("|")) + "</tr>"
                    for ln in table.splitlines()[2:])
-    eqs = "".join(f"<th>{html.escape(e)}</th>" for e in result["model"])
+    eqs = "".join(f"<th>{html.escape(e.strip())}</th>" for e in table.splitlines()[0].strip("|").split("|")[1:])
     val = result.get("validation") or {}
     figs = "".join(f'<p><img src="{f}" style="max-width:100%"></p>' for f in FIGURES if (out / f).exists())
     (out / "index.html").write_text(

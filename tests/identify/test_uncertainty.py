@@ -1,0 +1,190 @@
+"""Identification you can trust (issue 11), against simulated rigs with known coefficients:
+standard errors that cover the truth, inclusion probabilities that tell real terms from spurious ones,
+and reported coefficients that do not depend on where the held-out blocks fall."""
+import numpy as np
+import pytest
+
+from identify.gram import BlockGram
+from identify.identifier import SparseIdentifier, holdout_blocks
+from identify.optimizers.base import least_squares
+from identify.uncertainty import white_noise_std
+from identify.validation import validate
+from sim.rig import RigParameters
+from sim.sensors import Accelerometer
+from sim.synth import run_sweep
+from sim.sweep import SineSweep
+
+WEAK = "q1*q2^2"
+TABLE1_WEAK = 1.1620e4
+
+
+def _sensors(noise):
+    return dict(table_sensor=Accelerometer(noise_fraction=noise), mass_sensor=Accelerometer(noise_fraction=noise))
+
+
+def _random_case(rng):
+    """The Table 1 rig or the design rig with a random pre-stress and damping; 0.8-1.3 mm; noise
+    log-uniform 0.3-6 % on both accelerometers."""
+    if rng.random() < 0.5:
+        rig = RigParameters.paper_table1()
+    else:
+        rig = RigParameters.design(prestress_m=rng.uniform(1.5e-3, 2.2e-3),
+                                   damping_ns_per_m=3.7294 * 0.49 * rng.uniform(0.7, 1.5))
+    return rig, rng.uniform(0.8, 1.3), float(np.exp(rng.uniform(np.log(0.003), np.log(0.06))))
+
+
+def test_standard_errors_cover_the_truth_on_randomised_rigs():
+    """Truth within 2 SE for ~95 % and 3 SE for ~99 % of terms x cases. 24 cases give ~110 trials,
+    correlated within a case; at a true coverage of 95 % / 99 % the binomial 3-sigma lower bounds for
+    110 independent trials are 0.89 / 0.96, so we ask 0.88 / 0.96. The SE must not be inflated either:
+    at most 90 % within 1 SE (Gaussian: 68 %; an SE twice too large gives 95 %). Measured on these cases
+    (benchmarks/coverage.py --seed 11 --duration 30 --noise 0.003 0.06 --cases 24): 0.74 / 0.96 / 1.00
+    within 1 / 2 / 3 SE; without the chain-bias correction 0.56 / 0.87 / 0.98. Short records hide most
+    of the bias (it stays, the spread shrinks with length): on 60 s sweeps the estimator before issue 11
+    covered 0.83 / 0.95, this one 0.99 / 1.00; test_the_issue_case_is_covered checks such a record."""
+    rng = np.random.default_rng(11)
+    z = []
+    for _ in range(24):
+        rig, amp, noise = _random_case(rng)
+        run = run_sweep(rig, SineSweep(1, 20, 30, amp), fs_hz=2048, seed=int(rng.integers(1 << 31)),
+                        **_sensors(noise))
+        truth = run.truth["model"]["q1_dot"]
+        ident = SparseIdentifier(validate=False, placements=0).fit(run.recording)
+        se = ident.standard_errors_["q1_dot"]
+        z += [abs(c - truth.get(t, 0.0)) / se[t] for t, c in ident.model_.equations["q1_dot"].items()]
+    z = np.array(z)
+    assert z.size >= 100
+    assert np.mean(z < 2) >= 0.88 and np.mean(z < 3) >= 0.96, (np.mean(z < 2), np.mean(z < 3), z.max())
+    assert np.mean(z < 1) <= 0.90, np.mean(z < 1)
+
+
+@pytest.fixture(scope="module")
+def issue_case():
+    """The issue's case: Table 1 rig, 1-20 Hz, 60 s, 1.3 mm, 0.5 % noise, seed 1 (q1*q2^2 was 5.5 SE off)."""
+    run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 60, 1.3), seed=1, **_sensors(0.005))
+    return run, SparseIdentifier().fit(run.recording)
+
+
+def test_the_issue_case_is_covered(issue_case):
+    run, ident = issue_case
+    truth = run.truth["model"]["q1_dot"]
+    assert set(ident.model_.equations["q1_dot"]) == set(truth)
+    for t, c in ident.model_.equations["q1_dot"].items():
+        assert abs(c - truth[t]) < 3 * ident.standard_errors_["q1_dot"][t], t
+
+
+def test_chain_bias_is_measured_and_removed():
+    """At 5 % noise the integrated states' noise biases q2 and q2^3 (errors in variables). The noise
+    floors read from the spectra match the sensors' true noise, and the bias estimate removes a good
+    part of the bias: mean over 4 records of the error with and without the correction. Measured
+    (60 s sweeps): q2 -0.165 % -> -0.056 %, q2^3 +0.29 % -> +0.14 %; linear SIMEX extrapolation
+    under-corrects a bias that grows faster than the noise variance, the rest is inside the standard
+    errors (0.09-0.3 %). Asked: at least half of q2's bias and a quarter of q2^3's removed."""
+    rig = RigParameters.paper_table1()
+    before, after = [], []
+    for seed in range(4):
+        run = run_sweep(rig, SineSweep(1, 20, 60, 1.3), seed=seed, **_sensors(0.05))
+        ident = SparseIdentifier(validate=False, placements=0).fit(run.recording)
+        cb = ident.uncertainty_["chain_bias"]
+        assert cb["noise_std"]["input"] == pytest.approx(0.05 * np.std(run.table_acc_true), rel=0.05)
+        assert cb["noise_std"]["output"] == pytest.approx(0.05 * np.std(run.mass_acc_true), rel=0.05)
+        truth, eq = run.truth["model"]["q1_dot"], ident.model_.equations["q1_dot"]
+        after.append([eq[t] / truth[t] - 1 for t in ("q2", "q2^3")])
+        before.append([(eq[t] + cb["q1_dot"][t]) / truth[t] - 1 for t in ("q2", "q2^3")])
+    before, after = np.mean(before, 0), np.mean(after, 0)
+    assert np.all(np.abs(before) > 1e-3), before  # a bias worth removing: > 0.1 %
+    assert abs(after[0]) < 0.5 * abs(before[0]) and abs(after[1]) < 0.75 * abs(before[1]), (before, after)
+
+
+def test_white_noise_floor_needs_room_above_the_band():
+    rng = np.random.default_rng(0)
+    x = 0.1 * rng.standard_normal(20000)
+    assert white_noise_std(x, 1000.0, (1.0, 100.0)) == pytest.approx(0.1, rel=0.05)
+    assert white_noise_std(x, 1000.0, (1.0, 400.0)) is None  # band top 400 Hz x 1.3 is past 0.9 Nyquist
+
+
+def test_inclusion_probabilities_tell_real_from_spurious_terms(issue_case):
+    run, ident = issue_case
+    p = ident.result()["inclusion_probability"]
+    truth = run.truth["model"]["q1_dot"]
+    for term in ident.library_.names:
+        if term in truth:
+            assert p["q1_dot"][term] >= 0.9, term
+        else:
+            assert p["q1_dot"].get(term, 0.0) <= 0.25, term
+    assert p["q2_dot"] == {"q1": 1.0}
+
+
+def test_reported_coefficients_do_not_depend_on_the_heldout_placement():
+    """Table 1 rig, a 40 s sweep followed by 150 s of rest: the default blocks take a large share of the
+    resonance region out of the training fit, whose q1*q2^2 came out 6 % off (docs/identification.md
+    section 6). The reported coefficients are refit on all rows: the weak term spreads <= 1 % over
+    held-out fractions of 10-30 % (each moves the blocks), and lies within 1 % of the truth."""
+    run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 40, 1.3), fs_hz=1024, settle_s=150, seed=0,
+                    table_sensor=Accelerometer(noise_fraction=0, noise_ms2=0.02),
+                    mass_sensor=Accelerometer(noise_fraction=0, noise_ms2=0.02))
+    weak, training = [], []
+    for fraction in (0.1, 0.2, 0.3):
+        ident = SparseIdentifier(validate=False, placements=0, holdout_fraction=fraction).fit(run.recording)
+        weak.append(ident.model_.equations["q1_dot"][WEAK])
+        training.append(ident.training_model_.equations["q1_dot"].get(WEAK, 0.0))
+    weak = np.array(weak)
+    assert np.ptp(weak) <= 0.01 * TABLE1_WEAK, weak
+    assert np.all(np.abs(weak / TABLE1_WEAK - 1) < 0.01), weak
+    assert np.ptp(training) > 0.01 * TABLE1_WEAK, training  # the lottery the refit removes
+
+
+def test_validation_scores_a_fit_that_never_saw_the_heldout_rows(issue_case):
+    run, ident = issue_case
+    sig, held_rows = ident.states_, ident.heldout_rows_
+    edges, held = holdout_blocks(sig)
+    v = sig.valid
+    gram = BlockGram.from_library(ident.library_, (sig.q1[v], sig.q2[v]), sig.input[v][:, None],
+                                  (sig.q1_dot[v], sig.q1[v]), edges)
+    train = gram.equations(~held)
+    names = ident.library_.names
+    sup = np.array([n in ident.model_.equations["q1_dot"] for n in names])
+    x = least_squares(train.G, train.B[:, 0], sup)
+    assert ident.training_model_.equations["q1_dot"] == pytest.approx({n: x[j] for j, n in enumerate(names) if sup[j]})
+    assert ident.model_.equations["q1_dot"] != ident.training_model_.equations["q1_dot"]
+    again = validate(ident.training_model_, sig, held_rows)[0]
+    assert again["heldout"] == ident.validation_["heldout"]
+
+
+def test_report_table_shows_the_inclusion_probabilities(issue_case):
+    from shakeid.report import coefficient_table
+
+    run, ident = issue_case
+    lines = coefficient_table(ident.result()).splitlines()
+    assert lines[0].split("|")[4:6] == [" P(kept) q1_dot ", " P(kept) q2_dot "]
+    rows = {ln.split("|")[1].strip(): [c.strip() for c in ln.split("|")[2:-1]] for ln in lines[2:]}
+    p = ident.result()["inclusion_probability"]
+    assert rows["q2^3"][2] == f"{p['q1_dot']['q2^3']:.2f}" and rows["q1"][3] == "1.00"
+    assert rows["q1^2"][2] == f"{p['q1_dot'].get('q1^2', 0.0):.2f}"
+
+
+@pytest.mark.parametrize("layout", ["base", "force"])
+def test_noise_chain_is_the_chain_applied_to_the_noise(layout):
+    """SIMEX replicates add the chain's image of the noise to the states instead of rerunning the chain:
+    exact because every step of the chain is linear. Checked against identify.chain itself, so a change
+    there that this copy misses fails here."""
+    import dataclasses
+
+    from identify.chain import reconstruct_states
+    from identify.recording import Recording
+    from identify.uncertainty import NoiseChain
+
+    run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 10, 1.3), fs_hz=1024, **_sensors(0.005))
+    rec = run.recording
+    if layout == "force":
+        rec = Recording(run.recording.input, run.states[:, 1], 1024.0, "force")
+    band = (1.0, 100.0) if layout == "base" else (0.0, 100.0)
+    sig = reconstruct_states(rec, band)
+    rng = np.random.default_rng(3)
+    e_in, e_out = 0.01 * rng.standard_normal(rec.n_samples), 0.01 * rng.standard_normal(rec.n_samples)
+    noisier = reconstruct_states(dataclasses.replace(rec, input=rec.input + e_in, output=rec.output + e_out), band)
+    added = NoiseChain(sig, rec.n_samples, layout)(e_in, e_out)
+    v = sig.valid
+    for name, d in zip(("q1", "q2", "q1_dot", "input"), added):
+        want = getattr(noisier, name)[v] - getattr(sig, name)[v]
+        assert np.max(np.abs(d[v] - want)) <= 1e-9 * np.max(np.abs(getattr(noisier, name)[v])), name
