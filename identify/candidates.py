@@ -26,8 +26,8 @@ from .structure import Fit, Fitter, Structure
 END_STOP_FRACTIONS = (0.5, 0.6, 0.7, 0.8, 0.88, 0.94)
 #: Bouc-Wen: 1/(beta + gamma) (the state's saturation level) as fractions of the measured max |q2|,
 #: and gamma's share of beta + gamma.
-HYST_SATURATION = (0.05, 0.15, 0.4, 1.0)
-HYST_GAMMA_SHARE = (0.0, 0.5, 0.9)
+HYST_SATURATION = (0.1, 0.3, 1.0)
+HYST_GAMMA_SHARE = (0.0, 0.5)
 #: Which fault parameter(s) each measurement effect fits.
 FAULT_PARAMS = {"mass_acc_gain": ("mass_acc_gain",), "table_acc_gain": ("table_acc_gain",),
                 "channel_delay": ("channel_delay",), "bias_drift": ("bias_drift_mass", "bias_drift_table")}
@@ -47,6 +47,8 @@ def propose(fitter: Fitter, cur: Structure, name: str, effect: Effect) -> dict |
     """The candidate structure for `effect` on top of `cur` with equation-error coefficients, or None
     when it does not apply (already added, or a measurement fault of a force-input recording)."""
     if name in cur.effects:
+        return None
+    if name == "table_acc_gain":  # the same effect as a mass gain to a base-excited record: see _fault
         return None
     if effect.kind == "measurement":
         return _fault(fitter, cur, name) if fitter.chain is not None else None
@@ -77,15 +79,22 @@ def propose(fitter: Fitter, cur: Structure, name: str, effect: Effect) -> dict |
     new = [t for t in st.terms if t not in cur.terms]
     w, p = wald_p(fit, new)
     extra = {}
-    if st.travel:
+    if st.travel and not cur.travel:
         extra["travel_m"] = st.travel
-    if st.hyst is not None:
+    if st.hyst is not None and cur.hyst is None:
         extra.update(beta_per_m=st.hyst[0], gamma_per_m=st.hyst[1])
     return {"name": name, "kind": "physics", "terms": new, "structure": replace(st, coef=tuple(fit.coef.items())),
             "fit": fit, "wald": w, "p_value": p, "extra": extra}
 
 
 def _fault(fitter: Fitter, cur: Structure, name: str) -> dict:
+    """A measurement fault's parameter by bounded scalar search on the training segments' shooting error.
+
+    The two channels' gains are one effect to a base-excited recording: scaling both channels by one
+    factor scales every state and the input alike, which the model absorbs (its cubic coefficient
+    changes by the factor squared), so only their ratio shows. A table gain g_t reads as a mass gain
+    (1 + g_m) = 1 / (1 + g_t); the gain is fitted on the mass channel and reported with
+    table_acc_gain as its surrogate (and the equivalent table-channel value)."""
     train = ~fitter.seg_held
     best = None
     for key in FAULT_PARAMS[name]:
@@ -103,7 +112,7 @@ def _fault(fitter: Fitter, cur: Structure, name: str) -> dict:
             return float(np.nansum(fitter.data(st).run(fitter.model(st), train)[1]))
 
         res = minimize_scalar(cost, bounds=(lo, hi), method="bounded",
-                              options={"xatol": 1e-4 * (hi - lo), "maxiter": 14})
+                              options={"xatol": 1e-4 * (hi - lo), "maxiter": 10})
         if best is None or res.fun < best[1]:
             best = (key, float(res.fun), float(res.x))
     key, _, x = best
@@ -111,8 +120,12 @@ def _fault(fitter: Fitter, cur: Structure, name: str) -> dict:
     p[key] = x
     st = replace(cur, meas=tuple(sorted(p.items())), effects=cur.effects + (name,))
     fit = fitter.equation_fit(st)
+    extra, same = {key: x}, []
+    if key == "mass_acc_gain":
+        extra["table_acc_gain_equivalent"] = 1.0 / (1.0 + x) - 1.0
+        same = ["table_acc_gain"]
     return {"name": name, "kind": "measurement", "terms": [], "structure": replace(st, coef=tuple(fit.coef.items())),
-            "fit": fit, "wald": None, "p_value": 0.0, "extra": {key: x}}
+            "fit": fit, "wald": None, "p_value": 0.0, "extra": extra, "same_as": same}
 
 
 def all_candidates(fitter: Fitter, cur: Structure, catalog: dict) -> list[dict]:

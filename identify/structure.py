@@ -86,7 +86,7 @@ class Fitter:
 
     def z_state(self, sig: StateSignals, hyst) -> np.ndarray:
         """Bouc-Wen state integrated from the measured velocity (valid rows), z(0) = 0."""
-        key = (id(sig), hyst)
+        key = (id(sig), hyst)  # the cache holds sig itself, so its id cannot be reused while cached
         if key not in self._z:
             beta, gamma = hyst
             q1 = sig.q1[sig.valid]
@@ -94,10 +94,10 @@ class Fitter:
             scale = float(np.max(np.abs(q1))) / max(beta + gamma, 1e-9) + 1e-9
             res = simulate(zm, 1.0 / sig.fs_hz, [0.0], np.column_stack([q1, np.abs(q1)]), interpolation="linear",
                            substeps=2, bound=1e3 * scale)
-            self._z[key] = np.nan_to_num(res.states[:, 0])
             if len(self._z) > 64:
                 self._z.clear()
-        return self._z[key]
+            self._z[key] = (sig, np.nan_to_num(res.states[:, 0]))
+        return self._z[key][1]
 
     def names(self, st: Structure):
         states = ("q1", "q2", "z") if st.hyst is not None else ("q1", "q2")
@@ -163,7 +163,7 @@ class Fitter:
         held = self.seg_held if starts is None else np.zeros(len(s0), bool)
         d = ShootingData(X, U, measured, self.gap, fs, s0, s1, held, 1.0 + st.p.get("mass_acc_gain", 0.0), lowpass)
         if len(self._data) > 48:
-            self._data.clear()
+            self._data.clear()  # before inserting: the entry is used right after
         self._data[key] = d
         return d
 
