@@ -116,6 +116,10 @@ class RigPLC:
         self.config = config or PLCConfig()
         self.model = self.config.rig.model()                 # the smooth model identification sees
         self.physics = self.config.rig.model(end_stops=True)  # what runs: with the end stops
+        if self.physics.states != ("q1", "q2") or self.physics.inputs != ("zdd",):
+            raise ValueError(f"the rig PLC steps (q1, q2) driven by zdd; this rig needs states {self.physics.states} "
+                             f"and inputs {self.physics.inputs} (drift, hysteresis, absorber, free play, two "
+                             "different end-stop travels): simulate it with sim.synth.run_sweep")
         self.contact_samples = 0     # samples in contact with an end stop since power-on
         self.rng = np.random.default_rng(self.config.seed)
         self.setpoints = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 60.0, "amplitude_mm": 1.0}

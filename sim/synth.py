@@ -36,6 +36,7 @@ class SyntheticRun:
     table_acc_true: np.ndarray
     mass_acc_true: np.ndarray
     truth: dict = field(default_factory=dict)
+    internal: dict = field(default_factory=dict)  # further true states at the samples: z, qa1, qa2 (sim/physics.py)
 
 
 def run_sweep(rig: RigParameters | None = None, sweep: SineSweep | None = None, fs_hz: float = PAPER_FS_HZ,
@@ -51,36 +52,49 @@ def run_sweep(rig: RigParameters | None = None, sweep: SineSweep | None = None, 
     sweep = sweep or SineSweep()
     model = rig.model(end_stops=True)
     if substeps is None:
-        smooth = all(f.startswith("q") or f in model.inputs or f.startswith(_END_STOP_FEATURES)
-                     for t in model.terms for f, _ in t.factors)
-        substeps = TRUTH_SUBSTEPS if smooth else TRUTH_SUBSTEPS_NONSMOOTH
+        substeps = TRUTH_SUBSTEPS if all(_smooth(model, t) for t in model.terms) else TRUTH_SUBSTEPS_NONSMOOTH
     n = int(round((sweep.duration_s + settle_s) * fs_hz)) + 1
     dt = 1.0 / fs_hz
     n_fine, h2 = (n - 1) * 2 * substeps + 1, dt / (2 * substeps)
-    zdd_fine = np.empty(n_fine)
+    u_fine = np.empty((n_fine, len(model.inputs)))
     for a in range(0, n_fine, _CHUNK):  # in chunks: the kinematics' temporaries of a long sweep add up to GBs
         b = min(a + _CHUNK, n_fine)
-        zdd_fine[a:b] = sweep.kinematics(np.arange(a, b) * h2)[2]
-    res = simulate(model, dt, [0.0, 0.0], inputs_fine=zdd_fine[:, None], substeps=substeps, n_samples=n,
+        u_fine[a:b, 0] = sweep.kinematics(np.arange(a, b) * h2)[2]
+    if "drift" in model.inputs:  # stiffness drift: t / T over the record
+        u_fine[:, model.inputs.index("drift")] = np.arange(n_fine) / (n_fine - 1)
+    res = simulate(model, dt, rig.initial_state(model), inputs_fine=u_fine, substeps=substeps, n_samples=n,
                    bound=10.0)
     if res.diverged:
         raise ValueError(f"rig response diverged at t = {res.n_valid * dt:.3f} s: reduce the amplitude")
-    travel = model.travel.get("q2", np.inf)
-    contact_samples = int(np.count_nonzero(np.abs(res.states[:, 1]) > travel))
+    contact_samples = int(np.count_nonzero(rig.in_contact(res.states[:, 1]))) if rig.end_stops else 0
     if contact_samples == 0:
         model = rig.model()
-    zdd = zdd_fine[:: 2 * substeps]
-    qdd = model.rhs(res.states, zdd[:, None])[:, 0]
+    u = u_fine[:: 2 * substeps]
+    zdd = u[:, 0]
+    qdd = model.rhs(res.states[:, : len(model.states)], u[:, : len(model.inputs)])[:, 0]
     mass_acc = qdd + zdd
     rng = np.random.default_rng(seed)
     table_sensor = table_sensor or Accelerometer()
     mass_sensor = mass_sensor or Accelerometer()
-    rec = Recording(table_sensor.measure(zdd, rng), mass_sensor.measure(mass_acc, rng), fs_hz, "base",
-                    source="simulated rig")
+    rec = Recording(table_sensor.measure(zdd, rng, fs_hz=fs_hz, true_at=lambda t: sweep.kinematics(t)[2]),
+                    mass_sensor.measure(mass_acc, rng, fs_hz=fs_hz), fs_hz, "base", source="simulated rig")
     truth = {**{k: v for k, v in model.to_dict().items() if k in ("model", "travel")}, "rig": rig.to_dict(),
              "end_stops": rig.end_stop_summary(), "contact_samples": contact_samples,
              "sweep": {"f_start_hz": sweep.f_start_hz, "f_end_hz": sweep.f_end_hz, "duration_s": sweep.duration_s,
                        "amplitude_mm": sweep.amplitude_mm, "fade_s": sweep.fade},
              "fs_hz": fs_hz, "settle_s": settle_s, "max_abs_q_m": float(np.max(np.abs(res.states[:, 1])))}
+    faults = {name: s.faults() for name, s in (("table_sensor", table_sensor), ("mass_sensor", mass_sensor)) if s.faults()}
+    if faults:
+        truth["sensor_faults"] = faults
     rec.metadata["truth"] = truth
-    return SyntheticRun(rec, rig, sweep, res.states, zdd, mass_acc, truth)
+    internal = {s: res.states[:, i] for i, s in enumerate(model.states) if s in ("z", "qa1", "qa2")}
+    return SyntheticRun(rec, rig, sweep, res.states[:, :2], zdd, mass_acc, truth, internal)
+
+
+def _smooth(model, term) -> bool:
+    """A term RK4 at TRUTH_SUBSTEPS integrates to fourth order: plain states and inputs, or anything
+    times an end-stop feature (the kernel cuts its steps at contact, and stop() vanishes near q = 0
+    where a sign() factor with it jumps)."""
+    names = [f for f, _ in term.factors]
+    return (any(f.startswith(_END_STOP_FEATURES) for f in names)
+            or all(f in model.states or f in model.inputs for f in names))

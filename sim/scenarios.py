@@ -1,0 +1,267 @@
+"""Randomised discrepancy scenarios with known truth: the suite the discrepancy workflow is judged on
+(benchmarks/explain_robustness.py, docs in benchmarks/README.md).
+
+    rng = np.random.default_rng(1)
+    sc = make_scenario(rng, "two_effects")       # sc.truth_effects == ["hysteresis", "cubic_damping"], ...
+    run = sc.run(seed=0)                          # a SyntheticRun; run.recording.metadata["truth"] says it too
+
+Categories (CATEGORIES): "none" (the textbook Duffing rig), "single" (one catalog physics effect),
+"two_effects" (two of them, not from one surrogate group), "sensor_fault" (one measurement effect),
+"out_of_catalog" (physics the catalog does not have: a second mode, free play in the spring mount).
+
+The rig: mass 0.3-1.5 kg, natural frequency 3-9 Hz, damping ratio 2-6 %, cubic stiffness such that
+k3 Q^2 / k = 0.2-1 at a target amplitude Q of 4-11 mm; the sweep covers (0.3-0.6) fn to (2.5-4) fn
+(at most 40 Hz) in 30-60 s with 2 s of settling; 1000 or 2048 Hz; sensor noise 0.2-3 % of each
+channel's std, drawn per channel. The table amplitude is set from a pilot run of the plain rig (no noise, at the scenario's
+sample rate: near the hardening rig's jump the response depends on the last digits of the integration,
+so a pilot at another rate can peak elsewhere) so its response peaks near the target amplitude.
+
+Effect sizes are set from that pilot's peak displacement Q, peak velocity V and spring force
+Fs = k Q + k3 Q^3: each effect's force at (V, Q) is a drawn fraction rho of Fs (RELATIVE_FORCE), e.g.
+Coulomb friction mu = rho Fs, quadratic damping c2 = rho Fs / V^2. End stops: a gap of 0.7-0.9 Q on one
+or both sides, a bumper 3-20 times the rig's secant stiffness Fs / Q. Stiffness drift: r = +-(4-12) %.
+Bouc-Wen (n = 1, A = 1): z saturates at z_max = 1 / (beta + gamma) = 0.2-0.5 Q, a k z_max = rho Fs.
+Sensor faults: a gain error of +-(2-5) %, a delay of 0.3-2 ms on one channel, a bias ramp of
++-(0.01-0.05) m/s^2 over the record on one channel. Out of catalog: an absorber of 2-6 % of the mass tuned
+to 1.3-2.2 fn (damping ratio 2-8 %); free play of the linear spring with k g = rho Fs (g <= 0.3 Q and
+g <= Z/2: with g above the table amplitude Z the mass floats and the spring never engages).
+`magnitudes[name]["relative_force"]` is rho for forces; for sensor faults the relative size of the error:
+|gain - 1|, the phase 2 pi fn delay at resonance, the bias ramp over the peak mass acceleration.
+
+A drawn scenario is checked by running its physics once (no noise): it must not diverge, stay below
+MAX_RESPONSE_MM, and reach at least MIN_RESPONSE of the plain rig's peak, and touch the end stops only if end stops are its
+effect (then in >= 10 samples);
+otherwise it is redrawn (make_scenario never raises for an unlucky draw).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .rig import RigParameters
+from .sensors import Accelerometer
+from .sweep import SineSweep
+from .synth import SyntheticRun, run_sweep
+
+CATEGORIES = ("none", "single", "two_effects", "sensor_fault", "out_of_catalog")
+#: Catalog physics (the names of the contract, docs: /work/wt/_notes/EXPLAIN_CONTRACT.md).
+PHYSICS = ("coulomb_friction", "displacement_dependent_damping", "quadratic_stiffness", "quadratic_damping",
+           "cubic_damping", "asymmetric_stiffness", "end_stop", "stiffness_drift", "hysteresis")
+MEASUREMENT = ("mass_acc_gain", "table_acc_gain", "channel_delay", "bias_drift")
+OUT_OF_CATALOG = ("second_mode", "free_play")
+#: Physics a sweep can hardly tell apart: naming one for another is not a *wrong* name (the suite counts
+#: wrong names outside the truth and its groups). Symmetric by construction.
+SURROGATE_GROUPS = {
+    "quadratic_stiffness": ("asymmetric_stiffness", "end_stop"),
+    "asymmetric_stiffness": ("quadratic_stiffness", "end_stop"),
+    "end_stop": ("quadratic_stiffness", "asymmetric_stiffness"),
+    "quadratic_damping": ("cubic_damping",),
+    "cubic_damping": ("quadratic_damping",),
+    "coulomb_friction": ("hysteresis",),
+    "hysteresis": ("coulomb_friction",),
+    "displacement_dependent_damping": (),
+    "stiffness_drift": (),
+}
+#: Drawn range of each effect's force at the pilot's (V, Q) over the spring force Fs there.
+RELATIVE_FORCE = {
+    "coulomb_friction": (0.02, 0.05), "displacement_dependent_damping": (0.02, 0.06),
+    "quadratic_stiffness": (0.02, 0.06), "quadratic_damping": (0.02, 0.06), "cubic_damping": (0.02, 0.06),
+    "asymmetric_stiffness": (0.03, 0.08), "hysteresis": (0.03, 0.08), "free_play": (0.02, 0.06),
+}
+#: Largest response allowed without end stops as the effect: under the rig's 17.5 mm travel with margin.
+MAX_RESPONSE_MM = 14.0
+#: Smallest response allowed, over the plain rig's: an effect that kills the resonance is not "a few %".
+MIN_RESPONSE = 0.35
+MAX_TRIES = 30
+
+
+@dataclass
+class Scenario:
+    """One randomised case: a rig, a sweep, two sensors, and what is true about them."""
+
+    category: str
+    truth_effects: list[str]
+    rig: RigParameters
+    sweep: SineSweep
+    fs_hz: float
+    table_sensor: Accelerometer
+    mass_sensor: Accelerometer
+    settle_s: float = 2.0
+    magnitudes: dict = field(default_factory=dict)  # per effect: its parameters and relative force
+    pilot: dict = field(default_factory=dict)       # Q (m), V (m/s), Fs (N) of the plain rig
+
+    def run(self, seed: int | None = 0) -> SyntheticRun:
+        """Simulate and measure the scenario (the physics is the same for every seed; `seed` draws the
+        sensor noise). The recording's truth holds category, truth_effects and magnitudes."""
+        run = run_sweep(self.rig, self.sweep, self.fs_hz, self.settle_s, self.table_sensor, self.mass_sensor, seed)
+        run.truth.update(category=self.category, truth_effects=list(self.truth_effects),
+                         magnitudes=self.magnitudes, pilot=self.pilot)
+        run.recording.metadata["truth"] = run.truth
+        return run
+
+    def describe(self) -> str:
+        """One line: category, effects with their relative force, rig and sweep."""
+        eff = ",".join(f"{n}({self.magnitudes.get(n, {}).get('relative_force', 0) * 100:.1f}%)"
+                       for n in self.truth_effects) or "-"
+        fn = math.sqrt(self.rig.stiffness_n_per_m / self.rig.mass_kg) / (2 * math.pi)
+        noise = max(self.table_sensor.noise_fraction, self.mass_sensor.noise_fraction)
+        return (f"{self.category:14s} {eff:44s} fn={fn:4.1f}Hz Q={self.pilot.get('Q_m', 0) * 1e3:4.1f}mm "
+                f"{self.sweep.f_start_hz:.1f}-{self.sweep.f_end_hz:.0f}Hz/{self.sweep.duration_s:.0f}s "
+                f"fs={self.fs_hz:.0f} noise<={noise * 100:.1f}%")
+
+
+def make_scenario(rng: np.random.Generator, category: str, effects: list[str] | None = None) -> Scenario:
+    """A random scenario of `category` (CATEGORIES); `effects` fixes the truth names instead of drawing
+    them (e.g. ["end_stop"] for "single"). Redraws until the physics checks (module docstring)."""
+    if category not in CATEGORIES:
+        raise ValueError(f"unknown category {category!r}; known: {CATEGORIES}")
+    for _ in range(MAX_TRIES):
+        names = list(effects) if effects is not None else _draw_names(rng, category)
+        try:
+            sc = _draw(rng, category, names)
+        except ValueError:  # the pilot or the physics diverged: an unlucky draw
+            continue
+        if sc is not None:
+            return sc
+    raise RuntimeError(f"no sane {category} scenario in {MAX_TRIES} draws (effects {effects})")
+
+
+def _draw_names(rng, category) -> list[str]:
+    if category == "single":
+        return [str(rng.choice(PHYSICS))]
+    if category == "two_effects":
+        while True:
+            a, b = (str(x) for x in rng.choice(PHYSICS, 2, replace=False))
+            if b not in SURROGATE_GROUPS[a]:
+                return [a, b]
+    if category == "sensor_fault":
+        return [str(rng.choice(MEASUREMENT))]
+    if category == "out_of_catalog":
+        return [str(rng.choice(OUT_OF_CATALOG))]
+    return []
+
+
+def _base(rng):
+    """A plain rig, sweep, sample rate and sensors (sensor noise per channel)."""
+    m = rng.uniform(0.3, 1.5)
+    fn = rng.uniform(3.0, 9.0)
+    k = m * (2 * math.pi * fn) ** 2
+    zeta = rng.uniform(0.02, 0.06)
+    q_target = rng.uniform(4e-3, 11e-3)
+    k3 = rng.uniform(0.2, 1.0) * k / q_target**2
+    rig = RigParameters(mass_kg=m, damping_ns_per_m=2 * zeta * math.sqrt(k * m), stiffness_n_per_m=k,
+                        cubic_stiffness_n_per_m3=k3)
+    f0 = max(0.5, rng.uniform(0.3, 0.6) * fn)
+    f1 = min(40.0, rng.uniform(2.5, 4.0) * fn)
+    sweep = SineSweep(f0, f1, rng.uniform(30.0, 60.0), 2 * zeta * q_target * 1e3)
+    fs = float(rng.choice([1000.0, 2048.0]))
+    sensors = [Accelerometer(noise_fraction=rng.uniform(0.002, 0.03)) for _ in range(2)]
+    return rig, sweep, fs, sensors, q_target
+
+
+def _pilot(rig, sweep, fs, q_target):
+    """Scale the table amplitude so the plain rig peaks near q_target; (sweep, Q, V, Fs)."""
+    quiet = Accelerometer(noise_fraction=0.0)
+    for attempt in range(4):
+        run = run_sweep(rig, sweep, fs, 2.0, quiet, quiet, None)
+        q = run.truth["max_abs_q_m"]
+        if abs(q / q_target - 1) < 0.15 or attempt == 3:
+            break
+        sweep = dataclasses.replace(sweep, amplitude_mm=sweep.amplitude_mm * q_target / q)
+    q, v = run.truth["max_abs_q_m"], float(np.max(np.abs(run.states[:, 0])))
+    return sweep, q, v, rig.stiffness_n_per_m * q + rig.cubic_stiffness_n_per_m3 * q**3
+
+
+def _draw(rng, category, names) -> Scenario | None:
+    rig, sweep, fs, (table, mass), q_target = _base(rng)
+    sweep, Q, V, Fs = _pilot(rig, sweep, fs, q_target)
+    k, m = rig.stiffness_n_per_m, rig.mass_kg
+    fields_, effects, mags = {}, {}, {}
+
+    def rho(name):
+        return rng.uniform(*RELATIVE_FORCE[name])
+
+    for name in names:
+        r = rho(name) if name in RELATIVE_FORCE else None
+        if name == "coulomb_friction":
+            effects[name] = r * Fs
+        elif name == "displacement_dependent_damping":
+            effects[name] = r * Fs / (V * Q**2)
+        elif name == "quadratic_stiffness":
+            effects[name] = rng.choice([-1, 1]) * r * Fs / Q**2
+        elif name == "quadratic_damping":
+            effects[name] = r * Fs / V**2
+        elif name == "cubic_damping":
+            effects[name] = r * Fs / V**3
+        elif name == "asymmetric_stiffness":
+            effects[name] = r * Fs / Q
+            fields_["asymmetric_side"] = int(rng.choice([-1, 1]))
+        elif name == "end_stop":
+            gap = rng.uniform(0.7, 0.9) * Q * 1e3
+            side = str(rng.choice(["both", "upper", "lower"]))
+            fields_.update(end_stop_travel_mm=gap if side == "both" else None,
+                           end_stop_lower_mm=None if side == "both" else (gap if side == "lower" else math.inf),
+                           end_stop_upper_mm=None if side == "both" else (gap if side == "upper" else math.inf))
+            kc = rng.uniform(2.0, 10.0) * Fs / Q
+            fields_.update(contact_stiffness_n_per_m=kc,
+                           contact_damping_ns_per_m=2 * rng.uniform(0.1, 0.25) * math.sqrt(kc * m))
+            mags[name] = {"gap_mm": gap, "side": side, "contact_stiffness_n_per_m": kc}
+        elif name == "stiffness_drift":
+            fields_["stiffness_drift"] = float(rng.choice([-1, 1]) * rng.uniform(0.04, 0.12))
+            mags[name] = {"r": fields_["stiffness_drift"], "relative_force": abs(fields_["stiffness_drift"]) * k * Q / Fs}
+        elif name == "hysteresis":
+            z_max = rng.uniform(0.2, 0.5) * Q
+            share = rng.uniform(0.5, 0.9)
+            fields_.update(hysteresis_alpha=r * Fs / (k * z_max), hysteresis_beta=share / z_max,
+                           hysteresis_gamma=(1 - share) / z_max, hysteresis_n=1, hysteresis_A=1.0)
+            mags[name] = {"alpha": fields_["hysteresis_alpha"], "z_max_m": z_max, "relative_force": r}
+        elif name == "second_mode":
+            ma = rng.uniform(0.02, 0.06) * m
+            fa = min(rng.uniform(1.3, 2.2), 0.85 * sweep.f_end_hz / _fn(rig)) * _fn(rig)
+            ka = ma * (2 * math.pi * fa) ** 2
+            ca = 2 * rng.uniform(0.02, 0.08) * math.sqrt(ka * ma)
+            fields_.update(absorber_mass_kg=ma, absorber_stiffness_n_per_m=ka, absorber_damping_ns_per_m=ca)
+            mags[name] = {"mass_ratio": ma / m, "frequency_hz": fa, "relative_force": ma / m}
+        elif name == "free_play":
+            g = min(r * Fs / k, 0.3 * Q, 0.5 * sweep.amplitude_mm * 1e-3)  # g > Z: the spring never engages
+            fields_["spring_free_play_mm"] = g * 1e3
+            mags[name] = {"free_play_mm": g * 1e3, "relative_force": k * g / Fs}
+        elif name in ("mass_acc_gain", "table_acc_gain"):
+            gain = 1 + rng.choice([-1, 1]) * rng.uniform(0.02, 0.05)
+            (mass if name == "mass_acc_gain" else table).gain = gain
+            mags[name] = {"gain": gain, "relative_force": abs(gain - 1)}
+        elif name == "channel_delay":
+            d = rng.uniform(0.3e-3, 2e-3)
+            channel = str(rng.choice(["table", "mass"]))
+            (mass if channel == "mass" else table).delay_s = d
+            mags[name] = {"delay_s": d, "channel": channel, "relative_force": 2 * math.pi * _fn(rig) * d}
+        elif name == "bias_drift":
+            b = rng.choice([-1, 1]) * rng.uniform(0.01, 0.05)
+            channel = str(rng.choice(["table", "mass"]))
+            (mass if channel == "mass" else table).bias_drift_ms2 = b
+            mags[name] = {"bias_drift_ms2": b, "channel": channel, "relative_force": abs(b) / (2 * math.pi * _fn(rig) * V)}
+        else:
+            raise ValueError(f"unknown effect {name!r}")
+        if name in effects:
+            mags[name] = {"value": effects[name], "relative_force": r}
+    rig = dataclasses.replace(rig, effects=effects, **fields_)
+    sc = Scenario(category, list(names), rig, sweep, fs, table, mass, magnitudes=mags,
+                  pilot={"Q_m": Q, "V_ms": V, "Fs_n": Fs, "fn_hz": _fn(rig)})
+    quiet = Accelerometer(noise_fraction=0.0)
+    check = run_sweep(rig, sweep, fs, sc.settle_s, quiet, quiet, None)  # the physics sc.run() will run
+    contact = check.truth["contact_samples"]
+    if "end_stop" in names:
+        lower, upper = (v * 1e-3 for v in rig.travels_mm)
+        q2 = check.states[:, 1]
+        depth = max(q2.max() - upper, -q2.min() - lower, 0.0)
+        mags["end_stop"]["relative_force"] = rig.contact_stiffness_n_per_m * depth / Fs  # at the deepest contact
+        return sc if contact >= 10 else None
+    q = check.truth["max_abs_q_m"]
+    return sc if contact == 0 and MIN_RESPONSE * Q < q < MAX_RESPONSE_MM * 1e-3 else None
+
+
+def _fn(rig) -> float:
+    return math.sqrt(rig.stiffness_n_per_m / rig.mass_kg) / (2 * math.pi)
