@@ -113,22 +113,30 @@ class ShootingData:
         the chain's band removes it from the measured q2, so a segment started from the measured state
         would start off the model's orbit and ring. The offset is where the model's mean acceleration
         over the segment matches the measured one (two Newton steps; 0 for a symmetric model)."""
-        out = np.zeros(len(self.starts))
+        n_seg = len(self.starts)
         h = 1e-3 * float(np.max(np.abs(self.states[:, 1]))) + 1e-12
-        for i in seg:
-            a, b = int(self.starts[i]), int(self.stops[i])
-            x, u = self.states[a:b].copy(), self.inputs[a:b]
-            target = np.mean(self.measured[a:b]) if self.gap == "q1_dot" else 0.0
-            d = 0.0
-            for _ in range(2):
-                x[:, 1] = self.states[a:b, 1] + d
-                f0 = np.mean(model.rhs(x, u)[:, 0]) - target
-                x[:, 1] += h
-                slope = (np.mean(model.rhs(x, u)[:, 0]) - target - f0) / h
-                if not (np.isfinite(f0) and np.isfinite(slope)) or slope >= 0:
-                    break
-                d -= f0 / slope
-            out[i] = np.clip(d, -0.5 * h * 1e3, 0.5 * h * 1e3)
+        a, b = int(self.starts[0]), int(self.stops[-1])
+        cuts = self.starts - a
+        length = (self.stops - self.starts).astype(float)
+        x, u = self.states[a:b].copy(), self.inputs[a:b]
+        seg_of_row = np.repeat(np.arange(n_seg), self.stops - self.starts)
+        target = np.add.reduceat(self.measured[a:b], cuts) / length
+        d = np.zeros(n_seg)
+
+        def mean_rhs(shift):
+            x[:, 1] = self.states[a:b, 1] + shift[seg_of_row]
+            return np.add.reduceat(model.rhs(x, u)[:, 0], cuts) / length
+
+        for _ in range(2):  # Newton on all segments at once (each segment's own offset)
+            f0 = mean_rhs(d) - target
+            slope = (mean_rhs(d + h) - target - f0) / h
+            ok = np.isfinite(f0) & np.isfinite(slope) & (slope < 0)
+            d = np.where(ok, d - np.where(ok, f0 / np.where(ok, slope, 1.0), 0.0), d)
+        out = np.clip(np.nan_to_num(d), -0.5 * h * 1e3, 0.5 * h * 1e3)
+        if seg is not None and len(seg) < n_seg:
+            mask = np.zeros(n_seg, bool)
+            mask[seg] = True
+            out = np.where(mask, out, 0.0)
         return out
 
     def residuals(self, model: SparseModel, which: np.ndarray) -> np.ndarray:
