@@ -46,6 +46,13 @@ METRIC = {"base": "held-out multiple-shooting NRMSE of the relative acceleration
 #: Candidates refit on the shooting error per round: the best REFINE_TOP - 1 by shooting error at their
 #: equation-error start and the best REFINE_TOP - 1 by held-out equation error.
 REFINE_TOP = 3
+#: Candidates are looked at once the baseline's gap exceeds this multiple of the floor; below
+#: none_factor x the floor the first effect must close NEAR_CLOSED of the squared gap and beat the
+#: baseline with bootstrap probability NEAR_P_BEATS, else the answer is `none` (the suite's single
+#: effects at 2-3 % sensor noise left gaps of 1-2x the floor that were answered `none`).
+LOOK_FACTOR = 1.0
+NEAR_CLOSED = 0.4
+NEAR_P_BEATS = 0.95
 #: An effect is added only when the block bootstrap says it beats the explanation before it with at
 #: least this probability on the held-out segments (it is chosen on the training segments).
 MIN_P_BEATS = 0.9
@@ -113,8 +120,10 @@ class DiscrepancyAnalysis:
         cur_se = base_fit.se
         effects, rounds = [], []
         while len(effects) < self.max_effects and self._gap(err) > (
-                self.none_factor if not effects else CONTINUE_FACTOR) * self.noise_floor_:
-            step = self._round(fitter, cur, err, cur_se, base_fit.mse_heldout, catalog)
+                LOOK_FACTOR if not effects else CONTINUE_FACTOR) * self.noise_floor_:
+            # within none_factor x the floor the answer is `none` unless a candidate clearly closes the gap
+            near = not effects and self._gap(err) <= self.none_factor * self.noise_floor_
+            step = self._round(fitter, cur, err, cur_se, base_fit.mse_heldout, catalog, near)
             rounds.append(step["table"])
             if step["best"] is None:
                 break
@@ -188,7 +197,7 @@ class DiscrepancyAnalysis:
         h = self.fitter_.seg_held
         return float(np.sqrt(np.sum(err[h]) / self._norm)) if self._norm > 0 else 0.0
 
-    def _round(self, fitter: Fitter, cur: Structure, err, cur_se, mse_cur, catalog) -> dict:
+    def _round(self, fitter: Fitter, cur: Structure, err, cur_se, mse_cur, catalog, near: bool = False) -> dict:
         """One round: every candidate on top of `cur`; the best admissible one if it closes enough."""
         train, held = ~fitter.seg_held, fitter.seg_held
         cands = all_candidates(fitter, cur, catalog)
@@ -208,7 +217,8 @@ class DiscrepancyAnalysis:
                     c.update(refined)
             ok = sorted([c for c in cands if c["admissible"]], key=lambda c: np.sum(c["err"]))
         table = [self._public(c) for c in sorted(cands, key=lambda c: -c["gap_share_closed"])]
-        if not ok or ok[0]["gap_share_closed"] < self.min_gap_closed or ok[0]["p_beats_current"] < MIN_P_BEATS:
+        need, p_need = (NEAR_CLOSED, NEAR_P_BEATS) if near else (self.min_gap_closed, MIN_P_BEATS)
+        if not ok or ok[0]["gap_share_closed"] < need or ok[0]["p_beats_current"] < p_need:
             return {"best": None, "table": table}
         best = ok[0]
         others = ok[1:]
