@@ -153,6 +153,8 @@ class DiscrepancyAnalysis:
         final = cur.coefficients
         for e in effects:  # the coefficients of the final model, all effects refit together
             e["coefficients"].update({t: final.get(t, 0.0) for t in e["terms"]})
+            if e["name"] == "hysteresis" and cur.hyst is not None:
+                e["coefficients"].update(beta_per_m=cur.hyst[0], gamma_per_m=cur.hyst[1])
         self._flag_outside(effects)
         self.terms_ = effects[0]["terms"] if effects else []
         self.pair_p_value_ = effects[0]["p_beats_runner_up"] if effects else None
@@ -255,6 +257,8 @@ class DiscrepancyAnalysis:
         st = c["structure"]
         coef = {t: st.coefficients.get(t, 0.0) for t in c["terms"]}
         coef.update(c["extra"])
+        if "beta_per_m" in coef:  # refit on the shooting error with the coefficients
+            coef.update(beta_per_m=st.hyst[0], gamma_per_m=st.hyst[1])
         return {"name": c["name"], "kind": c["kind"], "terms": c["terms"], "coefficients": coef,
                 "score": c["score"], "p_value": c["p_value"], "gap_share_closed": c["gap_share_closed"],
                 "gap_after": self._gap(c["err"]), "p_beats_baseline": c["p_beats_current"],

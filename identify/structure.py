@@ -177,19 +177,31 @@ class Fitter:
         return self.data(st, [0], [n]).run(self.model(st))[0]
 
     def refine(self, st: Structure, max_nfev: int = 12) -> Structure:
-        """Coefficients refit on the training segments' shooting error (trust region, Gauss-Newton)."""
-        data = self.data(st)
+        """Coefficients refit on the training segments' shooting error (trust region, Gauss-Newton); for
+        a Bouc-Wen structure (beta, gamma) too, on a log scale (the grid only starts them), the state
+        z at each segment start integrated again from the measured velocity for every trial pair."""
         names = list(st.coefficients)
         theta0 = np.array([st.coefficients[t] for t in names])
+        k = len(names)
+        hyst = st.hyst is not None
+        if hyst:
+            theta0 = np.concatenate([theta0, np.log(np.maximum(st.hyst, 1e-3))])
         train = ~self.seg_held
-        norm = float(np.sqrt(np.sum(data.measured ** 2))) or 1.0
+        norm = float(np.sqrt(np.sum(self.data(st).measured ** 2))) or 1.0
+
+        def build(theta) -> Structure:
+            out = replace(st, coef=tuple(zip(names, map(float, theta[:k]))))
+            return replace(out, hyst=tuple(map(float, np.exp(theta[k:])))) if hyst else out
 
         def resid(theta):
-            return data.residuals(self.model(st, dict(zip(names, theta))), train) / norm
+            cand = build(theta)
+            return self.data(cand).residuals(self.model(cand), train) / norm
 
         r0 = resid(theta0)
-        sol = nl_least_squares(resid, theta0, x_scale=np.maximum(np.abs(theta0), 1e-12), diff_step=1e-6,
-                               max_nfev=max_nfev, method="trf")
+        scale = np.maximum(np.abs(theta0), 1e-12)
+        if hyst:
+            scale[k:] = 1.0
+        sol = nl_least_squares(resid, theta0, x_scale=scale, diff_step=1e-6, max_nfev=max_nfev, method="trf")
         if not (np.all(np.isfinite(sol.x)) and 2 * sol.cost < float(r0 @ r0)):
             return st
-        return replace(st, coef=tuple(zip(names, map(float, sol.x))))
+        return build(sol.x)
