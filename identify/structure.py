@@ -9,7 +9,7 @@ error (identify.shooting), and can refit the coefficients on the shooting error 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import least_squares as nl_least_squares
