@@ -161,7 +161,8 @@ def cmd_explain(args) -> int:
           f"{worst['excitation_hz']:.1f} Hz")
     for c in result["candidates"]:
         closed = c.get("gap_share_closed")
-        print(f"  {c['name']:32s} equation-error share {c['score']:+.3f}  p = {c['p_value']:.1e}  "
+        p = "-" if c.get("kind") == "measurement" else f"{c['p_value']:.1e}"  # searched, no Wald test
+        print(f"  {c['name']:32s} equation-error share {c['score']:+.3f}  p = {p}  "
               f"shooting gap closed {'-' if closed is None else f'{closed:+.2f}'}"
               + (f"  (rejected: {c['rejected']})" if c.get("rejected") else ""))
     if result["effect"] in ("none", "unexplained"):
