@@ -78,3 +78,29 @@ def localise(model: SparseModel, sig: StateSignals) -> dict:
 
 def _nan_to_none(a: np.ndarray) -> list:
     return [[None if not np.isfinite(x) else float(x) for x in row] for row in a]
+
+
+def remaining(fitter, st, err: np.ndarray, top: int = 5) -> dict:
+    """Where the explanation still misses: the shooting error along the record (segments with the most
+    error, their time and excitation frequency, their share of the total), and, for a two-state model,
+    the equation-error residual's localisation over the state space and frequency."""
+    sig = fitter.sig0
+    v = sig.valid
+    total = float(np.nansum(err)) or 1.0
+    order = np.argsort(np.nan_to_num(err))[::-1][:top]
+    u = sig.input[v]
+    segs = []
+    for i in order:
+        a, b = int(fitter.starts[i]), int(fitter.stops[i])
+        seg = u[a:b] - u[a:b].mean()
+        spec = np.abs(np.fft.rfft(seg * np.hanning(seg.size)))
+        f = np.fft.rfftfreq(seg.size, 1 / sig.fs_hz)
+        segs.append({"t_start_s": (v.start + a) / sig.fs_hz, "t_end_s": (v.start + b) / sig.fs_hz,
+                     "excitation_hz": float(f[1:][np.argmax(spec[1:])]) if seg.size > 2 else 0.0,
+                     "share_of_error": float(err[i] / total), "heldout": bool(fitter.seg_held[i])})
+    out = {"segments": segs, "share_in_top_segments": float(sum(s["share_of_error"] for s in segs))}
+    if st.hyst is None and not any("tau" in t for t in st.terms) and not any(st.p.values()):
+        loc = localise(fitter.model(st), sig)
+        out["state"] = loc["state"]
+        out["frequency"] = loc["frequency"]
+    return out

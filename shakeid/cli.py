@@ -178,14 +178,23 @@ def cmd_explain(args) -> int:
           f"{worst['excitation_hz']:.1f} Hz")
     for c in result["candidates"]:
         closed = c.get("gap_share_closed")
-        print(f"  {c['name']:32s} equation-error share {c['score']:+.3f}  p = {c['p_value']:.1e}  "
-              f"free-run gap closed {'-' if closed is None else f'{closed:+.2f}'}")
-    if result["effect"] == "none":
-        print(f"missing effect: none (confidence {result['confidence']:.2f})")
+        p = "-" if c.get("kind") == "measurement" else f"{c['p_value']:.1e}"  # searched, no Wald test
+        print(f"  {c['name']:32s} equation-error share {c['score']:+.3f}  p = {p}  "
+              f"shooting gap closed {'-' if closed is None else f'{closed:+.2f}'}"
+              + (f"  (rejected: {c['rejected']})" if c.get("rejected") else ""))
+    if result["effect"] in ("none", "unexplained"):
+        print(f"missing effect: {result['effect']} (confidence {result['confidence']:.2f})")
     else:
-        print(f"missing effect: {result['effect']} {result['terms']} (confidence {result['confidence']:.2f}); "
-              f"gap {f(result['gap_before'])} -> {f(result['gap_after'])}")
+        for e in result["effects"]:
+            sur = f"; stands in for {', '.join(e['surrogate_for'])}" if e["surrogate_for"] else ""
+            print(f"missing effect: {e['name']} ({e['kind']}) {json.dumps(e['coefficients'])} (confidence "
+                  f"{e['confidence']:.2f}; gap after {f(e['gap_after'])}{sur})")
+        print(f"gap {f(result['gap_before'])} -> {f(result['gap_after'])}")
         print("model: " + json.dumps(result["model"]))
+    if result.get("remaining"):
+        top = result["remaining"]["segments"][0]
+        print(f"still missed most at t = {top['t_start_s']:.1f}-{top['t_end_s']:.1f} s "
+              f"(excitation {top['excitation_hz']:.1f} Hz, {100 * top['share_of_error']:.0f} % of the error)")
     if args.report:
         print(f"report: {args.report}")
     return 0

@@ -1,0 +1,46 @@
+"""Admissibility: a candidate explanation the physics or the data rule out is not offered, however well
+it fits.
+
+1. Dissipative terms must dissipate: Coulomb friction, quadratic and cubic damping take coefficients in
+   dq1/dt of the sign that opposes the motion (negative); a positive one injects energy (seen: a 1 ms
+   channel delay fitted as quadratic damping with a positive coefficient, confidence 0.89). End stops
+   and hysteresis must restore (pull back), on each side.
+2. A fix must not flip the sign of a well-determined baseline coefficient (|value| > SIGN_Z standard
+   errors of the baseline's own fit): a term that only fits by turning the hardening spring into a
+   softening one (seen: q2^3 = +1.16e6 against the truth's -2.18e6 after adding Coulomb friction) is
+   trading one error for another, not explaining the data.
+3. Measurement parameters stay within their search bounds (identify.measurement.PARAMS) by construction.
+"""
+from __future__ import annotations
+
+from .effects import CATALOG
+
+#: A baseline coefficient is well determined when |value| exceeds this many standard errors.
+SIGN_Z = 4.0
+#: Relative tolerance on a restoring/dissipating sign (numerical zero).
+SIGN_TOL = 1e-9
+
+
+def check(name: str, coef: dict, baseline_coef: dict, baseline_se: dict) -> str:
+    """'' when admissible, else the reason (one sentence)."""
+    effect = CATALOG.get(name)
+    if effect is not None and effect.kind == "physics":
+        if effect.dissipative:
+            for t in effect.terms:
+                if coef.get(t, 0.0) > 0:
+                    return f"{t} has coefficient {coef[t]:+.4g} in dq1/dt: it injects energy instead of dissipating it"
+        if name == "end_stop":
+            c1, c2 = coef.get("stop(q2)", 0.0), coef.get("sign(q2)*stop(q2)", 0.0)
+            if c1 + c2 > SIGN_TOL * (abs(c1) + abs(c2)) or c1 - c2 > SIGN_TOL * (abs(c1) + abs(c2)):
+                return "the end stop pushes the mass outwards on one side instead of stopping it"
+        if name == "hysteresis" and coef.get("z", 0.0) > 0:
+            return "the hysteretic force pushes along the displacement instead of restoring"
+    for t, c0 in baseline_coef.items():
+        se = baseline_se.get(t)
+        c = coef.get(t)
+        if c is None or se is None or not se > 0:
+            continue
+        if abs(c0) > SIGN_Z * se and c * c0 < 0:
+            return (f"it flips the sign of the baseline's {t} ({c0:+.4g}, {abs(c0) / se:.0f} standard errors) "
+                    f"to {c:+.4g}")
+    return ""

@@ -1,0 +1,109 @@
+"""Explain until explained, against known truth: two effects at once, sensor faults named as such,
+hysteresis outside the plain-term physics, and nothing at 3 % noise. Design rig, 1-20 Hz in 30 s at
+1.3 mm, sampled at 1000 Hz (band to 100 Hz: the response's harmonics fit), 0.5 % sensor noise."""
+import json
+
+import numpy as np
+import pytest
+
+from identify.explain import DiscrepancyAnalysis
+from identify.model import SparseModel
+from identify.recording import Recording
+from identify.simulate import simulate
+from sim.rig import RigParameters
+from sim.sensors import Accelerometer
+from sim.sweep import SineSweep
+from sim.synth import run_sweep
+
+FS = 1000.0
+SWEEP = SineSweep(1.0, 20.0, 30.0, 1.3)
+
+
+def _run(effects=None, noise=0.005, seed=5):
+    s = Accelerometer(noise_fraction=noise)
+    return run_sweep(RigParameters.design(effects=effects or {}), SWEEP, fs_hz=FS, table_sensor=s, mass_sensor=s,
+                     seed=seed).recording
+
+
+def _delayed(x: np.ndarray, tau: float, fs: float) -> np.ndarray:
+    """x(t - tau): a channel recorded tau late (frequency-domain shift)."""
+    n, m = x.size, x.mean()
+    f = np.fft.rfftfreq(2 * n, 1 / fs)
+    return np.fft.irfft(np.fft.rfft(x - m, 2 * n) * np.exp(-2j * np.pi * f * tau), 2 * n)[:n] + m
+
+
+def test_two_effects_are_both_named_with_their_coefficients():
+    """Coulomb friction 0.1 N and quadratic damping 2 N s^2/m^2 on one rig: both named, both levels
+    within 10 % of truth (the issue saw one named at confidence 1.0 and Coulomb 32 % low)."""
+    res = DiscrepancyAnalysis().fit(_run({"coulomb_friction": 0.1, "quadratic_damping": 2.0})).result()
+    names = [e["name"] for e in res["effects"]]
+    assert {"coulomb_friction", "quadratic_damping"} <= set(names)
+    m = 0.49
+    assert res["model"]["q1_dot"]["sign(q1)"] == pytest.approx(-0.1 / m, rel=0.10)
+    assert res["model"]["q1_dot"]["q1*|q1|"] == pytest.approx(-2.0 / m, rel=0.10)
+    assert res["effect"] == names[0] and res["gap_after"] < 2 * res["noise_floor"]
+    assert all(set(e) >= {"name", "kind", "terms", "coefficients", "confidence", "gap_after", "surrogate_for"}
+               for e in res["effects"])
+    json.dumps(res)
+
+
+def test_mass_accelerometer_gain_is_named_as_a_gain():
+    """A -3 % gain error of the mass accelerometer is a measurement effect with its value, not physics
+    (the issue saw displacement-dependent damping at 0.89-0.95, its sign following the gain's; +3 % is
+    named too, docs/discrepancy.md)."""
+    gain = -0.03
+    rec = _run()
+    rec.output[:] = rec.output * (1 + gain)
+    res = DiscrepancyAnalysis().fit(rec).result()
+    first = res["effects"][0]
+    assert "gain" in res["effect"] and first["kind"] == "measurement"
+    assert first["coefficients"]["mass_acc_gain"] == pytest.approx(gain, abs=0.005)
+    assert not [e for e in res["effects"] if e["kind"] == "physics" and e["confidence"] >= 0.5]
+    assert res["gap_closed"] > 0.5
+
+
+def test_channel_delay_is_named_as_a_delay():
+    """The mass channel 1 ms late: channel_delay with its value (the issue saw energy-injecting quadratic
+    damping at confidence 0.89)."""
+    rec = _run()
+    rec.output[:] = _delayed(rec.output, 1e-3, FS)
+    res = DiscrepancyAnalysis().fit(rec).result()
+    assert "delay" in res["effect"] and res["effects"][0]["kind"] == "measurement"
+    assert res["effects"][0]["coefficients"]["channel_delay"] == pytest.approx(1e-3, abs=1e-4)
+    assert res["gap_closed"] > 0.5
+
+
+def _bouc_wen_recording(a=0.3, saturation_m=2e-3, noise=0.005, seed=5):
+    """Design rig plus a Bouc-Wen force F = a k z, z' = q1 - beta |q1| z - gamma q1 |z| (beta = gamma,
+    z saturating at `saturation_m`), measured by two accelerometers."""
+    rig = RigParameters.design()
+    eq = dict(rig.model().equations["q1_dot"])
+    eq["z"] = -a * rig.stiffness_n_per_m / rig.mass_kg
+    s = 1.0 / saturation_m
+    model = SparseModel({"q1_dot": eq, "q2_dot": {"q1": 1.0}, "z_dot": {"q1": 1.0, "|q1|*z": -s / 2, "q1*|z|": -s / 2}},
+                        states=("q1", "q2", "z"))
+    n = int((SWEEP.duration_s + 2) * FS) + 1
+    zdd = SWEEP.kinematics(np.arange(n) / FS)[2]
+    states = simulate(model, 1 / FS, [0, 0, 0], zdd[:, None], substeps=16).states
+    qdd = model.rhs(states, zdd[:, None])[:, 0]
+    rng, sensor = np.random.default_rng(seed), Accelerometer(noise_fraction=noise)
+    return Recording(sensor.measure(zdd, rng), sensor.measure(qdd + zdd, rng), FS, "base", source="Bouc-Wen rig")
+
+
+def test_hysteresis_is_named_or_flagged():
+    """Bouc-Wen hysteresis (the issue saw `none` at confidence 1.0, gap 25x the noise floor): named as
+    hysteresis, or `unexplained`, or a surrogate flagged as such that closes at least half the gap."""
+    res = DiscrepancyAnalysis().fit(_bouc_wen_recording()).result()
+    assert res["gap_before"] > 3 * res["noise_floor"]
+    if res["effect"] == "hysteresis":
+        assert res["gap_closed"] >= 0.5 and res["model"]["q1_dot"]["z"] < 0
+    elif res["effect"] == "unexplained":
+        assert res["remaining"]["segments"]
+    else:
+        assert res["effects"][0]["surrogate_for"] and res["gap_closed"] >= 0.5
+
+
+def test_plain_rig_at_three_percent_noise_answers_none():
+    res = DiscrepancyAnalysis().fit(_run(noise=0.03)).result()
+    assert res["effect"] == "none" and res["effects"] == [] and res["confidence"] > 0.5
+    assert res["gap_before"] <= 2 * res["noise_floor"]
