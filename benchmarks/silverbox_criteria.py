@@ -105,7 +105,8 @@ def part_criteria(st: Setup, emit) -> None:
         terms = SETS[label]
         c0 = time.process_time()
         m = st.refit(terms, ~st.held, ~held_rows, ftol=1e-4)  # as the budget ranks its candidates
-        out = {"fit": "interleaved fit rows", **{k: c.cost(m) for k, c in crit.items() if k != "heldout_highest_blocks"},
+        costs = {k: c.cost(m) for k, c in crit.items() if k != "heldout_highest_blocks"}
+        out = {"fit": "interleaved fit rows", **costs,
                **{f"multiple_shooting_{n}": st.multiple_shooting(m, held_rows, n) for n in (64, 256, 1024)},
                "test_mv": st.test(m)}
         emit({label: out})

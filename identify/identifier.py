@@ -95,8 +95,8 @@ class SparseIdentifier:
     def __init__(self, degree: int = 4, extra_terms=(), method: str = "admm", n_lambdas: int = 100,
                  lambda_eps: float = 1e-5, threshold: float | None = None, normalize_threshold: bool = True,
                  selection: str = "heldout", tolerance: float | None = None, max_terms: int | None = None,
-                 budget: str = "equation-error", budget_refit: str = "fit", refine: str | None = None, holdout_fraction: float = 0.2,
-                 holdout_samples: int | None = None, band_hz=None, harmonics: float = 5.0,
+                 budget: str = "equation-error", budget_refit: str = "fit", refine: str | None = None,
+                 holdout_fraction: float = 0.2, holdout_samples: int | None = None, band_hz=None, harmonics: float = 5.0,
                  taper_s: float | None = None, rig: RigConstants | None = None, validate: bool = True):
         self.degree = degree
         self.extra_terms = tuple(extra_terms)
