@@ -38,6 +38,7 @@ from .validation import model_verdict, physics_verdict, validate
 
 N_BLOCKS = 50
 BUDGETS = ("equation-error", "free-run")
+BUDGET_REFITS = ("fit", "all")
 N_REPORTED = 10  # budget candidates listed in the result
 
 
@@ -80,6 +81,10 @@ class SparseIdentifier:
         one-step acceleration error, identify.selection) or "free-run" (q1_dot's terms by the free-run
         error of candidates refit on it, estimation data only, identify.budget; the kept terms come
         with their free-run refit coefficients, as with refine="free-run"; slower: minutes on Silverbox).
+    budget_refit : rows of the free-run budget winner's final refit: "fit" (default; the validation's
+        held-out rows stay unseen) or "all" (fit and held-out rows, once the terms are chosen on the
+        fit rows and ranked on the held-out ones; more data for the coefficients, but the validation
+        figures are then no longer out-of-sample: result()["validation"]["heldout_fitted"] says so).
     refine : None, or "free-run" to refit the kept coefficients on the free-run simulation error of the
         fit samples (identify.refine); standard errors are then those of the equation-error fit.
     holdout_fraction : share of samples held out in interleaved blocks; holdout_samples : hold out
@@ -95,10 +100,11 @@ class SparseIdentifier:
     def __init__(self, degree: int = 4, extra_terms=(), method: str = "admm", n_lambdas: int = 100,
                  lambda_eps: float = 1e-5, threshold: float | None = None, normalize_threshold: bool = True,
                  selection: str = "heldout", tolerance: float | None = None, max_terms: int | None = None,
-                 budget: str = "equation-error", refine: str | None = None, holdout_fraction: float = 0.2,
-                 holdout_samples: int | None = None, band_hz=None, harmonics: float = 5.0,
-                 taper_s: float | None = None, rig: RigConstants | None = None, validate: bool = True,
-                 bias_replicates: int = unc.N_REPLICATES, placements: int = unc.N_PLACEMENTS):
+                 budget: str = "equation-error", budget_refit: str = "fit", refine: str | None = None,
+                 holdout_fraction: float = 0.2, holdout_samples: int | None = None, band_hz=None,
+                 harmonics: float = 5.0, taper_s: float | None = None, rig: RigConstants | None = None,
+                 validate: bool = True, bias_replicates: int = unc.N_REPLICATES,
+                 placements: int = unc.N_PLACEMENTS):
         self.degree = degree
         self.extra_terms = tuple(extra_terms)
         self.method = method
@@ -110,6 +116,7 @@ class SparseIdentifier:
         self.tolerance = tolerance
         self.max_terms = max_terms
         self.budget = budget
+        self.budget_refit = budget_refit
         self.refine = refine
         self.holdout_fraction = holdout_fraction
         self.holdout_samples = holdout_samples
@@ -135,6 +142,8 @@ class SparseIdentifier:
             raise IdentificationError(f"unknown refine {self.refine!r} (free-run)")
         if self.budget not in BUDGETS:
             raise IdentificationError(f"unknown budget {self.budget!r} ({', '.join(BUDGETS)})")
+        if self.budget_refit not in BUDGET_REFITS:
+            raise IdentificationError(f"unknown budget_refit {self.budget_refit!r} ({', '.join(BUDGET_REFITS)})")
         self._optimizer()
         timings = {}
         t0 = time.perf_counter()
@@ -190,6 +199,8 @@ class SparseIdentifier:
             self.validation_, self.simulated_states_, self.simulated_q1_dot_ = validate(
                 validated, sig, self.heldout_rows_ if held.any() else np.ones_like(self.heldout_rows_))
             timings["validation"] = time.perf_counter() - t0
+            if self.budget_ is not None and self.budget_refit == "all":
+                self.validation_["heldout_fitted"] = True  # the winner's coefficients saw these rows
         # a fitted model that does not reproduce the motion is kept (a library user may inspect it) but
         # reported as failed: verdict_ = {"status": "ok" | "failed" | "unvalidated", "reason": ...}
         # judged on the validated fit (the training-only one, unless a budget or refine replaced both) and,
@@ -250,7 +261,9 @@ class SparseIdentifier:
         lib = self.library_
         start = SparseModel(coefs, ("q1", "q2"), (sig.input_name,))
         self.budget_ = choose_budget(start, lib.names, sel.support, self.max_terms, train, sig,
-                                     ~self.heldout_rows_, self.heldout_rows_ if held.any() else None)
+                                     ~self.heldout_rows_, self.heldout_rows_ if held.any() else None,
+                                     final_rows=(np.ones_like(self.heldout_rows_)
+                                                 if self.budget_refit == "all" else None))
         timings["budget"] = self.budget_.seconds
         sel.support = self.budget_.support.copy()
         sel.coef = least_squares(train.G, train.B[:, 0], sel.support)
@@ -284,6 +297,7 @@ class SparseIdentifier:
         lib = self.library_
         sig = self.states_
         sel = {"rule": self.selection, "max_terms": self.max_terms, "budget": self.budget,
+               "budget_refit": self.budget_refit,
                "tolerance": DEFAULT_TOLERANCE[self.selection] if self.tolerance is None else self.tolerance}
         for eq, s in self.selections_.items():
             e = 0 if eq == "q1_dot" else 1

@@ -83,6 +83,9 @@ class IdentifyIn(ReadOptions):
     max_terms: int | None = Field(None, ge=1, le=100)
     budget: Literal["equation-error", "free-run"] | None = Field(
         None, description="how max_terms chooses q1_dot's terms (free-run: by the free-run error, slower)")
+    budget_refit: Literal["fit", "all"] | None = Field(
+        None, description="budget free-run: refit the chosen terms on the fit rows (fit) or on all rows (all; "
+                          "validation then not out-of-sample)")
     refine: Literal["free-run"] | None = None
     holdout_fraction: float | None = Field(None, gt=0, lt=0.9)
     n_lambdas: int | None = Field(None, ge=2, le=1000)

@@ -44,6 +44,9 @@ def _add_identify_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--budget", choices=("equation-error", "free-run"), default="equation-error",
                    help="how --max-terms chooses q1_dot's terms: by one-step acceleration error (default) or "
                         "by the free-run error of refit candidates on the data (slower; implies the refit)")
+    g.add_argument("--budget-refit", choices=("fit", "all"), default="fit",
+                   help="--budget free-run: refit the chosen terms on the fit rows (default) or on all rows, "
+                        "held-out ones included (validation figures are then not out-of-sample)")
     g.add_argument("--refine", choices=("free-run",),
                    help="refit the kept coefficients on the free-run simulation error")
     g.add_argument("--holdout-samples", type=int, help="hold out the first N samples (the paper: 30000)")
@@ -74,7 +77,7 @@ def _identifier(args):
     return SparseIdentifier(degree=args.degree, extra_terms=extra, method=args.method, n_lambdas=args.lambdas,
                             threshold=args.threshold, normalize_threshold=not args.raw_threshold,
                             selection=args.selection, tolerance=args.tolerance, max_terms=args.max_terms,
-                            budget=args.budget, refine=args.refine,
+                            budget=args.budget, budget_refit=args.budget_refit, refine=args.refine,
                             holdout_fraction=args.holdout_fraction, holdout_samples=args.holdout_samples,
                             band_hz=tuple(args.band) if args.band else None,
                             rig=RigConstants(mass_kg=args.mass_kg), bias_replicates=args.bias_replicates,

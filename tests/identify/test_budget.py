@@ -84,8 +84,27 @@ def test_identifier_budget_by_free_run(rig_run, true_q1_terms):
     assert res["refinement"]["accepted"] and res["budget"]["candidates"][0]["refit"] is not None
     assert res["selection"]["q1_dot"]["n_terms"] == 5
     assert set(res["standard_errors"]["q1_dot"]) == true_q1_terms
+    assert "heldout_fitted" not in res["validation"]  # default: the winner never saw the held-out rows
     with pytest.raises(IdentificationError, match="unknown budget"):
         SparseIdentifier(max_terms=5, budget="aic").fit(rig_run.recording)
+    with pytest.raises(IdentificationError, match="unknown budget_refit"):
+        SparseIdentifier(max_terms=5, budget="free-run", budget_refit="heldout").fit(rig_run.recording)
+
+
+def test_budget_refit_on_all_rows(rig_run, table1_truth, true_q1_terms):
+    """budget_refit="all": the same terms (chosen before the final refit), their coefficients refit on
+    the fit and held-out rows together, still the truth within the noise, and the result says that the
+    validation's held-out rows were fitted."""
+    ident = SparseIdentifier(selection="paper", tolerance=1e-3, max_terms=5, budget="free-run",
+                             budget_refit="all").fit(rig_run.recording)
+    q1 = ident.model_.equations["q1_dot"]
+    assert set(q1) == true_q1_terms
+    truth = table1_truth["q1_dot"]
+    for term, c in q1.items():
+        assert c == pytest.approx(truth[term], rel=0.05 if term == "q1*q2^2" else 0.01), term
+    res = ident.result()
+    assert res["selection"]["budget_refit"] == "all" and res["validation"]["heldout_fitted"] is True
+    assert res["status"] == "ok"
 
 
 def _silverbox_scorer():

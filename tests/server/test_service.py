@@ -141,6 +141,7 @@ def test_uploads_jobs_and_clear_errors(service, tmp_path, table1_run):
     assert bad.status_code == 422 and "junk.csv" in bad.json()["detail"]
     assert op.post("/api/recordings", params={"filename": "../etc/passwd.csv"}, content=b"x").status_code == 422
     assert op.post(f"/api/recordings/{rec['id']}/identify", json={"selection": "magic"}).status_code == 422
+    assert op.post(f"/api/recordings/{rec['id']}/identify", json={"budget_refit": "heldout"}).status_code == 422
     failing = op.post(f"/api/recordings/{rec['id']}/identify", json={"extra_terms": ["warp(q1)"]}).json()
     failed = wait_for(lambda: (j := viewer.get(f"/api/jobs/{failing['id']}").json())["state"] in ("completed", "failed")
                       and j, 60, "job")

@@ -38,12 +38,14 @@ def test_identify_options_and_report(table1_csv, tmp_path):
 def test_identify_budget_option(table1_csv, table1_truth):
     """--budget reaches the identifier; the rule's support already fits the budget here, so no candidates
     are screened (tests/identify/test_budget.py runs the choice itself)."""
-    proc = run("identify", table1_csv, "--max-terms", "5", "--budget", "free-run", "--json")
+    proc = run("identify", table1_csv, "--max-terms", "5", "--budget", "free-run", "--budget-refit", "all", "--json")
     assert proc.returncode == 0, proc.stderr
     doc = json.loads(proc.stdout)
     assert doc["selection"]["budget"] == "free-run" and doc["selection"]["max_terms"] == 5
+    assert doc["selection"]["budget_refit"] == "all"
     assert doc["budget"] is None and set(doc["model"]["q1_dot"]) == set(table1_truth["q1_dot"])
     assert run("identify", table1_csv, "--budget", "aic").returncode == 2
+    assert run("identify", table1_csv, "--budget-refit", "heldout").returncode == 2
 
 
 @pytest.mark.parametrize("content,args,message", [
