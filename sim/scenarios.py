@@ -265,3 +265,57 @@ def _draw(rng, category, names) -> Scenario | None:
 
 def _fn(rig) -> float:
     return math.sqrt(rig.stiffness_n_per_m / rig.mass_kg) / (2 * math.pi)
+
+
+# -- scoring (the contract's rules; benchmarks/explain_robustness.py) ------------------------------------
+def result_effects(result: dict) -> list[dict]:
+    """The `effects` list of a DiscrepancyAnalysis result; a result without one (before issue 12) is
+    read as one physics entry for its `effect` (none when the effect is none or unexplained)."""
+    if "effects" in result and result["effects"] is not None:
+        return [{"kind": "physics", "surrogate_for": [], **e} for e in result["effects"]]
+    if result.get("effect") in (None, "none", "unexplained"):
+        return []
+    return [{"name": result["effect"], "kind": "physics", "confidence": result.get("confidence") or 0.0,
+             "surrogate_for": []}]
+
+
+def wrong_physical_names(truth_effects: list[str], effects: list[dict], min_confidence: float = 0.5) -> list[str]:
+    """Physics entries named with confidence >= min_confidence that are neither a truth effect, nor in a
+    truth effect's surrogate group, nor flagged as standing in for one (surrogate_for naming a truth
+    effect; for out-of-catalog truth any non-empty surrogate_for)."""
+    allowed = set(truth_effects)
+    for t in truth_effects:
+        allowed |= set(SURROGATE_GROUPS.get(t, ()))
+    outside = any(t in OUT_OF_CATALOG for t in truth_effects)
+    wrong = []
+    for e in effects:
+        if e.get("kind", "physics") != "physics" or (e.get("confidence") or 0.0) < min_confidence:
+            continue
+        flagged = set(e.get("surrogate_for") or ())
+        if e["name"] in allowed or flagged & set(truth_effects) or (outside and flagged):
+            continue
+        wrong.append(e["name"])
+    return wrong
+
+
+def score(category: str, truth_effects: list[str], result: dict) -> dict:
+    """Whether a result is right for the scenario (contract rules), and its wrong physical names."""
+    effects = result_effects(result)
+    names = [e["name"] for e in effects]
+    closed = result.get("gap_closed")
+    closed_half = closed is not None and closed >= 0.5
+    wrong = wrong_physical_names(truth_effects, effects)
+    if category == "none":
+        right = result.get("effect") == "none"
+    elif category == "single":
+        right = bool(names) and names[0] == truth_effects[0] and closed_half
+    elif category == "two_effects":
+        right = all(t in names for t in truth_effects) and not wrong
+    elif category == "sensor_fault":
+        right = bool(names) and names[0] == truth_effects[0]
+    elif category == "out_of_catalog":
+        right = result.get("effect") == "unexplained" or (bool(effects) and bool(effects[0].get("surrogate_for"))
+                                                          and closed_half)
+    else:
+        raise ValueError(f"unknown category {category!r}")
+    return {"right": bool(right), "wrong_names": wrong, "names": names}
