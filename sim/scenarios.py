@@ -113,15 +113,17 @@ class Scenario:
                 f"fs={self.fs_hz:.0f} noise<={noise * 100:.1f}%")
 
 
-def make_scenario(rng: np.random.Generator, category: str, effects: list[str] | None = None) -> Scenario:
+def make_scenario(rng: np.random.Generator, category: str, effects: list[str] | None = None, *,
+                  duration_s: float | None = None, fs_hz: float | None = None) -> Scenario:
     """A random scenario of `category` (CATEGORIES); `effects` fixes the truth names instead of drawing
-    them (e.g. ["end_stop"] for "single"). Redraws until the physics checks (module docstring)."""
+    them (e.g. ["end_stop"] for "single"); `duration_s` and `fs_hz` fix the sweep's length and the sample
+    rate (tests use short records). Redraws until the physics checks (module docstring)."""
     if category not in CATEGORIES:
         raise ValueError(f"unknown category {category!r}; known: {CATEGORIES}")
     for _ in range(MAX_TRIES):
         names = list(effects) if effects is not None else _draw_names(rng, category)
         try:
-            sc = _draw(rng, category, names)
+            sc = _draw(rng, category, names, duration_s, fs_hz)
         except ValueError:  # the pilot or the physics diverged: an unlucky draw
             continue
         if sc is not None:
@@ -144,7 +146,7 @@ def _draw_names(rng, category) -> list[str]:
     return []
 
 
-def _base(rng):
+def _base(rng, duration_s=None, fs_hz=None):
     """A plain rig, sweep, sample rate and sensors (sensor noise per channel)."""
     m = rng.uniform(0.3, 1.5)
     fn = rng.uniform(3.0, 9.0)
@@ -158,6 +160,8 @@ def _base(rng):
     f1 = min(40.0, rng.uniform(2.5, 4.0) * fn)
     sweep = SineSweep(f0, f1, rng.uniform(30.0, 60.0), 2 * zeta * q_target * 1e3)
     fs = float(rng.choice([1000.0, 2048.0]))
+    sweep = sweep if duration_s is None else dataclasses.replace(sweep, duration_s=float(duration_s))
+    fs = fs if fs_hz is None else float(fs_hz)
     sensors = [Accelerometer(noise_fraction=rng.uniform(0.002, 0.03)) for _ in range(2)]
     return rig, sweep, fs, sensors, q_target
 
@@ -175,8 +179,8 @@ def _pilot(rig, sweep, fs, q_target):
     return sweep, q, v, rig.stiffness_n_per_m * q + rig.cubic_stiffness_n_per_m3 * q**3
 
 
-def _draw(rng, category, names) -> Scenario | None:
-    rig, sweep, fs, (table, mass), q_target = _base(rng)
+def _draw(rng, category, names, duration_s=None, fs_hz=None) -> Scenario | None:
+    rig, sweep, fs, (table, mass), q_target = _base(rng, duration_s, fs_hz)
     sweep, Q, V, Fs = _pilot(rig, sweep, fs, q_target)
     k, m = rig.stiffness_n_per_m, rig.mass_kg
     fields_, effects, mags = {}, {}, {}
