@@ -1,5 +1,6 @@
 """The randomised discrepancy scenarios (sim/scenarios.py): every effect drawn sane and as stated, draws
 reproducible, and the contract's scoring rules."""
+import json
 import math
 
 import numpy as np
@@ -26,6 +27,7 @@ def test_each_effect_is_drawn_sane_and_as_stated(category, names):
     run = sc.run(seed=1)
     truth = run.recording.metadata["truth"]
     assert truth["category"] == category and truth["truth_effects"] == (names or []) == sc.truth_effects
+    json.dumps(truth)  # the truth travels with the recording
     name = (names or [None])[0]
     plain = RigParameters()
     assert set(sc.rig.effects) == ({name} & (set(PHYSICS) - set(FIELDS)))
