@@ -63,11 +63,11 @@ def plan(n_cases: int) -> list[tuple[str, list[str] | None]]:
 
 
 def run_case(i: int, seed: int, category: str, names) -> dict:
-    rng = np.random.default_rng([seed, i])
-    sc = make_scenario(rng, category, names)
-    rec = {"case": i, "category": category, "truth": sc.truth_effects, "scenario": sc.describe(),
-           "magnitudes": sc.magnitudes}
+    t0 = time.perf_counter()
+    sc = make_scenario(np.random.default_rng([seed, i]), category, names)
     run = sc.run(seed=i)
+    rec = {"case": i, "category": category, "truth": sc.truth_effects, "scenario": sc.describe(),
+           "magnitudes": sc.magnitudes, "sim_seconds": time.perf_counter() - t0}
     t0 = time.perf_counter()
     try:
         res = DiscrepancyAnalysis().fit(run.recording).result()
@@ -123,6 +123,7 @@ def summary(records: list[dict]) -> dict:
             "cases_with_wrong_name": sum(bool(r["wrong_names"]) for r in records),
             "errors": sum("error" in r for r in records),
             "seconds_per_case": float(np.mean([r["seconds"] for r in records])) if records else 0.0,
+            "sim_seconds_per_case": float(np.mean([r["sim_seconds"] for r in records])) if records else 0.0,
             "calibration_by_case": calibration(by_case), "calibration_by_entry": calibration(by_entry)}
 
 
@@ -131,7 +132,8 @@ def print_summary(s: dict) -> None:
     for c, t in s["tally"].items():
         print(f"  {c:14s} {t['right']:3d} / {t['n']}")
     print(f"wrong physical names at confidence >= 0.5: {s['wrong_names_at_0.5']} (in {s['cases_with_wrong_name']} "
-          f"cases; target 0); errors: {s['errors']}; analysis {s['seconds_per_case']:.1f} s per case")
+          f"cases; target 0); errors: {s['errors']}; per case: analysis {s['seconds_per_case']:.1f} s, "
+          f"scenario {s['sim_seconds_per_case']:.1f} s")
     for key, what in (("calibration_by_case", "first effect's confidence vs case right"),
                       ("calibration_by_entry", "each named effect's confidence vs name true")):
         print(f"\n{what}:\n  confidence   n   right-rate  mean-confidence")
