@@ -234,3 +234,13 @@ def test_plc_refuses_physics_it_cannot_step():
     with pytest.raises(ValueError, match="run_sweep"):
         RigPLC(PLCConfig(rig=dataclasses.replace(BASE, stiffness_drift=0.1)))
     RigPLC(PLCConfig(rig=dataclasses.replace(BASE, effects={"cubic_damping": 1.0})))  # a plain term runs
+
+
+def test_contact_is_counted_per_side():
+    """Contact (truth, PLC counters) is judged per side: an upper-only stop never counts q < -travel."""
+    q = np.array([-0.02, -0.004, 0.0, 0.004, 0.02])
+    one = RigParameters(end_stop_upper_mm=3.0, end_stop_lower_mm=math.inf)
+    assert one.in_contact(q).tolist() == [False, False, False, True, True]
+    assert RigParameters(end_stop_travel_mm=3.0).in_contact(q).tolist() == [True, True, False, True, True]
+    assert not RigParameters(end_stop_travel_mm=None).in_contact(q).any()
+    assert RigParameters(end_stop_lower_mm=5.0).travels_mm == (5.0, 17.5)
