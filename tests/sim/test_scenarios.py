@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from sim.rig import RigParameters
-from sim.scenarios import (CATEGORIES, MAX_RESPONSE_MM, MEASUREMENT, OUT_OF_CATALOG, PHYSICS, RELATIVE_FORCE,
-                           SURROGATE_GROUPS, _draw_names, make_scenario, result_effects, score)
+from sim.scenarios import (CATEGORIES, DETECTABLE, GAP_PER_SIZE, MAX_RESPONSE_MM, MEASUREMENT, NOISE_FLOOR_PER_NOISE,
+                           OUT_OF_CATALOG, PHYSICS, RELATIVE_FORCE, SURROGATE_GROUPS, _draw_names, make_scenario,
+                           result_effects, score)
 
 SHORT = dict(duration_s=12.0, fs_hz=1000.0)
 CASES = ([("none", None)] + [("single", [p]) for p in PHYSICS] + [("sensor_fault", [p]) for p in MEASUREMENT]
@@ -57,6 +58,9 @@ def test_each_effect_is_drawn_sane_and_as_stated(category, names):
         assert sc.magnitudes[name]["frequency_hz"] < sc.sweep.f_end_hz
     for s in (sc.table_sensor, sc.mass_sensor):
         assert 0.002 <= s.noise_fraction <= 0.03
+        if name in GAP_PER_SIZE:  # quiet enough for the effect's expected gap to stand DETECTABLE x the floor
+            cap = GAP_PER_SIZE[name] * sc.magnitudes[name]["relative_force"] / (DETECTABLE * NOISE_FLOOR_PER_NOISE)
+            assert s.noise_fraction <= max(cap, 0.002)
 
 
 def test_draws_are_reproducible_and_seed_only_the_noise():
