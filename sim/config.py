@@ -9,7 +9,10 @@
                max_duration_s, watchdog_s
     [rig]      mass_kg, damping_ns_per_m, stiffness_n_per_m, cubic_stiffness_n_per_m3, input_gain,
                end_stop_travel_mm (inf: no end stops), contact_stiffness_n_per_m, contact_damping_ns_per_m,
-               [rig.effects] (simulated rig only: the physics, its end stops and hidden effects)
+               end_stop_lower_mm / end_stop_upper_mm (per side), [rig.effects] (simulated rig only: the
+               physics, its end stops and hidden effects); the suite's further physics fields
+               (stiffness_drift, hysteresis_*, absorber_*, spring_free_play_mm: sim/rig.py) are accepted
+               but the PLC refuses them (run_sweep only)
     [sensors]  noise_ms2, bias_ms2 (simulated rig only)
     [sim]      speed (simulated rig only)
     [server]   data_dir, tokens, ... (the HTTP service, server/settings.py)

@@ -20,6 +20,13 @@ it; physics that is not a term of (q1, q2) gets extra states or an extra input:
                            F = -(k_a qa2 + c_a qa1) on the mass; qa'' = -(k_a qa2 + c_a qa1)/m_a - q'' - z''
 - spring free play         the linear spring's force k dz(q2, g), dz(q, g) = sign(q) max(|q| - g, 0):
                            stop() of a coordinate qf = q2 with travel g (the kernel cuts steps at +-g)
+
+No change to the compiled kernel was needed: it carries up to 8 states and 8 inputs. Accuracy of
+run_sweep against these laws integrated independently by DOP853 at rtol 1e-10 (tests/sim/
+test_effects_physics.py, 6.5 s sweeps at 1 kHz): 1e-9 of the peak displacement for the smooth ones
+(cubic damping, drift, absorber: 16 substeps), 2e-9 for Bouc-Wen (n = 1, 2) and asymmetric stiffness
+(|q1|, |z|, |q2| kinks: 64 substeps), 2.5e-6 and 6e-6 with hard (7.7e5 N/m) end-stop contacts and free
+play, where DOP853 steps through the kinks the kernel cuts its steps at.
 """
 from __future__ import annotations
 

@@ -222,8 +222,7 @@ class RigPLC:
         states, mass = states[:good], mass[:good]
         if good:
             self.x = states[-1].copy()
-            travel = self.physics.travel.get("q2", np.inf)
-            self.contact_samples += int(np.count_nonzero(np.abs(states[:, 1]) > travel))
+            self.contact_samples += int(np.count_nonzero(self.config.rig.in_contact(states[:, 1])))  # per side
         if good == n:
             return zdd, mass
         self._simulation_fault((first + good) / fs)

@@ -54,30 +54,23 @@ def run_sweep(rig: RigParameters | None = None, sweep: SineSweep | None = None, 
     if substeps is None:
         substeps = TRUTH_SUBSTEPS if all(_smooth(model, t) for t in model.terms) else TRUTH_SUBSTEPS_NONSMOOTH
     n = int(round((sweep.duration_s + settle_s) * fs_hz)) + 1
-    dt = 1.0 / fs_hz
-    n_fine, h2 = (n - 1) * 2 * substeps + 1, dt / (2 * substeps)
-    u_fine = np.empty((n_fine, len(model.inputs)))
-    for a in range(0, n_fine, _CHUNK):  # in chunks: the kinematics' temporaries of a long sweep add up to GBs
-        b = min(a + _CHUNK, n_fine)
-        u_fine[a:b, 0] = sweep.kinematics(np.arange(a, b) * h2)[2]
-    if "drift" in model.inputs:  # stiffness drift: t / T over the record
-        u_fine[:, model.inputs.index("drift")] = np.arange(n_fine) / (n_fine - 1)
-    res = simulate(model, dt, rig.initial_state(model), inputs_fine=u_fine, substeps=substeps, n_samples=n,
-                   bound=10.0)
-    if res.diverged:
-        raise ValueError(f"rig response diverged at t = {res.n_valid * dt:.3f} s: reduce the amplitude")
+    res, u = _integrate(rig, model, sweep, fs_hz, n, substeps)
     contact_samples = int(np.count_nonzero(rig.in_contact(res.states[:, 1]))) if rig.end_stops else 0
     if contact_samples == 0:
         model = rig.model()
-    u = u_fine[:: 2 * substeps]
     zdd = u[:, 0]
-    qdd = model.rhs(res.states[:, : len(model.states)], u[:, : len(model.inputs)])[:, 0]
-    mass_acc = qdd + zdd
+    mass_acc = _mass_acc(model, res.states, u)
     rng = np.random.default_rng(seed)
     table_sensor = table_sensor or Accelerometer()
     mass_sensor = mass_sensor or Accelerometer()
-    rec = Recording(table_sensor.measure(zdd, rng, fs_hz=fs_hz, true_at=lambda t: sweep.kinematics(t)[2]),
-                    mass_sensor.measure(mass_acc, rng, fs_hz=fs_hz), fs_hz, "base", source="simulated rig")
+    table_late = mass_late = None  # the true accelerations at t - delay, for delayed sensors
+    if table_sensor.delay_s:
+        table_late = sweep.kinematics(np.arange(n) / fs_hz - table_sensor.delay_s)[2]
+    if mass_sensor.delay_s:  # the rig is at rest before the sweep: the delayed input gives the delayed motion
+        res_late, u_late = _integrate(rig, rig.model(end_stops=True), sweep, fs_hz, n, substeps, mass_sensor.delay_s)
+        mass_late = _mass_acc(model, res_late.states, u_late)
+    rec = Recording(table_sensor.measure(zdd, rng, fs_hz, table_late), mass_sensor.measure(mass_acc, rng, fs_hz, mass_late),
+                    fs_hz, "base", source="simulated rig")
     truth = {**{k: v for k, v in model.to_dict().items() if k in ("model", "travel")}, "rig": rig.to_dict(),
              "end_stops": rig.end_stop_summary(), "contact_samples": contact_samples,
              "sweep": {"f_start_hz": sweep.f_start_hz, "f_end_hz": sweep.f_end_hz, "duration_s": sweep.duration_s,
@@ -89,6 +82,29 @@ def run_sweep(rig: RigParameters | None = None, sweep: SineSweep | None = None, 
     rec.metadata["truth"] = truth
     internal = {s: res.states[:, i] for i, s in enumerate(model.states) if s in ("z", "qa1", "qa2")}
     return SyntheticRun(rec, rig, sweep, res.states[:, :2], zdd, mass_acc, truth, internal)
+
+
+def _integrate(rig, model, sweep, fs_hz, n, substeps, late_s: float = 0.0):
+    """The rig's states at n samples and the inputs there, driven by the sweep delayed by `late_s` s."""
+    dt = 1.0 / fs_hz
+    n_fine, h2 = (n - 1) * 2 * substeps + 1, dt / (2 * substeps)
+    u_fine = np.empty((n_fine, len(model.inputs)))
+    for a in range(0, n_fine, _CHUNK):  # in chunks: the kinematics' temporaries of a long sweep add up to GBs
+        b = min(a + _CHUNK, n_fine)
+        t = np.arange(a, b) * h2
+        u_fine[a:b, 0] = sweep.kinematics(t - late_s if late_s else t)[2]
+    if "drift" in model.inputs:  # stiffness drift: t / T over the record
+        u_fine[:, model.inputs.index("drift")] = (np.arange(n_fine) - late_s / h2) / (n_fine - 1)
+    res = simulate(model, dt, rig.initial_state(model), inputs_fine=u_fine, substeps=substeps, n_samples=n,
+                   bound=10.0)
+    if res.diverged:
+        raise ValueError(f"rig response diverged at t = {res.n_valid * dt:.3f} s: reduce the amplitude")
+    return res, u_fine[:: 2 * substeps]
+
+
+def _mass_acc(model, states, u) -> np.ndarray:
+    """The mass's absolute acceleration x'' = q'' + z'' (m/s^2) at the samples."""
+    return model.rhs(states[:, : len(model.states)], u[:, : len(model.inputs)])[:, 0] + u[:, 0]
 
 
 def _smooth(model, term) -> bool:
