@@ -55,7 +55,7 @@ from sim.synth import run_sweep  # noqa: E402
 FS = 2048.0
 AMPLITUDE_MM = 1.2
 TARGETS = {"fit": 2.0, "fit_validated": 3.0, "pysindy": 10.0}
-PARTS = ("chain", "library_gram", "path", "selection_refit", "validation")
+PARTS = ("chain", "library_gram", "path", "selection_refit", "offset", "refit_uncertainty", "validation")
 
 
 def timed(fn):
@@ -140,12 +140,13 @@ def identification_figures(n: int, repeat: int, pysindy: bool = True) -> dict:
     X, U = (sig.q1, sig.q2), sig.input[:, None]
     lib = Library()
     f = {"n": n, "peak_mm": 1e3 * truth["max_abs_q_m"], "contact_samples": truth["contact_samples"]}
-    runs = {"anchor": [], "transforms": [], "fit": [], "fit_validated": []}
+    runs = {"anchor": [], "transforms": [], "fit": [], "fit_validated": [], "fit_no_uncertainty": []}
     for _ in range(repeat):  # rounds: a load spike on the machine hits anchor and calls alike
         runs["anchor"].append(anchor(rec, lib, X, U))
         runs["transforms"].append(chain_transforms(rec, sig))
-        for key, validate in (("fit", False), ("fit_validated", True)):
-            t, ident = timed(lambda v=validate: SparseIdentifier(validate=v).fit(rec))
+        for key, kw in (("fit", dict(validate=False)), ("fit_validated", {}),
+                        ("fit_no_uncertainty", dict(validate=False, bias_replicates=0, placements=0))):
+            t, ident = timed(lambda kw=kw: SparseIdentifier(**kw).fit(rec))
             runs[key].append({"total": t, "parts": dict(ident.timings_), "model": ident.model_,
                               "verdict": ident.verdict_["status"]})
     tr = runs.pop("transforms")
@@ -246,6 +247,10 @@ def main(argv=None) -> int:
               f"{tr['welch'][0]:.3f}/{tr['welch'][1]:.3f} = {(tr['padded_ffts'][1] + tr['welch'][1]) / a['total'][1]:.2f}"
               " x the anchor (cpu)")
         print(f"          fit parts (wall, fastest run): {_parts(fit['parts'])}")
+        core = f["fit_no_uncertainty"]
+        print(f"          fit without the uncertainty step (bias_replicates=0, placements=0; all-rows refit kept), "
+              f"wall/cpu: {core['total'][0]:.3f}/{core['total'][1]:.3f} = {core['total'][1] / a['total'][1]:.2f} x the "
+              f"anchor (cpu); PySINDy / it {ps_t[1] / core['total'][1] if ps_t else float('nan'):.1f} (cpu)")
         print(f"          fit+val parts (wall, fastest run): {_parts(val['parts'])} (verdict {val['verdict']})")
         print(f"          peak |q2| {f['peak_mm']:.1f} mm, {f['contact_samples']} samples on the end stops; "
               f"model: {fit['model']!r}", flush=True)
