@@ -37,7 +37,7 @@ EDGE_FRACTION = 0.5
 #: is below 1e-9 of their peak from ~20 periods on (docs/identification.md, Benchmarks).
 PAD_PERIODS = 40
 #: Excited = Welch PSD at least this many dB above the noise floor (the spectrum's 10th percentile).
-EXCITATION_MARGIN_DB = 10.0
+EXCITATION_MARGIN_DB = 8.0  # over the noise level: the old rule's 10 dB over a low decile (0.55-0.67 of it)
 #: Guard beyond the taper at an edge where the record is not at rest, in periods of f_lo.
 LIVE_EDGE_PERIODS = 3.0
 #: An edge is at rest when its RMS is below this fraction of the record's RMS.
