@@ -36,7 +36,7 @@ EDGE_FRACTION = 0.5
 #: Zero padding of the transforms in periods of f_lo (padded_length): what the states lose to wrap-around
 #: is below 1e-9 of their peak from ~20 periods on (docs/identification.md, Benchmarks).
 PAD_PERIODS = 40
-#: Excited = Welch PSD at least this many dB above the noise floor (the spectrum's 10th percentile).
+#: Excited = Welch PSD at least this many dB above the noise floor (excited_band: the noise level itself).
 EXCITATION_MARGIN_DB = 8.0  # over the noise level: the old rule's 10 dB over a low decile (0.55-0.67 of it)
 #: Guard beyond the taper at an edge where the record is not at rest, in periods of f_lo.
 LIVE_EDGE_PERIODS = 3.0
