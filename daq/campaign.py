@@ -148,14 +148,18 @@ def _amplitudes(value) -> tuple[float, ...]:
     return tuple(_number(v, f"amplitudes_mm[{k}]") for k, v in enumerate(value))
 
 
+def _known_keys(table: dict, known, where: str) -> None:
+    unknown = set(table) - set(known)
+    if unknown:
+        raise PlanError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}; known: {', '.join(sorted(known))}")
+
+
 def parse_plan(plan: dict, where: str = "plan") -> CampaignPlan:
     """A plan from its dict form (a TOML file's tables or the API's JSON), checked key by key: unknown
     keys, missing keys, non-finite or out-of-range numbers and an unsafe name are refused by name."""
     if not isinstance(plan, dict):
         raise PlanError(f"{where}: expected a table of keys")
-    unknown = set(plan) - PLAN_KEYS
-    if unknown:
-        raise PlanError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}; known: {', '.join(sorted(PLAN_KEYS))}")
+    _known_keys(plan, PLAN_KEYS, where)
     for key in ("name", "sweep", "amplitudes_mm"):
         if key not in plan:
             raise PlanError(f"{where}: {key} is missing")
@@ -165,9 +169,7 @@ def parse_plan(plan: dict, where: str = "plan") -> CampaignPlan:
     sweep = plan["sweep"]
     if not isinstance(sweep, dict):
         raise PlanError("sweep: expected a table with f_start_hz, f_end_hz, duration_s (and settle_s)")
-    unknown = set(sweep) - SWEEP_KEYS
-    if unknown:
-        raise PlanError(f"sweep: unknown key(s) {', '.join(sorted(unknown))}; known: {', '.join(sorted(SWEEP_KEYS))}")
+    _known_keys(sweep, SWEEP_KEYS, "sweep")
     for key in ("f_start_hz", "f_end_hz", "duration_s"):
         if key not in sweep:
             raise PlanError(f"sweep.{key} is missing")

@@ -114,3 +114,26 @@ def dask_cluster(tmp_path_factory):
                 proc.kill()
                 proc.wait()
         log.close()
+
+
+@pytest.fixture
+def sim_rig(tmp_path):
+    """`shakeid sim` at 10x on free ports, as its own process, and (its rig configuration file, its Modbus
+    port); watchdog 5 s of rig time, 0.5 s of wall time: ten heartbeats."""
+    import subprocess
+    import sys
+
+    from sim.server import free_port
+
+    modbus, stream = free_port(), free_port()
+    cfg = tmp_path / "rig.toml"
+    cfg.write_text(f'[plc]\ntransport = "modbus"\nhost = "127.0.0.1"\nport = {modbus}\n'
+                   f'[stream]\nurl = "socket://127.0.0.1:{stream}"\nsensitivity_counts_per_ms2 = 655.34\n'
+                   f'[limits]\nwatchdog_s = 5.0\n[sim]\nspeed = 10.0\n')
+    shakeid = str(Path(sys.executable).with_name("shakeid"))
+    proc = subprocess.Popen([shakeid, "sim", "--config", str(cfg)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+    assert "simulated rig" in proc.stdout.readline()
+    yield cfg, modbus
+    proc.terminate()
+    proc.wait(10)

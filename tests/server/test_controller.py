@@ -16,7 +16,6 @@ import pytest
 
 from daq.devices import ModbusPLC
 from sim.plc import Fault, State
-from sim.server import free_port
 
 from .conftest import SHAKEID, Service, wait_for
 
@@ -46,23 +45,6 @@ def _alive(pid: int) -> bool:
     except OSError:
         return False
     return state != "Z"  # a zombie has exited; only its parent's bookkeeping is left
-
-
-@pytest.fixture
-def sim_rig(tmp_path):
-    """`shakeid sim` at 10x on free ports, and a rig configuration file for it (watchdog 5 s of rig time,
-    0.5 s of wall time: ten heartbeats)."""
-    modbus, stream = free_port(), free_port()
-    cfg = tmp_path / "rig.toml"
-    cfg.write_text(f'[plc]\ntransport = "modbus"\nhost = "127.0.0.1"\nport = {modbus}\n'
-                   f'[stream]\nurl = "socket://127.0.0.1:{stream}"\nsensitivity_counts_per_ms2 = 655.34\n'
-                   f'[limits]\nwatchdog_s = 5.0\n[sim]\nspeed = 10.0\n')
-    proc = subprocess.Popen([SHAKEID, "sim", "--config", str(cfg)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True)
-    assert "simulated rig" in proc.stdout.readline()
-    yield cfg, modbus
-    proc.terminate()
-    proc.wait(10)
 
 
 def test_killing_the_service_stops_the_table_and_leaves_no_process(tmp_path, sim_rig):

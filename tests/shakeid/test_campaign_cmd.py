@@ -14,27 +14,17 @@ import pytest
 
 from daq.devices import ModbusPLC
 from sim.plc import Command, State
-from sim.server import free_port
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 
 
 @pytest.fixture
-def sim_rig(tmp_path):
-    """`shakeid sim` at 10x on free ports, and its rig configuration (watchdog 5 s of rig time)."""
-    modbus, stream = free_port(), free_port()
-    cfg = tmp_path / "rig.toml"
-    cfg.write_text(f'[plc]\ntransport = "modbus"\nhost = "127.0.0.1"\nport = {modbus}\n'
-                   f'[stream]\nurl = "socket://127.0.0.1:{stream}"\nsensitivity_counts_per_ms2 = 655.34\n'
-                   f'[limits]\nwatchdog_s = 5.0\n[sim]\nspeed = 10.0\n')
-    proc = subprocess.Popen([SHAKEID, "sim", "--config", str(cfg)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True)
-    assert "simulated rig" in proc.stdout.readline()
+def rig(sim_rig):
+    """The shared `shakeid sim` fixture (tests/conftest.py) and a Modbus link to its PLC."""
+    cfg, modbus = sim_rig
     plc = ModbusPLC("127.0.0.1", modbus)
     yield cfg, plc
     plc.close()
-    proc.terminate()
-    proc.wait(10)
 
 
 def _plan(tmp_path, name: str, duration_s: float, amplitudes=(0.8, 1.2)) -> Path:
@@ -62,8 +52,8 @@ def _wait(fn, timeout_s: float, what: str):
     return value
 
 
-def test_a_campaign_writes_one_file_per_sweep_in_order(sim_rig, tmp_path):
-    cfg, plc = sim_rig
+def test_a_campaign_writes_one_file_per_sweep_in_order(rig, tmp_path):
+    cfg, plc = rig
     out = tmp_path / "out"
     p = _campaign(_plan(tmp_path, "levels", 3.0), cfg, out)
     assert p.returncode == 0, p.stdout + p.stderr
@@ -86,8 +76,8 @@ def test_a_campaign_writes_one_file_per_sweep_in_order(sim_rig, tmp_path):
     assert again.returncode == 2 and "already in" in again.stderr and "completed, 4 of 4" in again.stderr
 
 
-def test_an_estop_pauses_the_campaign_resume_goes_on_and_ctrl_c_aborts(sim_rig, tmp_path):
-    cfg, plc = sim_rig
+def test_an_estop_pauses_the_campaign_resume_goes_on_and_ctrl_c_aborts(rig, tmp_path):
+    cfg, plc = rig
     out = tmp_path / "out"
     plan = _plan(tmp_path, "stops", 30.0, amplitudes=(1.0,))
     proc = subprocess.Popen([SHAKEID, "campaign", str(plan), "--config", str(cfg), "--out", str(out)],
