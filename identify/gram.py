@@ -53,12 +53,16 @@ class BlockGram:
         self.counts = np.diff(self.edges)
 
     @classmethod
-    def from_library(cls, library, states, inputs, targets, edges, chunk: int = CHUNK_ROWS) -> "BlockGram":
+    def from_library(cls, library, states, inputs, targets, edges, chunk: int | None = None) -> "BlockGram":
         """Per-block Grams of [library(states, inputs) | targets] without building the whole matrix.
 
-        states, targets : sequences of 1-D arrays (columns); inputs : (n, n_inputs) array."""
+        states, targets : sequences of 1-D arrays (columns); inputs : (n, n_inputs) array; chunk : rows
+        per chunk (default: CHUNK_ROWS x 18 columns' worth, so a narrow library takes longer chunks and
+        pays the per-chunk overhead less often)."""
         self = cls.__new__(cls)
         m, p = len(library), len(targets)
+        if chunk is None:
+            chunk = CHUNK_ROWS * 18 // max(m + p, 18) if m + p >= 18 else CHUNK_ROWS * 18 // (m + p)
         self._setup(edges, m + p, p)
         buf = np.empty((chunk, m + p), order="F")
         for b in range(self.n_blocks):

@@ -213,20 +213,22 @@ class SparseIdentifier:
         self.timings_ = timings
         return self
 
-    def _gram(self, sig: StateSignals, edges) -> BlockGram:
+    def _gram(self, sig: StateSignals, edges, columns=None) -> BlockGram:
         """Per-block normal equations of the library on the model's states. With an offset carried
         (an even force) every column goes through the chain's band (identify.inband, as explain's
         screen does): an even term's DC and slow part are not in the measured acceleration, and on
         raw columns an offset a few % off shows as a spurious constant, q1^4, q2^4 (3e4 N/m^2 rig).
         Without one (odd forces) the columns stay as they are and are streamed in chunks: through the
         band, the degree-4 even terms fit the chain's low-frequency error on short sweeps (exact
-        supports 9 of 24 instead of 21 of 24, docs/identification.md), while raw, their DC costs."""
+        supports 9 of 24 instead of 21 of 24, docs/identification.md), while raw, their DC costs.
+        `columns`: those library columns only (indices)."""
+        lib = self.library_ if columns is None else self.library_.subset(columns)
         v = sig.valid
         # q2_dot = q1 by construction of the chain, so the second target is q1 itself
         targets = (sig.q1_dot[v], sig.q1[v])
         if sig.q2_offset is not None:
-            return band_limited_gram(self.library_, sig, targets, edges)
-        return BlockGram.from_library(self.library_, (sig.q1[v], sig.q2[v]), sig.input[v][:, None], targets, edges)
+            return band_limited_gram(lib, sig, targets, edges)
+        return BlockGram.from_library(lib, (sig.q1[v], sig.q2[v]), sig.input[v][:, None], targets, edges)
 
     def _fit_pass(self, sig: StateSignals, gram: BlockGram, held, timings: dict):
         """Path, selection and refit per equation on the Grams of the states.
@@ -277,8 +279,8 @@ class SparseIdentifier:
         bias_of = None
         if self.bias_replicates and getattr(self, "recording_", None) is not None:
             def bias_of(sups, coefs):
-                return unc.chain_bias(self.recording_, sig, sups, coefs, lambda s2: self._gram(s2, gram.edges),
-                                      self.bias_replicates)
+                return unc.chain_bias(self.recording_, sig, sups, coefs,
+                                      lambda s2, cols: self._gram(s2, gram.edges, cols), self.bias_replicates)
         optimizer = self._optimizer()
 
         def fit_and_select(train, heldout):
