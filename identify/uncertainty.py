@@ -57,7 +57,8 @@ def refit_all_rows(gram: BlockGram, support: np.ndarray, eq: int, covariance: bo
     block boundary, and neighbours' scores come out negatively correlated. The plain block sandwich
     (identify.gram.sandwich_covariance) ignores that and overstated the spread of q1 / q2 / q2^3 by 1.5-1.7x
     on the Table 1 sweep; Newey-West weights over one block lag (Bartlett: 1/2) take it into account and
-    stay positive semi-definite."""
+    stay positive semi-definite. Blocks of different recordings (gram.segment, a joint fit) are not
+    neighbours: their lag pairs get no weight."""
     everything = np.ones(gram.n_blocks, dtype=bool)
     ne = gram.equations(everything)
     coef = least_squares(ne.G, ne.B[:, eq], support)
@@ -68,7 +69,8 @@ def refit_all_rows(gram: BlockGram, support: np.ndarray, eq: int, covariance: bo
         return coef, np.zeros((0, 0))
     scores = gram.block_scores(everything, S, coef[S], eq)
     k = scores.shape[0]
-    lag1 = scores[:-1].T @ scores[1:]
+    same = (gram.segment[:-1] == gram.segment[1:])[:, None]  # pairs within one recording only
+    lag1 = scores[:-1].T @ (scores[1:] * same)
     meat = (scores.T @ scores + 0.5 * (lag1 + lag1.T)) * k / max(k - 1, 1)
     bread = scaled_pinv(ne.G[np.ix_(S, S)])
     return coef, bread @ meat @ bread
@@ -117,24 +119,32 @@ def chain_bias(recording, sig, supports: dict, coefs: dict, gram_of, n_replicate
     supports, coefs : {equation index: (m,) support, (m,) all-rows coefficients}; gram_of(sig) ->
     BlockGram on sig.valid rows. Returns None when a channel's noise floor cannot be read, else
     {"noise_std": (input, output), "bias": {e: (m,)}, "spread_var", "mc_var": {e: (m,)}, "replicates"};
-    bias is what to subtract, spread_var the replicates' variance, mc_var that of their mean."""
-    s_in = white_noise_std(recording.input, recording.fs_hz, sig.band_hz)
-    s_out = white_noise_std(recording.output, recording.fs_hz, sig.band_hz)
-    if s_in is None or s_out is None or n_replicates < 2:
+    bias is what to subtract, spread_var the replicates' variance, mc_var that of their mean.
+    Several recordings (a joint fit, identify.joint): recording and sig are lists, every recording gets
+    its own noise in each replicate, gram_of(list of sigs) -> their joint BlockGram, and noise_std is
+    a list of (input, output), one per recording."""
+    several = isinstance(recording, (list, tuple))
+    pairs = list(zip(recording, sig)) if several else [(recording, sig)]
+    floors = [(white_noise_std(r.input, r.fs_hz, s.band_hz), white_noise_std(r.output, r.fs_hz, s.band_hz))
+              for r, s in pairs]
+    if any(f is None for fl in floors for f in fl) or n_replicates < 2:
         return None
     rng = np.random.default_rng(seed)
     shifts = {e: [] for e in supports}
-    n = recording.input.size
-    noise_chain = NoiseChain(sig, n, recording.layout)
+    chains = [NoiseChain(s, r.input.size, r.layout) for r, s in pairs]
     for _ in range(n_replicates):
-        d1, d2, dd, du = noise_chain(s_in * rng.standard_normal(n), s_out * rng.standard_normal(n))
-        g2 = gram_of(dataclasses.replace(sig, q1=sig.q1 + d1, q2=sig.q2 + d2, q1_dot=sig.q1_dot + dd,
-                                         input=sig.input + du))
+        noisy = []
+        for (r, s), nc, (s_in, s_out) in zip(pairs, chains, floors):
+            n = nc.n
+            d1, d2, dd, du = nc(s_in * rng.standard_normal(n), s_out * rng.standard_normal(n))
+            noisy.append(dataclasses.replace(s, q1=s.q1 + d1, q2=s.q2 + d2, q1_dot=s.q1_dot + dd,
+                                             input=s.input + du))
+        g2 = gram_of(noisy if several else noisy[0])
         for e, sup in supports.items():
             shifts[e].append(refit_all_rows(g2, sup, e, covariance=False)[0] - coefs[e])
     bias = {e: np.mean(d, axis=0) for e, d in shifts.items()}
     spread = {e: np.var(d, axis=0, ddof=1) for e, d in shifts.items()}
-    return {"noise_std": (s_in, s_out), "bias": bias, "spread_var": spread,
+    return {"noise_std": floors if several else floors[0], "bias": bias, "spread_var": spread,
             "mc_var": {e: v / n_replicates for e, v in spread.items()}, "replicates": n_replicates}
 
 
@@ -194,7 +204,9 @@ def name_info(info: dict, eqs, names, supports: dict) -> dict:
     out = {"coefficients": "kept terms refit on all rows" + (", chain bias removed (SIMEX)" if bias else ""),
            "chain_bias": None, "inclusion_probability": None, "placements": info["placements"]}
     if bias is not None:
-        out["chain_bias"] = {"noise_std": {"input": bias["noise_std"][0], "output": bias["noise_std"][1]},
+        floors = bias["noise_std"]
+        named = [{"input": f[0], "output": f[1]} for f in (floors if isinstance(floors, list) else [floors])]
+        out["chain_bias"] = {"noise_std": named if isinstance(floors, list) else named[0],
                              "replicates": bias["replicates"],
                              **{eqs[e]: {names[j]: float(b[j]) for j in np.flatnonzero(supports[e])}
                                 for e, b in bias["bias"].items()}}
