@@ -202,7 +202,9 @@ def create_app(settings: Settings) -> FastAPI:
         campaign = catalog().get("campaigns", campaign_id)
         if campaign is None:
             raise HTTPException(404, f"no campaign {campaign_id}")
-        return campaign
+        joint = [j for j in catalog().list("jobs", "kind = 'identify_joint'", limit=10_000)
+                 if j["options"].get("campaign_id") == campaign_id]
+        return {**campaign, "joint_identification": max(joint, key=lambda j: j["created"]) if joint else None}
 
     @app.post("/api/campaigns/{campaign_id}/{action}", status_code=202, response_model=schemas.Accepted,
               tags=["campaigns"], responses=campaign_errors)

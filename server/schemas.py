@@ -100,7 +100,9 @@ class ExplainIn(ReadOptions):
 
 class JobOut(BaseModel):
     id: str
-    kind: Literal["identify", "explain"]
+    kind: Literal["identify", "explain", "identify_joint"] = Field(
+        description="identify_joint: one model of several recordings (options.recording_ids, in order; "
+                    "recording_id is the first); its result_dir holds joint.json")
     recording_id: str
     state: JobState
     attempts: int
@@ -171,6 +173,9 @@ class CampaignOut(BaseModel):
     sweeps: list[CampaignSweepOut]
     progress: CampaignProgress
     recording_ids: list[str] = Field(description="complete recordings in plan order (for a joint identification)")
+    joint_identification: JobOut | None = Field(
+        None, description="the joint identification of recording_ids queued when the campaign completed "
+                          "(job kind identify_joint; GET /api/jobs/{id}); None before that")
     created: float
     updated: float
 
