@@ -94,6 +94,13 @@ class IdentifyIn(ReadOptions):
     placements: int | None = Field(None, ge=0, le=500, description="held-out placements for inclusion probabilities")
 
 
+class JointIdentifyIn(IdentifyIn):
+    """Several recordings fitted as one model (`shakeid identify A.h5 B.h5 ...`, identify.joint); the
+    options apply to every recording."""
+    recording_ids: list[Annotated[str, Field(pattern=r"^[0-9a-f]{12}$")]] = Field(
+        min_length=2, max_length=500, description="the recordings, in the order the result lists them")
+
+
 class ExplainIn(ReadOptions):
     """The options of `shakeid explain`: the read options only."""
 

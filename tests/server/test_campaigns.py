@@ -150,6 +150,18 @@ def test_a_completed_campaign_is_identified_jointly(service):
     assert [s["source"] for s in result["recordings"]] == [f"{rid}.h5" for rid in c["recording_ids"]]
     assert result["status"] == "ok" and all(s["status"] == "ok" for s in result["recordings"]), result["reason"]
     assert {"q1", "q2", "q2^3", "zdd"} <= set(result["model"]["q1_dot"])
+    # the same two recordings, the other way round, through POST /api/identify
+    ids = c["recording_ids"][::-1]
+    assert op.post("/api/identify", json={"recording_ids": ids[:1]}).status_code == 422  # one is no joint fit
+    assert viewer.post("/api/identify", json={"recording_ids": ids}).status_code == 403
+    job = op.post("/api/identify", json={"recording_ids": ids, "placements": 0, "bias_replicates": 0})
+    assert job.status_code == 202, job.text
+    job = wait_for(lambda: (j := op.get(f"/api/jobs/{job.json()['id']}").json())["state"] not in ("queued", "running")
+                   and j, timeout_s=300)
+    assert job["state"] == "completed", job["error"]
+    again = op.get(f"/api/jobs/{job['id']}/joint").json()
+    assert [s["source"] for s in again["recordings"]] == [f"{rid}.h5" for rid in ids]
+    assert set(again["model"]["q1_dot"]) == set(result["model"]["q1_dot"])
 
 
 def test_estop_pauses_a_campaign_resume_reruns_the_sweep_and_abort_ends_one(service):
