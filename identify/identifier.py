@@ -142,7 +142,7 @@ class SparseIdentifier:
                          normalize=self.normalize_threshold)
         raise IdentificationError(f"unknown method {self.method!r} (admm or stlsq)")
 
-    def fit(self, recording) -> "SparseIdentifier":
+    def fit(self, recording: "Recording | list[Recording]") -> "SparseIdentifier":
         """Fit to one Recording, or to a list of them: one model for several recordings of the same
         rig (identify.joint: chain and held-out blocks per recording, normal equations summed)."""
         if isinstance(recording, (list, tuple)):
