@@ -58,7 +58,8 @@ def refit_all_rows(gram: BlockGram, support: np.ndarray, eq: int, covariance: bo
     block boundary, and neighbours' scores come out negatively correlated. The plain block sandwich
     (identify.gram.sandwich_covariance) ignores that and overstated the spread of q1 / q2 / q2^3 by 1.5-1.7x
     on the Table 1 sweep; Newey-West weights over one block lag (Bartlett: 1/2) take it into account and
-    stay positive semi-definite."""
+    stay positive semi-definite. Blocks of different recordings (gram.segment, a joint fit) are not
+    neighbours: their lag pairs get no weight."""
     everything = np.ones(gram.n_blocks, dtype=bool)
     ne = gram.equations(everything)
     coef = least_squares(ne.G, ne.B[:, eq], support)
@@ -69,7 +70,8 @@ def refit_all_rows(gram: BlockGram, support: np.ndarray, eq: int, covariance: bo
         return coef, np.zeros((0, 0))
     scores = gram.block_scores(everything, S, coef[S], eq)
     k = scores.shape[0]
-    lag1 = scores[:-1].T @ scores[1:]
+    same = (gram.segment[:-1] == gram.segment[1:])[:, None]  # pairs within one recording only
+    lag1 = scores[:-1].T @ (scores[1:] * same)
     meat = (scores.T @ scores + 0.5 * (lag1 + lag1.T)) * k / max(k - 1, 1)
     bread = scaled_pinv(ne.G[np.ix_(S, S)])
     return coef, bread @ meat @ bread
@@ -135,28 +137,32 @@ def chain_bias(recording, sig, supports: dict, coefs: dict, gram_of, n_replicate
     when a channel's noise floor cannot be read, else {"noise_std": (input, output), "bias": {e: (m,)},
     "spread_var", "mc_var": {e: (m,)}, "replicates"}; bias is what to subtract, spread_var the
     variance the added noise gives a refit, mc_var that of the bias estimate.
+    Several recordings (a joint fit, identify.joint): recording and sig are lists, every recording gets
+    its own noise in each replicate, gram_of(list of sigs, columns) -> their joint BlockGram, and
+    noise_std is a list of (input, output), one per recording.
 
     Replicates come in antithetic pairs (noise d and -d): the shift of a refit is, to first order,
     linear in the noise, and that part cancels in a pair's mean, leaving the quadratic part, the bias;
     half the pair's difference is the linear part, whose variance is spread_var. One noise draw serves
     two refits, and the bias estimate's Monte Carlo error is that of the quadratic part alone."""
-    both = welch_psd(np.vstack([recording.input, recording.output]), recording.fs_hz,
-                     int(min(1024, max(recording.input.size // 8, 64))))
-    s_in = white_noise_std(recording.input, recording.fs_hz, sig.band_hz, (both[0], both[1][0]))
-    s_out = white_noise_std(recording.output, recording.fs_hz, sig.band_hz, (both[0], both[1][1]))
-    if s_in is None or s_out is None or n_replicates < 2:
+    several = isinstance(recording, (list, tuple))
+    pairs = list(zip(recording, sig)) if several else [(recording, sig)]
+    floors = [noise_floors(r, s.band_hz) for r, s in pairs]
+    if any(f is None for fl in floors for f in fl) or n_replicates < 2:
         return None
     rng = np.random.default_rng(seed)
     n_pairs = (n_replicates + 1) // 2
     columns = np.flatnonzero(np.any([sup for sup in supports.values()], axis=0))
     means, halves = {e: [] for e in supports}, {e: [] for e in supports}
-    noise_chain = NoiseChain(sig, recording.input.size, recording.layout)
+    chains = [NoiseChain(s, r.input.size, r.layout) for r, s in pairs]
     for _ in range(n_pairs):
-        d1, d2, dd, du = noise_chain.draw(rng, s_in, s_out)
+        draws = [nc.draw(rng, s_in, s_out) for nc, (s_in, s_out) in zip(chains, floors)]
         refits = []
         for sign in (1.0, -1.0):
-            g2 = gram_of(dataclasses.replace(sig, q1=sig.q1 + sign * d1, q2=sig.q2 + sign * d2,
-                                             q1_dot=sig.q1_dot + sign * dd, input=sig.input + sign * du), columns)
+            noisy = [dataclasses.replace(s, q1=s.q1 + sign * d1, q2=s.q2 + sign * d2, q1_dot=s.q1_dot + sign * dd,
+                                         input=s.input + sign * du)
+                     for (_, s), (d1, d2, dd, du) in zip(pairs, draws)]
+            g2 = gram_of(noisy if several else noisy[0], columns)
             ne = g2.equations(np.ones(g2.n_blocks, dtype=bool))
             refits.append({})
             for e, sup in supports.items():
@@ -169,8 +175,16 @@ def chain_bias(recording, sig, supports: dict, coefs: dict, gram_of, n_replicate
     bias = {e: np.mean(d, axis=0) for e, d in means.items()}
     spread = {e: np.mean(np.square(h), axis=0) for e, h in halves.items()}  # the linear part has mean 0
     mc = {e: np.var(d, axis=0, ddof=1) / n_pairs if n_pairs > 1 else spread[e] for e, d in means.items()}
-    return {"noise_std": (s_in, s_out), "bias": bias, "spread_var": spread, "mc_var": mc,
+    return {"noise_std": floors if several else floors[0], "bias": bias, "spread_var": spread, "mc_var": mc,
             "replicates": 2 * n_pairs}
+
+
+def noise_floors(recording, band_hz) -> tuple[float | None, float | None]:
+    """White-noise std of the input and output channels (white_noise_std), from one batched Welch."""
+    f, p = welch_psd(np.vstack([recording.input, recording.output]), recording.fs_hz,
+                     int(min(1024, max(recording.input.size // 8, 64))))
+    return (white_noise_std(recording.input, recording.fs_hz, band_hz, (f, p[0])),
+            white_noise_std(recording.output, recording.fs_hz, band_hz, (f, p[1])))
 
 
 def placements(held: np.ndarray, n: int, seed: int = 0) -> list[np.ndarray]:
@@ -229,7 +243,9 @@ def name_info(info: dict, eqs, names, supports: dict) -> dict:
     out = {"coefficients": "kept terms refit on all rows" + (", chain bias removed (SIMEX)" if bias else ""),
            "chain_bias": None, "inclusion_probability": None, "placements": info["placements"]}
     if bias is not None:
-        out["chain_bias"] = {"noise_std": {"input": bias["noise_std"][0], "output": bias["noise_std"][1]},
+        floors = bias["noise_std"]
+        named = [{"input": f[0], "output": f[1]} for f in (floors if isinstance(floors, list) else [floors])]
+        out["chain_bias"] = {"noise_std": named if isinstance(floors, list) else named[0],
                              "replicates": bias["replicates"],
                              **{eqs[e]: {names[j]: float(b[j]) for j in np.flatnonzero(supports[e])}
                                 for e, b in bias["bias"].items()}}

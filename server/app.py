@@ -202,7 +202,9 @@ def create_app(settings: Settings) -> FastAPI:
         campaign = catalog().get("campaigns", campaign_id)
         if campaign is None:
             raise HTTPException(404, f"no campaign {campaign_id}")
-        return campaign
+        joint = [j for j in catalog().list("jobs", "kind = 'identify_joint'", limit=10_000)
+                 if j["options"].get("campaign_id") == campaign_id]
+        return {**campaign, "joint_identification": max(joint, key=lambda j: j["created"]) if joint else None}
 
     @app.post("/api/campaigns/{campaign_id}/{action}", status_code=202, response_model=schemas.Accepted,
               tags=["campaigns"], responses=campaign_errors)
@@ -302,6 +304,30 @@ def create_app(settings: Settings) -> FastAPI:
     def identify(body: schemas.IdentifyIn, rec_id: str = Id()):
         """Queue an identification with the CLI's options; poll GET /api/jobs/{id}."""
         return _submit("identify", rec_id, body.model_dump(exclude_none=True))
+
+    @app.post("/api/identify", status_code=202, response_model=schemas.JobOut, tags=["jobs"],
+              dependencies=[operator], responses={**errors, 404: {"model": schemas.Problem},
+                                                  409: {"model": schemas.Problem}})
+    def identify_joint(body: schemas.JointIdentifyIn):
+        """Queue one model of several recordings (job kind identify_joint); poll GET /api/jobs/{id}, then
+        GET /api/jobs/{id}/joint for the result (the JSON of `shakeid identify A.h5 B.h5 --json`)."""
+        ids = list(body.recording_ids)
+        for rec_id in ids:
+            if recording_or_404(rec_id)["status"] == "running":
+                raise HTTPException(409, f"recording {rec_id} is still being recorded")
+        options = body.model_dump(exclude_none=True, exclude={"recording_ids"})
+        return state["jobs"].submit("identify_joint", ids[0], {**options, "recording_ids": ids})
+
+    @app.get("/api/jobs/{job_id}/joint", tags=["jobs"], dependencies=[viewer],
+             responses={**errors, 404: {"model": schemas.Problem}})
+    def joint_result(job_id: str = Id()) -> dict:
+        """A joint identification's result (joint.json: the joint model, `recordings` per recording),
+        whether or not one model explained them all."""
+        job = catalog().get("jobs", job_id)
+        path = FsPath(job["result_dir"]) / "joint.json" if job and job["kind"] == "identify_joint" else None
+        if path is None or not path.exists():
+            raise HTTPException(404, f"no joint identification result for job {job_id}")
+        return json.loads(path.read_text())
 
     @app.post("/api/recordings/{rec_id}/explain", status_code=202, response_model=schemas.JobOut,
               tags=["jobs"], dependencies=[operator],

@@ -98,6 +98,11 @@ def cmd_identify(args) -> int:
     --accept-faulty); 1 when the fitted model fails its validation (identify/validation.py)."""
     from identify.quality import check_identifiable
 
+    if len(args.files) > 1:
+        from .joint_cmd import cmd_identify_joint
+
+        return cmd_identify_joint(args, _identifier, _read)
+    args.file = args.files[0]
     ident = _identifier(args)  # option errors first, before any file is read
     rec = _read(args)
     data = check_identifiable(rec, args.file, args.accept_faulty)
@@ -278,7 +283,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
     q = sub.add_parser("identify", help="identify a sparse ODE model from a recording (CSV, MAT, HDF5)")
-    q.add_argument("file")
+    q.add_argument("files", nargs="+", metavar="FILE",
+                   help="a recording; several: one model fitted to all of them (joint identification)")
     _add_identify_options(q)
     q.add_argument("--report", metavar="DIR", help="write figures, coefficient table and model JSON here")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
