@@ -181,7 +181,7 @@ class ChunkedIdentifier(SparseIdentifier):
                 simulated[k].append(s[keep])
             one_step.append(first_equation(model, sig.q1[keep], sig.q2[keep], sig.input[keep][:, None]))
             if progress:
-                progress("validation", i + 1, len(windows))
+                progress("validation windows", i + 1, len(windows))
         cat = {k: (np.concatenate(measured[k]), np.concatenate(simulated[k])) for k in names}
         metrics = {k: fit_metrics(*cat[k]) for k in names}
         return {"diverged": diverged, "substeps": substeps, "heldout": metrics,

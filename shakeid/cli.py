@@ -99,6 +99,10 @@ def cmd_identify(args) -> int:
     from identify.quality import check_identifiable
 
     ident = _identifier(args)  # option errors first, before any file is read
+    from .ooc_cmd import identify_out_of_core, wants_out_of_core
+
+    if wants_out_of_core(args):  # a long HDF5 recording: read and identified chunk by chunk
+        return identify_out_of_core(args, ident)
     rec = _read(args)
     data = check_identifiable(rec, args.file, args.accept_faulty)
     try:
@@ -280,6 +284,9 @@ def build_parser() -> argparse.ArgumentParser:
     q = sub.add_parser("identify", help="identify a sparse ODE model from a recording (CSV, MAT, HDF5)")
     q.add_argument("file")
     _add_identify_options(q)
+    from .ooc_cmd import add_out_of_core_options
+
+    add_out_of_core_options(q)
     q.add_argument("--report", metavar="DIR", help="write figures, coefficient table and model JSON here")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     q.add_argument("--accept-faulty", action="store_true",
