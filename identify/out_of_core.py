@@ -35,7 +35,10 @@ windows' scored rows together; the verdict is identify.validation.model_verdict'
 """
 from __future__ import annotations
 
+import os
+import socket
 import time
+from collections import Counter
 
 import numpy as np
 
@@ -58,14 +61,15 @@ SIMEX_SKIPPED = ("not done out of core: its replicates would read and transform 
 
 def chunk_gram(source, chain: ChunkedChain, library: Library, edges: np.ndarray, a: int, b: int):
     """Grams of the library and targets on valid rows [a, b) (valid-row coordinates), split by the blocks
-    of `edges`: (block indices, (k, m + p, m + p) cross-products). Runs anywhere the source can be read."""
+    of `edges`: (block indices, (k, m + p, m + p) cross-products, "host:pid" that computed them). Runs
+    anywhere the source can be read (a Dask worker: identify.out_of_core's map_chunks)."""
     v0 = chain.valid.start
     q1, q2, q1_dot, u = chain.states(source, v0 + a, v0 + b)
     first = int(np.searchsorted(edges, a, side="right")) - 1
     last = int(np.searchsorted(edges, b, side="left"))  # blocks first .. last - 1 overlap [a, b)
     local = np.clip(edges[first:last + 1], a, b) - a
     part = BlockGram.from_library(library, (q1, q2), u[:, None], (q1_dot, q1), local)
-    return np.arange(first, last), part.C
+    return np.arange(first, last), part.C, f"{socket.gethostname()}:{os.getpid()}"
 
 
 def _serial_map(fn, jobs):
@@ -139,10 +143,13 @@ class ChunkedIdentifier(SparseIdentifier):
         gram = BlockGram.__new__(BlockGram)
         gram._setup(edges, len(lib) + 2, 2)
         jobs = [(source, chain, lib, edges, a, b) for a, b in chunk_ranges(0, int(edges[-1]), self.chunk_samples)]
-        for done, (blocks, C) in enumerate((map_chunks or _serial_map)(chunk_gram, jobs), start=1):
+        where = Counter()
+        for done, (blocks, C, host) in enumerate((map_chunks or _serial_map)(chunk_gram, jobs), start=1):
             gram.C[blocks] += C
+            where[host] += 1
             if progress:
                 progress("gram", done, len(jobs))
+        self.computed_on_ = dict(where)  # chunks per process ("host:pid")
         return gram
 
     def _windows(self) -> list[tuple[int, int, int, int]]:
@@ -204,7 +211,7 @@ class ChunkedIdentifier(SparseIdentifier):
             "samples": int(self.chain_.n), "chunk_samples": int(self.chunk_samples),
             "overlap_samples": int(self.chain_.overlap),
             "chunks": len(chunk_ranges(0, int(self.edges_[-1]), self.chunk_samples)),
-            "chain_bias": SIMEX_SKIPPED,
+            "chain_bias": SIMEX_SKIPPED, "computed_on": self.computed_on_,
             "validation": f"free run on {self.validation_['windows']['count'] if self.validation_ else 0} "
                           f"held-out windows of {self.window_s:g} s, each from its measured state",
         }

@@ -73,9 +73,8 @@ def _dask_map(scheduler: str, timeout: float = 10.0):
     def run(fn, jobs):
         futures = [client.submit(fn, *job, pure=False) for job in jobs]
         try:
-            for fut in as_completed(futures):
+            for fut in as_completed(futures, loop=client.loop):
                 yield fut.result()
-                fut.release()
         finally:
             client.close()
     return run
