@@ -54,7 +54,7 @@ def wants_out_of_core(args) -> bool:
 def _progress(stage: str, done: int, total: int, _last={}) -> None:  # noqa: B006  per-process memo
     """'shakeid: scan 40 % (12/30 chunks)' on stderr at every tenth of a stage."""
     step = int(10 * done / max(total, 1))
-    if _last.get(stage) != step:
+    if done == 1 or _last.get(stage) != step:  # done == 1: a new stage (or a new run in this process)
         _last[stage] = step
         print(f"shakeid: {stage} {100 * done // max(total, 1)} % ({done}/{total})", file=sys.stderr, flush=True)
 
