@@ -36,8 +36,8 @@ from .spectral import lowband_irfft, lowband_rfft, welch_psd
 
 #: Overlap on each side of a chunk, in periods of f_lo: the same reach as the whole-record chain's padding.
 OVERLAP_PERIODS = PAD_PERIODS
-#: Samples per chunk (2^20: 8 MB a channel; the chain's transforms of a chunk plus its overlap and the
-#: library's buffers stay near 200 MB at 2048 Hz, f_lo ~1 Hz: benchmarks/out_of_core.py).
+#: Samples per chunk (2^20: 8 MB a channel). With it the whole `shakeid identify --chunked` process peaked
+#: at 262-394 MB RSS for 1e6-1e8 samples at 2048 Hz, f_lo 1.4 Hz (benchmarks/out_of_core.py).
 CHUNK_SAMPLES = 1 << 20
 
 

@@ -18,8 +18,9 @@ from pathlib import Path
 
 from identify.errors import RecordingError, ShakeidError
 
-#: Above this many samples an HDF5 recording is identified out of core: 2^24 (2.3 h at 2048 Hz); the
-#: in-core chain and Grams of that many samples peak near 3 GB (benchmarks/out_of_core.py measures 1e7).
+#: Above this many samples an HDF5 recording is identified out of core: 2^24 (2.3 h at 2048 Hz). In core,
+#: 1e7 samples peaked at 2.1 GB RSS (2.3 GB with SIMEX; benchmarks/out_of_core.py), so 2^24 needs ~3.5 GB;
+#: out of core 0.4 GB at any length.
 AUTO_CHUNKED_SAMPLES = 1 << 24
 
 
