@@ -90,9 +90,21 @@ class StateSignals:
 def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARGIN_DB) -> tuple[float, float]:
     """Frequency range (Hz) where the signal's PSD stands `margin_db` above its noise floor."""
     n = x.size
-    nper = int(min(n, 2 ** int(np.ceil(np.log2(fs_hz * 8.0)))))  # ~0.125 Hz resolution
-    nper = max(min(nper, n // 2), 16)
+    nper = welch_length(n, fs_hz)
     f, p = welch_psd(x, fs_hz, nper)  # = scipy.signal.welch(..., detrend="linear"), 3x faster
+    return band_from_psd(f, p, n, nper, margin_db)
+
+
+def welch_length(n: int, fs_hz: float) -> int:
+    """The Welch segment length excited_band uses on a record of n samples (~0.125 Hz resolution)."""
+    nper = int(min(n, 2 ** int(np.ceil(np.log2(fs_hz * 8.0)))))
+    return max(min(nper, n // 2), 16)
+
+
+def band_from_psd(f: np.ndarray, p: np.ndarray, n: int, nper: int,
+                  margin_db: float = EXCITATION_MARGIN_DB) -> tuple[float, float]:
+    """excited_band's rule on a Welch PSD of a record of n samples in segments of nper (identify.chunked
+    accumulates that PSD chunk by chunk, without holding the record)."""
     skip = 3  # the lowest bins hold the window's leakage of offsets and drifts, not excitation
     floor = np.percentile(p[skip:], 10) / _low_decile_of_noise(n, nper)
     above = np.flatnonzero(p[skip:] > floor * 10 ** (margin_db / 10)) + skip
@@ -107,7 +119,7 @@ def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARG
     best = int(np.argmax(power))
     lo_bin, hi_bin = above[starts[best]], above[stops[best]]
     df = f[1] - f[0]
-    return float(max(f[lo_bin] - df, df)), float(min(f[hi_bin] + df, fs_hz / 2))
+    return float(max(f[lo_bin] - df, df)), float(min(f[hi_bin] + df, df * nper / 2))  # df nper / 2: Nyquist
 
 
 def _low_decile_of_noise(n: int, nper: int) -> float:

@@ -104,6 +104,10 @@ def cmd_identify(args) -> int:
         return cmd_identify_joint(args, _identifier, _read)
     args.file = args.files[0]
     ident = _identifier(args)  # option errors first, before any file is read
+    from .ooc_cmd import identify_out_of_core, wants_out_of_core
+
+    if wants_out_of_core(args):  # a long HDF5 recording: read and identified chunk by chunk
+        return identify_out_of_core(args, ident)
     rec = _read(args)
     data = check_identifiable(rec, args.file, args.accept_faulty)
     try:
@@ -286,6 +290,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("files", nargs="+", metavar="FILE",
                    help="a recording; several: one model fitted to all of them (joint identification)")
     _add_identify_options(q)
+    from .ooc_cmd import add_out_of_core_options
+
+    add_out_of_core_options(q)
     q.add_argument("--report", metavar="DIR", help="write figures, coefficient table and model JSON here")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     q.add_argument("--accept-faulty", action="store_true",
