@@ -1,0 +1,45 @@
+// The rig history: c, k, k3 and b of every identified recording, oldest left, each with error bars of
+// ± 2 standard errors (from the model's physical parameters): is the rig drifting? An SVG drawn here.
+"use strict";
+let historyShown = "";
+async function refreshHistory(recs) {
+  // refetched only when some recording's identification changed (the list is polled every second)
+  const key = JSON.stringify(recs.map(r => [r.id, r.jobs.identify.state, r.jobs.identify.id]));
+  if (key === historyShown) return;
+  historyShown = key;
+  drawHistory(await api("GET", "/api/dashboard/history"));
+}
+function drawHistory(h) {
+  const pts = h.points;
+  if (!pts.length) { $("history").innerHTML = `<p class="muted">no identified recordings yet</p>`; return; }
+  const W = 270, H = 200, L = 62, R = 8, T = 22, B = 30;
+  const panels = Object.entries(h.parameters).map(([key, {symbol, unit}]) => {
+    const vals = pts.map(p => p[key]).filter(v => v && v.value != null);
+    if (!vals.length) return `<svg width="${W}" height="${H}"><text x="${L}" y="${T}">${symbol}: none</text></svg>`;
+    const lo = Math.min(...vals.map(v => v.value - 2 * (v.std_error || 0))), hi = Math.max(...vals.map(v => v.value + 2 * (v.std_error || 0)));
+    const pad = (hi - lo) * 0.1 || Math.abs(hi) * 0.01 || 1;
+    const y0 = lo - pad, y1 = hi + pad;
+    const X = i => L + (pts.length === 1 ? (W - L - R) / 2 : i * (W - L - R) / (pts.length - 1));
+    const Y = v => T + (y1 - v) / (y1 - y0) * (H - T - B);
+    const marks = pts.map((p, i) => {
+      const v = p[key];
+      if (!v || v.value == null) return "";
+      const se = v.std_error || 0, tip = `${p.recording_id} · ${when(p.created)}` + (p.amplitude_mm ? ` · ${p.amplitude_mm} mm` : "") +
+        `\n${symbol} = ${v.value.toPrecision(5)} ± ${se.toPrecision(2)} ${unit} (1 SE)`;
+      return `<g class="point" data-rec="${p.recording_id}" data-value="${v.value}" data-se="${v.std_error ?? ""}"><title>${esc(tip)}</title>` +
+        `<line class="bar" x1="${X(i)}" x2="${X(i)}" y1="${Y(v.value - 2 * se)}" y2="${Y(v.value + 2 * se)}"/>` +
+        `<line class="bar" x1="${X(i) - 3}" x2="${X(i) + 3}" y1="${Y(v.value - 2 * se)}" y2="${Y(v.value - 2 * se)}"/>` +
+        `<line class="bar" x1="${X(i) - 3}" x2="${X(i) + 3}" y1="${Y(v.value + 2 * se)}" y2="${Y(v.value + 2 * se)}"/>` +
+        `<circle class="${p.origin}" cx="${X(i)}" cy="${Y(v.value)}" r="3"/></g>`;
+    }).join("");
+    // enough significant digits that the three tick labels differ (the spread may be 1e-4 of the value)
+    const digits = Math.min(8, Math.max(3, 2 + Math.ceil(Math.log10(Math.max(Math.abs(y0), Math.abs(y1)) / (hi - lo + pad)))));
+    const ticks = [y0 + pad, (y0 + y1) / 2, y1 - pad].map(v => `<text x="${L - 4}" y="${Y(v) + 4}" text-anchor="end">${v.toPrecision(digits)}</text>` +
+      `<line class="axis" x1="${L - 2}" x2="${L}" y1="${Y(v)}" y2="${Y(v)}"/>`).join("");
+    return `<svg width="${W}" height="${H}" data-parameter="${key}"><text x="${L}" y="14" font-weight="600">${symbol}, ${unit}</text>` +
+      `<line class="axis" x1="${L}" x2="${L}" y1="${T}" y2="${H - B}"/><line class="axis" x1="${L}" x2="${W - R}" y1="${H - B}" y2="${H - B}"/>` +
+      ticks + marks + `<text x="${(L + W - R) / 2}" y="${H - 8}" text-anchor="middle" fill="#777">recording (oldest → newest)</text></svg>`;
+  });
+  $("history").innerHTML = panels.join("") + `<p class="hint">${pts.length} identified recording(s), ` +
+    `${when(pts[0].created)} to ${when(pts[pts.length - 1].created)}; blue: sweeps, orange: uploads. Hover a point for its recording.</p>`;
+}
