@@ -10,8 +10,12 @@ const when = s => new Date(s * 1000).toLocaleString(undefined, {dateStyle: "shor
 // from the address bar; fragments never reach the server. The token is never shown again: the page shows
 // the role and a fingerprint of it (GET /api/session).
 const TOKEN_KEY = "shakeid-token";
-const fromLink = new URLSearchParams(location.hash.slice(1)).get("token");
-if (fromLink) { localStorage.setItem(TOKEN_KEY, fromLink); history.replaceState(null, "", location.pathname); }
+function tokenFromLink() {  // on load, and when such a link is opened in a tab that shows the page already
+  const t = new URLSearchParams(location.hash.slice(1)).get("token");
+  if (t) { localStorage.setItem(TOKEN_KEY, t); history.replaceState(null, "", location.pathname); }
+  return !!t;
+}
+tokenFromLink();
 const tok = () => localStorage.getItem(TOKEN_KEY) || "";
 let session = null;  // {role, fingerprint} once the token is accepted
 
@@ -71,7 +75,7 @@ function route() {
   $("home").hidden = !!m; $("recording").hidden = !m;
   if (m) showRecording(m[1]); else { openRecording = null; refresh(); }
 }
-window.addEventListener("hashchange", route);
+window.addEventListener("hashchange", () => tokenFromLink() ? signIn() : route());
 
 // -- the rig: its state line is rewritten by every refresh, so it never shows a stale state
 $("estop").onclick = () => api("POST", "/api/rig/estop")
