@@ -46,10 +46,22 @@ function say(text, kind = "info") {
   div.className = "msg " + kind;
   div.innerHTML = `<time>${new Date().toLocaleTimeString()}</time><span></span><button class="dismiss" title="dismiss">✕</button>`;
   div.querySelector("span").textContent = text;
-  div.querySelector("button").onclick = () => div.remove();
+  div.querySelector("button").onclick = () => { div.remove(); dismissAll(); };
   $("messages").prepend(div);
+  dismissAll();
 }
-const fail = what => e => { if (e.status !== 401) say(`${what}: ${e.message}`, "error"); };
+function dismissAll() {  // a "dismiss all" button once there are several messages
+  const box = $("messages"), n = box.querySelectorAll(".msg").length;
+  let all = $("dismiss-all");
+  if (n < 2) { if (all) all.remove(); return; }
+  if (!all) {
+    all = document.createElement("button"); all.id = "dismiss-all"; all.textContent = "dismiss all messages";
+    all.onclick = () => { box.innerHTML = ""; };
+  }
+  box.append(all);
+}
+// an API refusal as a message; its detail often names the action already ("sweep refused: ..."): no repeat
+const fail = what => e => { if (e.status !== 401) say(e.message.startsWith(what) ? e.message : `${what}: ${e.message}`, "error"); };
 
 async function signIn() {
   try { session = await api("GET", "/api/session"); }
@@ -173,7 +185,7 @@ function fitCell(r) {
   if (j.state === "none") return `<span class="muted">not yet</span>` +
     (session.role === "operator" && r.status !== "running" ? ` <button class="identify" data-id="${r.id}">identify</button>` : "");
   if (j.state === "queued" || j.state === "running") return `<span class="muted">${j.state}…</span>`;
-  if (j.state === "failed") return `<span class="bad" title="${esc(j.error)}">failed</span>: <span class="muted">${esc(shorten(j.error, 90))}</span>`;
+  if (j.state === "failed") return `<span class="bad" title="${esc(j.error)}">failed</span>: <span class="muted">${esc(shorten(j.error, 60))}</span>`;
   const f = (r.info.identify || {}).fit_percent;
   if (f == null) return `<span class="bad">diverged</span>`;
   const cls = f >= 90 ? "good" : f >= 50 ? "warn" : "bad";
@@ -190,8 +202,8 @@ function showRecordings(recs) {
   if (key === recsShown) return;  // unchanged: leave the rows (and any button under the mouse) alone
   recsShown = key;
   $("recs").innerHTML = `<tr><th>date</th><th>id</th><th>origin</th><th>parameters</th><th>status</th><th>data quality</th><th>held-out fit</th></tr>` +
-    (recs.length ? recs.map(r => `<tr data-id="${r.id}"><td>${when(r.created)}</td><td><a href="#/recording/${r.id}">${r.id}</a></td>
-      <td>${esc(r.origin)}</td><td>${params(r)}</td><td>${statusCell(r)}</td><td>${qualityCell(r.info.quality)}</td>
+    (recs.length ? recs.map(r => `<tr data-id="${r.id}"><td class="date">${when(r.created)}</td><td><a href="#/recording/${r.id}">${r.id}</a></td>
+      <td>${esc(r.origin)}</td><td class="date">${params(r)}</td><td>${statusCell(r)}</td><td>${qualityCell(r.info.quality)}</td>
       <td class="fit">${fitCell(r)}</td></tr>`).join("") : `<tr><td colspan="7" class="muted">no recordings yet</td></tr>`);
   $("recs").querySelectorAll("button.identify").forEach(b => b.onclick = () => identify(b.dataset.id));
 }
