@@ -17,6 +17,7 @@ from fastapi import APIRouter, HTTPException, Path, Query
 from fastapi.responses import FileResponse, HTMLResponse
 
 from .catalog import ID_PATTERN, Catalog
+from .schemas import Problem
 
 HERE = FsPath(__file__).parent
 STATIC = HERE / "static"
@@ -33,6 +34,7 @@ def dashboard_router(catalog: Callable[[], Catalog], viewer) -> APIRouter:
     """Routes of the dashboard; `catalog` returns the service's catalog, `viewer` is the auth dependency
     (it returns who calls: role and token fingerprint)."""
     router = APIRouter()
+    errors = {401: {"model": Problem}, 403: {"model": Problem}, 422: {"model": Problem}}
 
     @router.get("/", response_class=HTMLResponse, include_in_schema=False)
     def page():
@@ -46,20 +48,21 @@ def dashboard_router(catalog: Callable[[], Catalog], viewer) -> APIRouter:
         return FileResponse(path, media_type="text/javascript" if name.endswith(".js") else "text/css",
                             headers={"Cache-Control": "no-cache"})
 
-    @router.get("/api/session", tags=["dashboard"])
+    @router.get("/api/session", tags=["dashboard"], responses=errors)
     def session(who: str = viewer) -> dict:
         """Who the token is: its role and a fingerprint (never the token itself)."""
         role, fingerprint = who.split(" ", 1)
         return {"role": role, "fingerprint": fingerprint}
 
-    @router.get("/api/dashboard/recordings", tags=["dashboard"], dependencies=[viewer])
+    @router.get("/api/dashboard/recordings", tags=["dashboard"], dependencies=[viewer], responses=errors)
     def recordings_overview(limit: int = Query(50, ge=1, le=500)) -> list[dict]:
         """Recordings, newest first, each with its sweep's parameters and state, and where its latest
         identification and explanation stand ({state: none|queued|running|completed|failed, error})."""
         cat = catalog()
         return [_overview(cat, rec) for rec in cat.list("recordings", limit=limit)]
 
-    @router.get("/api/dashboard/recordings/{rec_id}", tags=["dashboard"], dependencies=[viewer])
+    @router.get("/api/dashboard/recordings/{rec_id}", tags=["dashboard"], dependencies=[viewer],
+                responses={**errors, 404: {"model": Problem}})
     def recording_overview(rec_id: str = Path(pattern=ID_PATTERN)) -> dict:
         """One recording as in the overview (its page polls this while its jobs run)."""
         cat = catalog()
@@ -68,7 +71,7 @@ def dashboard_router(catalog: Callable[[], Catalog], viewer) -> APIRouter:
             raise HTTPException(404, f"no recording {rec_id}")
         return _overview(cat, rec)
 
-    @router.get("/api/dashboard/history", tags=["dashboard"], dependencies=[viewer])
+    @router.get("/api/dashboard/history", tags=["dashboard"], dependencies=[viewer], responses=errors)
     def rig_history(limit: int = Query(200, ge=1, le=2000)) -> dict:
         """The rig's physical parameters over recordings (oldest first): for each recording with a
         completed identification, each parameter's value and standard error (SI units, as in the
