@@ -38,7 +38,7 @@ async function refreshRecording() {
     `<h3>Explanation <span class="hint">(what the textbook Duffing model misses, and which effect closes the gap)</span></h3>` +
     `<div id="rec-explain">${explainSection(r, explanation)}</div>`;
   $("rec-body").querySelectorAll("button[data-job]").forEach(b => b.onclick = () =>
-    api("POST", `/api/recordings/${id}/${b.dataset.job}`, {}).then(() => { say(`${b.dataset.job} of ${id} queued`); refreshRecording(); })
+    api("POST", b.dataset.job === "explain" ? `/api/recordings/${id}/explain` : `/api/recordings/${id}/identify`, {}).then(() => { say(`${b.dataset.job} of ${id} queued`); refreshRecording(); })
       .catch(fail(`${b.dataset.job} refused`)));
   const dl = $("rec-download");
   if (dl) dl.onclick = async () => {
