@@ -75,7 +75,8 @@ def dashboard_router(catalog: Callable[[], Catalog], viewer) -> APIRouter:
     def rig_history(limit: int = Query(200, ge=1, le=2000)) -> dict:
         """The rig's physical parameters over recordings (oldest first): for each recording with a
         completed identification, each parameter's value and standard error (SI units, as in the
-        model's "physical" object; the standard error is null when the model has none)."""
+        model's "physical" object; the standard error is null when the model has none), and why the
+        data were identified although refused at first (accepted_faulty: the plot marks those)."""
         cat = catalog()
         points = []
         for rec in reversed(cat.list("recordings", limit=limit)):
@@ -92,9 +93,11 @@ def dashboard_router(catalog: Callable[[], Catalog], viewer) -> APIRouter:
             params = {key: {"value": (physical.get(key) or {}).get("value"),
                             "std_error": (physical.get(key) or {}).get("std_error")} for key in HISTORY_PARAMETERS}
             sweep = rec["info"].get("sweep") or {}
+            summary = rec["info"].get("identify") or {}
             points.append({"recording_id": rec["id"], "created": rec["created"], "origin": rec["origin"],
-                           "amplitude_mm": sweep.get("amplitude_mm"),
-                           "fit_percent": (rec["info"].get("identify") or {}).get("fit_percent"), **params})
+                           "amplitude_mm": sweep.get("amplitude_mm"), "fit_percent": summary.get("fit_percent"),
+                           # reasons the data were refused and identified anyway (an aborted sweep, say)
+                           "accepted_faulty": summary.get("accepted_faulty") or [], **params})
         return {"parameters": {k: {"symbol": s, "unit": u} for k, (s, u) in HISTORY_PARAMETERS.items()},
                 "points": points}
 

@@ -68,12 +68,13 @@ async function signIn() {
   catch (e) { if (e.status !== 401) say("cannot reach the service: " + e.message, "error"); return; }
   $("session").innerHTML = `signed in as <b>${esc(session.role)}</b> <span class="muted">(token ${esc(session.fingerprint)}…)</span> <a href="#" id="signout">sign out</a>`;
   $("signout").onclick = ev => { ev.preventDefault(); signOut("signed out"); };
+  document.body.classList.toggle("viewer", session.role !== "operator");
   $("login").hidden = true;
   route();
 }
 function signOut(why) {
   localStorage.removeItem(TOKEN_KEY); session = null;
-  $("session").textContent = ""; $("login").hidden = false; $("home").hidden = $("recording").hidden = true;
+  $("session").textContent = ""; $("rig").textContent = "not signed in"; $("rig").className = "rig"; $("login").hidden = false; $("home").hidden = $("recording").hidden = true;
   if (why) say(why, "error");
 }
 $("login-form").onsubmit = ev => {

@@ -33,13 +33,15 @@ function drawHistory(h) {
     const marks = pts.map((p, i) => {
       const v = p[key];
       if (!v || v.value == null) return "";
+      const faulty = p.accepted_faulty.length > 0;
       const se = v.std_error || 0, tip = `${p.recording_id} · ${when(p.created)}` + (p.amplitude_mm ? ` · ${p.amplitude_mm} mm` : "") +
-        `\n${symbol} = ${v.value.toPrecision(5)} ± ${se.toPrecision(2)} ${unit} (1 SE)`;
+        `\n${symbol} = ${v.value.toPrecision(5)} ± ${se.toPrecision(2)} ${unit} (1 SE)` +
+        (faulty ? `\nidentified from faulty data: ${p.accepted_faulty.join("; ")}` : "");
       return `<g class="point" data-rec="${p.recording_id}" data-value="${v.value}" data-se="${v.std_error ?? ""}"><title>${esc(tip)}</title>` +
         `<line class="bar" x1="${X(i)}" x2="${X(i)}" y1="${Y(v.value - 2 * se)}" y2="${Y(v.value + 2 * se)}"/>` +
         `<line class="bar" x1="${X(i) - 3}" x2="${X(i) + 3}" y1="${Y(v.value - 2 * se)}" y2="${Y(v.value - 2 * se)}"/>` +
         `<line class="bar" x1="${X(i) - 3}" x2="${X(i) + 3}" y1="${Y(v.value + 2 * se)}" y2="${Y(v.value + 2 * se)}"/>` +
-        `<circle class="${p.origin}" cx="${X(i)}" cy="${Y(v.value)}" r="3"/></g>`;
+        `<circle class="${p.origin}${faulty ? " faulty" : ""}" cx="${X(i)}" cy="${Y(v.value)}" r="3"/></g>`;
     }).join("");
     // enough significant digits that the three tick labels differ (the spread may be 1e-4 of the value)
     const digits = Math.min(8, Math.max(3, 2 + Math.ceil(Math.log10(Math.max(Math.abs(y0), Math.abs(y1)) / (hi - lo + pad)))));
@@ -51,5 +53,5 @@ function drawHistory(h) {
       `<text x="${(L + W - R) / 2}" y="${H - 4}" text-anchor="middle" fill="#777">recording (oldest → newest)</text></svg>`;
   });
   $("history").innerHTML = panels.join("") + `<p class="hint">${pts.length} identified recording(s), ` +
-    `${when(pts[0].created)} to ${when(pts[pts.length - 1].created)}; blue: sweeps, orange: uploads. Hover a point for its recording.</p>`;
+    `${when(pts[0].created)} to ${when(pts[pts.length - 1].created)}; blue: sweeps, orange: uploads; hollow: identified from data refused at first (an aborted sweep, say). Hover a point for its recording.</p>`;
 }

@@ -38,7 +38,8 @@ async function refreshRecording() {
     `<h3>Explanation <span class="hint">(what the textbook Duffing model misses, and which effect closes the gap)</span></h3>` +
     `<div id="rec-explain">${explainSection(r, explanation)}</div>`;
   $("rec-body").querySelectorAll("button[data-job]").forEach(b => b.onclick = () =>
-    api("POST", b.dataset.job === "explain" ? `/api/recordings/${id}/explain` : `/api/recordings/${id}/identify`, {}).then(() => { say(`${b.dataset.job} of ${id} queued`); refreshRecording(); })
+    api("POST", b.dataset.job === "explain" ? `/api/recordings/${id}/explain` : `/api/recordings/${id}/identify`,
+        b.dataset.faulty ? {accept_faulty: true} : {}).then(() => { say(`${b.dataset.job} of ${id} queued`); refreshRecording(); })
       .catch(fail(`${b.dataset.job} refused`)));
   const dl = $("rec-download");
   if (dl) dl.onclick = async () => {
@@ -74,7 +75,9 @@ function jobState(r, kind, label) {
   const run = session.role === "operator" && r.status !== "running" ? ` <button data-job="${kind}">${label}</button>` : "";
   if (j.state === "none") return `<p class="muted">not yet${run}</p>`;
   if (j.state === "queued" || j.state === "running") return `<p class="muted">${j.state}…</p>`;
-  if (j.state === "failed") return `<p class="bad">failed: ${esc(j.error)}${run}</p>`;
+  // refused for the data's state or quality: the operator may go on anyway, and the result will say so
+  const anyway = session.role === "operator" && /accept_faulty/.test(j.error || "") ? ` <button data-job="${kind}" data-faulty="1">${label} anyway</button>` : run;
+  if (j.state === "failed") return `<p class="bad">failed: ${esc(j.error)}${anyway}</p>`;
   return null;
 }
 function modelSection(r, m) {
@@ -85,7 +88,9 @@ function modelSection(r, m) {
   const rows = Object.entries(m.model).flatMap(([eq, terms]) => Object.entries(terms).map(([t, c]) =>
     `<tr><td>${esc(eq)}</td><td>${esc(t)}</td><td class="num">${num(c)}</td><td class="num">${num((se[eq] || {})[t], 2)}</td>` +
     `<td class="num">${(ip[eq] || {})[t] == null ? "–" : (ip[eq][t]).toFixed(2)}</td></tr>`));
-  let html = `<p>${m.status === "ok" ? "" : `<b>${esc(m.status)}</b>: `}${esc(m.reason || "")}</p>` +
+  const faulty = m.accepted_faulty && m.accepted_faulty.length ?
+    `<p class="bad" id="rec-faulty">identified although refused at first (accept_faulty): ${esc(m.accepted_faulty.join("; "))}; read it with care</p>` : "";
+  let html = faulty + `<p>${m.status === "ok" ? "" : `<b>${esc(m.status)}</b>: `}${esc(m.reason || "")}</p>` +
     `<table class="data" id="rec-terms"><tr><th>equation</th><th>term</th><th class="num">coefficient</th><th class="num">standard error</th>` +
     `<th class="num">inclusion probability</th></tr>${rows.join("")}</table>`;
   const p = m.physical;
