@@ -10,6 +10,8 @@ async function refreshHistory(recs) {
   drawHistory(await api("GET", "/api/dashboard/history"));
 }
 const tick = (v, digits) => Math.abs(v) >= 1e5 || (v !== 0 && Math.abs(v) < 1e-2) ? v.toExponential(digits - 1) : v.toPrecision(digits);
+const faultyToggle = (on, n) => !n ? "" :
+  `<label class="hint"><input type="checkbox" id="history-faulty"${on ? " checked" : ""}> show the ${n} fit(s) of data refused at first</label>`;
 /** The first and last recording's date under the axis (the rest are in each point's tooltip). */
 function xLabels(pts, X, y) {
   const d0 = new Date(pts[0].created * 1000), d1 = new Date(pts[pts.length - 1].created * 1000);
@@ -18,9 +20,18 @@ function xLabels(pts, X, y) {
   const first = `<text x="${X(0)}" y="${y}" text-anchor="start" fill="#777">${short(pts[0].created)}</text>`;
   return pts.length < 2 ? first : first + `<text x="${X(pts.length - 1)}" y="${y}" text-anchor="end" fill="#777">${short(pts[pts.length - 1].created)}</text>`;
 }
+let lastHistory = null;
 function drawHistory(h) {
-  const pts = h.points;
-  if (!pts.length) { $("history").innerHTML = `<p class="muted">no identified recordings yet</p>`; return; }
+  lastHistory = h;
+  // fits of data refused at first (an aborted sweep) are far less certain and would set the scale: shown on request
+  const withFaulty = $("history-faulty") && $("history-faulty").checked;
+  const hidden = h.points.filter(p => p.accepted_faulty.length).length;
+  const pts = withFaulty ? h.points : h.points.filter(p => !p.accepted_faulty.length);
+  if (!pts.length) {
+    $("history").innerHTML = `<p class="muted">no identified recordings yet</p>` + faultyToggle(withFaulty, hidden);
+    if ($("history-faulty")) $("history-faulty").onchange = () => drawHistory(lastHistory);
+    return;
+  }
   const W = 270, H = 210, L = 74, R = 12, T = 22, B = 38, PAD = 10;  // px; PAD keeps end points off the axes
   const panels = Object.entries(h.parameters).map(([key, {symbol, unit}]) => {
     const vals = pts.map(p => p[key]).filter(v => v && v.value != null);
@@ -53,5 +64,7 @@ function drawHistory(h) {
       `<text x="${(L + W - R) / 2}" y="${H - 4}" text-anchor="middle" fill="#777">recording (oldest → newest)</text></svg>`;
   });
   $("history").innerHTML = panels.join("") + `<p class="hint">${pts.length} identified recording(s), ` +
-    `${when(pts[0].created)} to ${when(pts[pts.length - 1].created)}; blue: sweeps, orange: uploads; hollow: identified from data refused at first (an aborted sweep, say). Hover a point for its recording.</p>`;
+    `${when(pts[0].created)} to ${when(pts[pts.length - 1].created)}; blue: sweeps, orange: uploads; hollow: identified from data refused at first (an aborted sweep, say). Hover a point for its recording.</p>` +
+    faultyToggle(withFaulty, hidden);
+  if ($("history-faulty")) $("history-faulty").onchange = () => drawHistory(lastHistory);
 }
