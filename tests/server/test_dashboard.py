@@ -288,3 +288,38 @@ def test_campaign_from_the_builder(page, service):
         assert row.locator(f"a[href='#/recording/{rec_id}']").count() == 1
         page.locator(f"#recs tr[data-id='{rec_id}']").wait_for()
 
+
+
+def test_failed_fit_is_not_not_yet_and_can_be_forced(page, service):
+    """An aborted recording: identification refused (failed, with the reason; not the 'not yet' of a
+    recording never tried), then identified anyway from its page, which says so, and kept out of the rig
+    history unless asked for."""
+    with service.client() as api:
+        wait_idle(api)
+        # aborted while recording the settle (30 s of rest after the sweep): the whole sweep is in the file,
+        # so the forced fit is a good one (a sweep cut mid-way may have too little to identify: that fails
+        # again, rightly)
+        sweep_id = api.post("/api/sweeps", json={**sweep_body(30.0), "settle_s": 30.0}).json()["id"]
+        wait_for(lambda: api.get(f"/api/sweeps/{sweep_id}").json()["progress"] >= 1.0, 60, "the sweep's end")
+        assert api.post(f"/api/sweeps/{sweep_id}/abort").status_code == 202
+        rec_id = wait_for(lambda: (s := api.get(f"/api/sweeps/{sweep_id}").json())["state"] == "aborted"
+                          and s["recording_id"], what="the abort")
+        row = page.locator(f"#recs tr[data-id='{rec_id}']")
+        row.locator("td.fit:has-text('not yet')").wait_for()
+        row.locator("button.identify").click()
+        row.locator("td.fit:has-text('failed')").wait_for()
+        job = api.get("/api/jobs", params={"limit": 5}).json()
+        error = next(j["error"] for j in job if j["recording_id"] == rec_id)
+        assert "accept_faulty" in error and error[:50] in row.inner_text()
+        page.click(f"#recs a[href='#/recording/{rec_id}']")
+        page.click("#rec-model button[data-faulty]")
+        page.wait_for_selector("#rec-model p.muted:has-text('queued'), #rec-model p.muted:has-text('running')")
+        page.wait_for_selector("#rec-faulty, #rec-model p.bad")  # identified, or failed again
+        assert page.locator("#rec-faulty").count() == 1, page.inner_text("#rec-model")
+        model = api.get(f"/api/recordings/{rec_id}/model").json()
+        assert model["accepted_faulty"] and model["accepted_faulty"][0] in page.inner_text("#rec-faulty")
+    page.click("text=← all recordings")
+    page.wait_for_selector("#history-faulty")
+    assert page.locator(f"#history g.point[data-rec='{rec_id}']").count() == 0
+    page.check("#history-faulty")
+    assert page.locator(f"#history g.point[data-rec='{rec_id}'] circle.faulty").count() == 4  # c, k, k3, b
