@@ -135,6 +135,7 @@ function listen(rec_id) {
   source = new EventSource(`/api/recordings/${rec_id}/live?access_token=${encodeURIComponent(tok())}`);
   source.addEventListener("samples", e => {
     const d = JSON.parse(e.data);
+    if (!d.t || !d.t.length) return;
     d.t.forEach((t, i) => points.push([t, d.table_acc[i], d.mass_acc[i]]));
     const t_end = points[points.length - 1][0];
     points = points.filter(p => p[0] > t_end - 10); draw();
