@@ -19,13 +19,14 @@ from typing import Literal
 from fastapi import Depends, FastAPI, HTTPException, Path, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, StreamingResponse
+from fastapi.responses import FileResponse, JSONResponse, StreamingResponse
 
 from daq.recorder import software_version
 
 from . import schemas
 from .auth import require
 from .catalog import ID_PATTERN, Catalog, new_id
+from .dashboard import dashboard_router
 from .ipc import ControllerRefused, ControllerUnavailable
 from .jobs import JobQueue
 from .rigclient import RigLink
@@ -386,9 +387,7 @@ def create_app(settings: Settings) -> FastAPI:
             raise HTTPException(404, f"no figure {name}")
         return FileResponse(report / name, media_type="image/png")
 
-    @app.get("/", response_class=HTMLResponse, include_in_schema=False)
-    def dashboard():
-        return (FsPath(__file__).with_name("dashboard.html")).read_text()
+    app.include_router(dashboard_router(catalog, viewer))  # the page, its script, and the JSON it shows
 
     return app
 
