@@ -194,7 +194,18 @@ def create_app(settings: Settings) -> FastAPI:
     @app.get("/api/campaigns", response_model=list[schemas.CampaignOut], tags=["campaigns"],
              dependencies=[viewer], responses=errors)
     def list_campaigns(limit: int = Query(50, ge=1, le=500)):
-        return catalog().list("campaigns", limit=limit)
+        """The newest campaigns, each with its latest joint identification job (or null)."""
+        joint = latest_joint_jobs()
+        return [{**c, "joint_identification": joint.get(c["id"])} for c in catalog().list("campaigns", limit=limit)]
+
+    def latest_joint_jobs() -> dict:
+        """{campaign id: its newest identify_joint job}."""
+        out = {}
+        for j in catalog().list("jobs", "kind = 'identify_joint'", limit=10_000):
+            cid = j["options"].get("campaign_id")
+            if cid and (cid not in out or j["created"] > out[cid]["created"]):
+                out[cid] = j
+        return out
 
     @app.get("/api/campaigns/{campaign_id}", response_model=schemas.CampaignOut, tags=["campaigns"],
              dependencies=[viewer], responses={**errors, 404: {"model": schemas.Problem}})
@@ -203,9 +214,7 @@ def create_app(settings: Settings) -> FastAPI:
         campaign = catalog().get("campaigns", campaign_id)
         if campaign is None:
             raise HTTPException(404, f"no campaign {campaign_id}")
-        joint = [j for j in catalog().list("jobs", "kind = 'identify_joint'", limit=10_000)
-                 if j["options"].get("campaign_id") == campaign_id]
-        return {**campaign, "joint_identification": max(joint, key=lambda j: j["created"]) if joint else None}
+        return {**campaign, "joint_identification": latest_joint_jobs().get(campaign_id)}
 
     @app.post("/api/campaigns/{campaign_id}/{action}", status_code=202, response_model=schemas.Accepted,
               tags=["campaigns"], responses=campaign_errors)

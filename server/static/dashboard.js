@@ -238,7 +238,9 @@ function showCampaigns(cs) {
   $("campaigns").innerHTML = `<tr><th>date</th><th>name</th><th>state</th><th>progress</th><th>sweeps (amplitude, direction)</th><th></th></tr>` +
     (cs.length ? cs.map(c => `<tr data-id="${c.id}"><td>${when(c.created)}</td><td>${esc(c.name)}</td>
       <td class="state">${esc(c.state)}${c.reason ? `<br><span class="muted">${esc(c.reason)}</span>` : ""}</td>
-      <td class="progress">${c.progress.done}/${c.progress.total}</td>
+      <td class="progress">${c.progress.done}/${c.progress.total}${c.joint_identification ?
+        `<br><span class="muted joint" title="${esc(c.joint_identification.error || "")}">joint model: ${esc(c.joint_identification.state)}` +
+        `${c.joint_identification.error ? " (" + esc(c.joint_identification.error.slice(0, 80)) + ")" : ""}</span>` : ""}</td>
       <td>${c.sweeps.map(s => `<span class="chip ${s.status}" title="${esc(s.status + (s.reason ? ": " + s.reason : ""))}">` +
         (s.recording_id ? `<a href="#/recording/${s.recording_id}">${s.amplitude_mm} mm ${s.direction}</a>` : `${s.amplitude_mm} mm ${s.direction}`) + `</span>`).join("")}</td>
       <td>${actions(c)}</td></tr>`).join("") : `<tr><td colspan="6" class="muted">no campaigns yet</td></tr>`);

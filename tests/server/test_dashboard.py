@@ -283,10 +283,17 @@ def test_campaign_from_the_builder(page, service):
         row.locator("td.state:has-text('completed')").wait_for(timeout=120_000)
         truth = api.get(f"/api/campaigns/{cid}").json()
     assert truth["state"] == "completed" and [s["amplitude_mm"] for s in truth["sweeps"]] == [0.8, 1.3]
-    assert row.locator("td.progress").inner_text() == "2/2"
+    assert row.locator("td.progress").inner_text().splitlines()[0] == "2/2"
     for rec_id in truth["recording_ids"]:  # each sweep links to its recording, listed with its amplitude
         assert row.locator(f"a[href='#/recording/{rec_id}']").count() == 1
         page.locator(f"#recs tr[data-id='{rec_id}']").wait_for()
+    # the joint identification of the campaign's recordings shows with the state the API gives it
+    with service.client() as api:
+        joint = api.get(f"/api/campaigns/{cid}").json()["joint_identification"]
+        listed = {c["id"]: c for c in api.get("/api/campaigns").json()}[cid]["joint_identification"]
+    assert joint is not None and listed["id"] == joint["id"]
+    row.locator("span.joint").wait_for()
+    assert row.locator("span.joint").inner_text().startswith("joint model: ")
 
 
 
