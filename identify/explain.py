@@ -94,7 +94,10 @@ class DiscrepancyAnalysis:
 
     # -- fitting ----------------------------------------------------------------------------------
     def fit(self, recording: Recording) -> "DiscrepancyAnalysis":
-        catalog = CATALOG if self.catalog is None else self.catalog
+        # a bias drift is looked for in the raw channels (identify.drift, after the rounds): the chain
+        # removes it before any gap is measured, so as a candidate it could only fit something else
+        catalog = ({k: v for k, v in CATALOG.items() if k != "bias_drift"} if self.catalog is None
+                   else self.catalog)
         sig = reconstruct_states(recording, self.band_hz)
         u_name = sig.input_name
         edges, held = holdout_blocks(sig, self.holdout_fraction)
@@ -224,6 +227,10 @@ class DiscrepancyAnalysis:
                     c.update(refined)
             ok = sorted([c for c in cands if c["admissible"]], key=lambda c: np.sum(c["err"]))
         table = [self._public(c) for c in sorted(cands, key=lambda c: -c["gap_share_closed"])]
+        # a candidate that fits the training segments best but makes the held-out gap worse has fitted
+        # something else there (a gain fault bending to a one-sided end stop's contacts: -85 % on the
+        # held-out segments while the stop itself closed 49 %): it is passed over, not taken as the best
+        ok = [c for c in ok if c["gap_share_closed"] > 0] or ok
         need, p_need = (NEAR_CLOSED, NEAR_P_BEATS) if near else (self.min_gap_closed, MIN_P_BEATS)
         if not ok or ok[0]["gap_share_closed"] < need or ok[0]["p_beats_current"] < p_need:
             return {"best": None, "table": table}
