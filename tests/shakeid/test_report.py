@@ -4,7 +4,8 @@ import json
 import pytest
 
 from identify.identifier import SparseIdentifier
-from shakeid.report import FIGURES, coefficient_table, write_report
+from reports.identification import FIGURES, write_report
+from reports.text import coefficient_table
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

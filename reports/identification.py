@@ -21,29 +21,9 @@ matplotlib.use("Agg")  # files only: no display on a lab server
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .text import coefficient_table  # noqa: E402
+
 FIGURES = ("input.png", "output.png", "lambda_path.png", "validation.png")
-
-
-def coefficient_table(result: dict) -> str:
-    """Markdown table in the layout of the paper's Table 1 (zeros shown as 0), then per equation the
-    term's inclusion probability: the share of random held-out placements whose selection kept it."""
-    model, se = result["model"], result.get("standard_errors", {})
-    p_in = result.get("inclusion_probability") or {}
-    eqs = list(model)
-    heads = eqs + [f"P(kept) {eq}" for eq in eqs if eq in p_in]
-    lines = ["| term | " + " | ".join(heads) + " |", "|---|" + "---:|" * len(heads)]
-    for term in result["library"]["terms"]:
-        cells = []
-        for eq in eqs:
-            c = model[eq].get(term)
-            if c is None:
-                cells.append("0")
-            else:
-                s = se.get(eq, {}).get(term)
-                cells.append(f"{c:.5g}" + (f" ± {s:.2g}" if s else ""))
-        cells += [f"{p_in[eq].get(term, 0.0):.2f}" for eq in eqs if eq in p_in]
-        lines.append(f"| {term} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
 
 
 def write_report(ident, out_dir) -> Path:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .report import _save, plt
+from .identification import _save, plt
 
 FIGURES = ("residual_time.png", "residual_state.png", "candidates.png", "gap.png")
 
