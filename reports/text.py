@@ -14,16 +14,22 @@ def unit(text: str) -> str:
     return text.replace("^2", "²").replace("^3", "³")
 
 
-def coefficient_table(result: dict) -> str:
-    """Markdown table in the layout of the paper's Table 1 (zeros shown as 0), then per equation the
-    term's inclusion probability: the share of random held-out placements whose selection kept it."""
+def plural(n: int, word: str) -> str:
+    """'1 term', '5 terms', '0 terms'."""
+    return f"{n} {word}" + ("" if n == 1 else "s")
+
+
+def coefficient_rows(result: dict) -> tuple[list[str], list[list[str]]]:
+    """(headers, rows) in the layout of the paper's Table 1: every library term, its coefficient per
+    equation (0 when not selected) ± its standard error, then per equation the term's inclusion
+    probability: the share of random held-out placements whose selection kept it."""
     model, se = result["model"], result.get("standard_errors", {})
     p_in = result.get("inclusion_probability") or {}
     eqs = list(model)
-    heads = eqs + [f"P(kept) {eq}" for eq in eqs if eq in p_in]
-    lines = ["| term | " + " | ".join(heads) + " |", "|---|" + "---:|" * len(heads)]
+    headers = ["term"] + eqs + [f"P(kept) {eq}" for eq in eqs if eq in p_in]
+    rows = []
     for term in result["library"]["terms"]:
-        cells = []
+        cells = [term]
         for eq in eqs:
             c = model[eq].get(term)
             if c is None:
@@ -32,7 +38,15 @@ def coefficient_table(result: dict) -> str:
                 s = se.get(eq, {}).get(term)
                 cells.append(f"{c:.5g}" + (f" ± {s:.2g}" if s else ""))
         cells += [f"{p_in[eq].get(term, 0.0):.2f}" for eq in eqs if eq in p_in]
-        lines.append(f"| {term} | " + " | ".join(cells) + " |")
+        rows.append(cells)
+    return headers, rows
+
+
+def coefficient_table(result: dict) -> str:
+    """coefficient_rows as a Markdown table (coefficients.md, the terminal summary)."""
+    headers, rows = coefficient_rows(result)
+    lines = ["| " + " | ".join(headers) + " |", "|---|" + "---:|" * (len(headers) - 1)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
     return "\n".join(lines) + "\n"
 
 

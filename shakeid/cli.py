@@ -186,7 +186,7 @@ def cmd_explain(args) -> int:
         print(f"still missed most at t = {top['t_start_s']:.1f}-{top['t_end_s']:.1f} s "
               f"(excitation {top['excitation_hz']:.1f} Hz, {100 * top['share_of_error']:.0f} % of the error)")
     if args.report:
-        print(f"report: {args.report}")
+        print(f"report: {Path(args.report) / 'index.html'}")
     return 0
 
 
