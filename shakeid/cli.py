@@ -50,7 +50,8 @@ def _add_identify_options(p: argparse.ArgumentParser) -> None:
                         "thresholded least squares")
     g.add_argument("--lambdas", type=int, default=100, metavar="N", help="number of points on the lambda path")
     g.add_argument("--threshold", type=float,
-                   help="STLSQ: a single threshold instead of a path (default: none, a path)")
+                   help="STLSQ: a single threshold on the coefficients, dimensionless (normalised unless "
+                        "--raw-threshold), instead of a path (default: none, a path)")
     g.add_argument("--raw-threshold", action="store_true",
                    help="STLSQ: threshold raw coefficients, as the paper's Table 2 (lambda = 0.95)")
     g.add_argument("--selection", choices=("heldout", "paper", "bic"), default="heldout",
