@@ -64,12 +64,14 @@ def _labels(ident) -> dict:
     if ident.states_.input_name == "zdd":
         return {"input": f"table acceleration ({unit(rec.units[0] or 'm/s^2')})", "acc": "relative acceleration (m/s²)",
                 "disp": "relative displacement (mm)", "disp_scale": 1e3, "acc_unit": "m/s²", "vel_unit": "m/s",
-                "disp_unit": "mm", "output_title": "Output: relative acceleration (mass − table)"}
+                "disp_unit": "mm", "output_title": "Output: relative acceleration (mass − table)",
+                "acc_word": "relative acceleration", "disp_word": "relative displacement"}
     u_in, u_out = unit(rec.units[0]), unit(rec.units[1])
     return {"input": f"{rec.input_name}" + (f" ({u_in})" if u_in else " (as recorded)"),
             "acc": "y''" + (f" ({u_out}/s²)" if u_out else ""), "disp": "y" + (f" ({u_out})" if u_out else ""),
             "disp_scale": 1.0, "acc_unit": f"{u_out}/s²" if u_out else "", "vel_unit": f"{u_out}/s" if u_out else "",
-            "disp_unit": u_out, "output_title": "Output: second derivative of y"}
+            "disp_unit": u_out, "output_title": "Output: second derivative of y",
+            "acc_word": "output's second derivative y''", "disp_word": "output y"}
 
 
 def _save(fig, path):
@@ -125,9 +127,9 @@ def _validation_figure(ident, path, labels):
     w = int(min(0.5 * sig.fs_hz * max(1.0, 2.0 / max(sig.band_hz[0], 0.5)), t.size // 2))
     z = slice(max(centre - w, 0), min(centre + w, t.size))
     fig, axes = plt.subplots(6, 1, figsize=(10, 14), gridspec_kw={"height_ratios": [2, 1, 2, 1, 2, 1]})
-    panels = [("acceleration, whole record (held-out samples shaded)", slice(None), meas_acc, sim_acc,
+    panels = [(f"{labels['acc_word']}, whole record (held-out samples shaded)", slice(None), meas_acc, sim_acc,
                labels["acc"], labels["acc_unit"], True),
-              ("displacement, whole record (held-out samples shaded)", slice(None), meas_q, sim_q,
+              (f"{labels['disp_word']}, whole record (held-out samples shaded)", slice(None), meas_q, sim_q,
                labels["disp"], labels["disp_unit"], True),
               ("zoom: the held-out block with the largest response", z, meas_acc, sim_acc, labels["acc"],
                labels["acc_unit"], False)]
@@ -141,7 +143,7 @@ def _validation_figure(ident, path, labels):
         if shade:
             _shade(ax, t, held)
             _shade(axr, t, held)
-        ax.set(xlabel="time (s)", ylabel=ylabel, title=title.capitalize())
+        ax.set(xlabel="time (s)", ylabel=ylabel, title=title[0].upper() + title[1:])
         axr.set(xlabel="time (s)", ylabel=f"residual ({u})" if u else "residual",
                 title="Residual: measured − simulated (own scale)")
         if not shade:  # the zoom fills the width: room above the data for the legend
@@ -219,14 +221,18 @@ def _index_html(out: Path, ident, result: dict) -> str:
                    f"(c = −m·coef(q1), k = −m·coef(q2), k3 = −m·coef(q2³); b from k). The design column: "
                    + DESIGN_K3_NOTE + ".")
     sel = result.get("selection") or {}
-    srows = [[eq, str(d["index"] + 1), f"{d['lambda']:.3g}", plural(d["n_terms"], "term"), f"{d['score']:.3g}",
-              f"{d['threshold']:.3g}"] for eq, d in sel.items() if isinstance(d, dict) and "index" in d]
+    srows = []
+    for e, (eq, s) in enumerate(ident.selections_.items()):  # the path's own parameter (lambda or threshold)
+        srows.append([eq, str(s.index + 1), f"{ident.path_.params[s.index, e]:.3g}", plural(int(s.support.sum()), "term"),
+                      f"{s.score[s.index]:.3g}", "-" if np.isnan(s.threshold) else f"{s.threshold:.3g}"])
     if srows:
         page.heading("Selection")
-        page.table(["equation", "chosen path point", ident.path_.param_name, "model", "score (MSE)", "threshold (MSE)"],
+        n_path = ident.path_.params.shape[0]
+        page.table(["equation", "chosen path point", f"{ident.path_.param_name} there", "model", "score (MSE)",
+                    "tolerance (MSE)"],
                    srows, f"Where on the path each equation's model was chosen, by the {sel.get('rule')} rule "
-                          f"({result.get('method')}, {len(ident.selections_[next(iter(ident.selections_))].path_mse)} "
-                          "path points): the sparsest point whose score is within the threshold (Figure 3).")
+                          f"({result.get('method')}, {plural(n_path, 'path point')}): the sparsest point whose score is "
+                          "within the tolerance (Figure 3).")
     page.heading("Figures")
     captions = {
         "input.png": "Input: " + ("the table acceleration over the whole record, as the accelerometer on the table "

@@ -217,7 +217,7 @@ def _remote(args, plan) -> int:
             time.sleep(0.2)
         _report(c, seen)
     print(f"campaign {plan.name} ({cid}): {c['state']}, {c['progress']['done']} of {c['progress']['total']} sweeps "
-          f"complete{'; ' + c['reason'] if c['reason'] else ''}; recordings {', '.join(c['recording_ids']) or '-'}")
+          f"complete{'; ' + c['reason'] if c['reason'] else ''}; recordings {', '.join(c['recording_ids']) or 'none'}")
     if c["state"] == "paused":
         print(f"to go on: POST {args.server}/api/campaigns/{cid}/resume (after POST /api/rig/reset if needed)")
     return 0 if c["state"] == "completed" else 1
