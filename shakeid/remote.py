@@ -76,7 +76,7 @@ def cmd_sweep_remote(args) -> int:
     progress.close(sweep["state"])
     rec_id = sweep["recording_id"]
     print(f"sweep {sweep_id}: {sweep['state']}{' (' + sweep['error'] + ')' if sweep['error'] else ''}; "
-          (f"recording {rec_id}" if rec_id else "no recording"))
+          + (f"recording {rec_id}" if rec_id else "no recording"))
     if rec_id and args.out:
         Path(args.out).write_bytes(client.request("GET", f"/api/recordings/{rec_id}/file", raw=True))
         print(f"{args.out}: the recording, downloaded")
