@@ -169,16 +169,17 @@ def cmd_explain(args) -> int:
           f"{worst['excitation_hz']:.1f} Hz")
     for c in result["candidates"]:
         closed = c.get("gap_share_closed")
-        p = "-" if c.get("kind") == "measurement" else f"{c['p_value']:.1e}"  # searched, no Wald test
+        p = "not tested" if c.get("kind") == "measurement" else f"{c['p_value']:.1e}"  # searched, no Wald test
         print(f"  {c['name']:32s} equation-error share {c['score']:+.3f}  p = {p}  "
-              f"shooting gap closed {'-' if closed is None else f'{closed:+.2f}'}"
+              f"shooting gap closed {'n/a' if closed is None else f'{closed:+.2f}'}"
               + (f"  (rejected: {c['rejected']})" if c.get("rejected") else ""))
     if result["effect"] in ("none", "unexplained"):
         print(f"missing effect: {result['effect']} (confidence {result['confidence']:.2f})")
     else:
         for e in result["effects"]:
             sur = f"; stands in for {', '.join(e['surrogate_for'])}" if e["surrogate_for"] else ""
-            print(f"missing effect: {e['name']} ({e['kind']}) {json.dumps(e['coefficients'])} (confidence "
+            coefs = ", ".join(f"{t} {c:.4g}" for t, c in e["coefficients"].items())
+            print(f"missing effect: {e['name']} ({e['kind']}{'; ' + coefs if coefs else ''}) (confidence "
                   f"{e['confidence']:.2f}; gap after {f(e['gap_after'])}{sur})")
         print(f"gap {f(result['gap_before'])} -> {f(result['gap_after'])}")
         print("model: " + json.dumps(result["model"]))
