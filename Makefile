@@ -17,8 +17,9 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/shakeid demo --out demo-output
 
-# Debian's docker-compose validates docker-compose.yml in the tests (no Docker engine needed); installed
-# from the Debian registry when missing and we may (root), else the test says how to get it.
+# Debian's docker-compose validates docker-compose.yml in the tests (no Docker engine needed), Debian's chromium
+# runs the dashboard's browser tests; each installed from the Debian registry when missing and we may (root), else
+# the test says how to get it.
 tools:
 	@command -v docker-compose >/dev/null 2>&1 || { \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
@@ -27,6 +28,15 @@ tools:
 	      --no-install-recommends docker-compose >/dev/null; } \
 	      || echo "note: could not install docker-compose; tests/test_deploy.py will say so"; \
 	  else echo "note: docker-compose is missing; tests/test_deploy.py will say how to install it"; fi; }
+	@# Debian's Chromium runs the dashboard's browser tests (tests/server/test_dashboard.py, via Playwright);
+	@# they fail, saying how to install it, when it is missing
+	@test -x /usr/bin/chromium || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing Debian's chromium (the dashboard's browser tests)"; \
+	    { apt-get update -qq >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+	      --no-install-recommends chromium >/dev/null; } \
+	      || echo "note: could not install chromium; tests/server/test_dashboard.py will say so"; \
+	  else echo "note: chromium is missing; tests/server/test_dashboard.py will say how to install it"; fi; }
 
 test: $(STAMP) tools
 	$(PY) -m pytest -q

@@ -15,8 +15,8 @@ Target (issue 13): Dask with 2 workers >= 1.6x Dask with 1 worker. On a 2-core m
 running other work the ratio is bounded by the free cores, so read it together with the machine's load
 (printed).
 
-TODO (issue 13, later): the out-of-core part of this benchmark (one recording larger than memory, in
-chunks over the cluster) is not measured here yet.
+The out-of-core part of issue 13 (one recording of 1e6-1e8 samples identified chunk by chunk: time per
+sample, peak RSS, the h5py read beside it) is benchmarks/out_of_core.py.
 """
 from __future__ import annotations
 

@@ -145,9 +145,11 @@ class SweepRunner:
                     last_poll = time.monotonic()
                     with self._lock:
                         st = self.plc.status()
-                    if self.on_progress:
+                    # progress only while it means something: a PLC in estop or fault reports no elapsed
+                    # time, and "0" would hide how far the sweep got (an estop at 26 % is not one at 0 %)
+                    if self.on_progress and st.state in (State.RUNNING, State.DONE):
                         self.on_progress(min(st.elapsed_s / req.duration_s, 1.0) if st.state == State.RUNNING
-                                         else float(st.state == State.DONE), st)
+                                         else 1.0, st)
                     if st.state == State.ESTOP:  # pressed anywhere: on the rig, in the service, by another client
                         status, reason = "aborted", "emergency stop (the PLC is in estop)"
                         break

@@ -90,9 +90,21 @@ class StateSignals:
 def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARGIN_DB) -> tuple[float, float]:
     """Frequency range (Hz) where the signal's PSD stands `margin_db` above its noise floor."""
     n = x.size
-    nper = int(min(n, 2 ** int(np.ceil(np.log2(fs_hz * 8.0)))))  # ~0.125 Hz resolution
-    nper = max(min(nper, n // 2), 16)
+    nper = welch_length(n, fs_hz)
     f, p = welch_psd(x, fs_hz, nper)  # = scipy.signal.welch(..., detrend="linear"), 3x faster
+    return band_from_psd(f, p, n, nper, margin_db)
+
+
+def welch_length(n: int, fs_hz: float) -> int:
+    """The Welch segment length excited_band uses on a record of n samples (~0.125 Hz resolution)."""
+    nper = int(min(n, 2 ** int(np.ceil(np.log2(fs_hz * 8.0)))))
+    return max(min(nper, n // 2), 16)
+
+
+def band_from_psd(f: np.ndarray, p: np.ndarray, n: int, nper: int,
+                  margin_db: float = EXCITATION_MARGIN_DB) -> tuple[float, float]:
+    """excited_band's rule on a Welch PSD of a record of n samples in segments of nper (identify.chunked
+    accumulates that PSD chunk by chunk, without holding the record)."""
     skip = 3  # the lowest bins hold the window's leakage of offsets and drifts, not excitation
     floor = np.percentile(p[skip:], 10) / _low_decile_of_noise(n, nper)
     above = np.flatnonzero(p[skip:] > floor * 10 ** (margin_db / 10)) + skip
@@ -107,7 +119,7 @@ def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARG
     best = int(np.argmax(power))
     lo_bin, hi_bin = above[starts[best]], above[stops[best]]
     df = f[1] - f[0]
-    return float(max(f[lo_bin] - df, df)), float(min(f[hi_bin] + df, fs_hz / 2))
+    return float(max(f[lo_bin] - df, df)), float(min(f[hi_bin] + df, df * nper / 2))  # df nper / 2: Nyquist
 
 
 def _low_decile_of_noise(n: int, nper: int) -> float:
@@ -203,6 +215,47 @@ def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, tap
             yk += lines[rows.index((i, False))] if power == 0 else (x[-1] - x[0]) * fs_hz / max(n - 1, 1)
         results.append(yk)
     return results
+
+
+class BandLimitedNoise:
+    """Images under the chain's band-limited (j w)^power operators of independent white noises, drawn
+    on the band's bins directly: `requests` are (weights over the noises, power), each giving one (n,)
+    array per draw.
+
+    The spectrum of white noise on nfft points is an independent complex Gaussian per bin (variance
+    nfft std^2, real at DC and Nyquist); drawing the band's bins alone skips the rfft and most of the
+    random numbers (a band to 87 Hz at 2048 Hz is 4 % of the bins). What this leaves out is the chain's
+    detrending, taper and zero padding of the noise, which shape the record's ends only: the result is
+    the stationary image the chain's output has on its valid rows (tests/identify/test_uncertainty.py
+    compares covariances)."""
+
+    def __init__(self, n: int, fs_hz: float, band: tuple[float, float], requests):
+        self.n, self.nfft = n, padded_length(n, fs_hz, band)
+        f = rfftfreq(self.nfft, 1.0 / fs_hz)
+        g = band_gain(f, band, fs_hz)
+        self.k_max = int(np.flatnonzero(g)[-1])
+        f, g = f[:self.k_max + 1], g[:self.k_max + 1]
+        self.weights = [w for w, _ in requests]
+        self.responses = [_band_response(f, g, band, power) for _, power in requests]
+
+    def draw(self, stds, rng: np.random.Generator) -> list[np.ndarray]:
+        """One draw for white noises of std `stds[i]` (per sample): a list of (n,) arrays, one per request."""
+        kk = self.k_max + 1
+        draws = []
+        for std in stds:
+            z = rng.standard_normal((2, kk)) * (std * np.sqrt(self.nfft / 2.0))
+            spec = z[0] + 1j * z[1]
+            spec[0] = z[0, 0] * np.sqrt(2.0)  # DC: real, variance nfft std^2
+            if self.k_max == self.nfft // 2:
+                spec[-1] = z[0, -1] * np.sqrt(2.0)
+            draws.append(spec)
+        out = np.zeros((len(self.responses), kk), dtype=complex)
+        for k, (weights, h) in enumerate(zip(self.weights, self.responses)):
+            for w, d in zip(weights, draws):
+                if w:
+                    out[k] += w * d
+            out[k] *= h
+        return list(lowband_irfft(out, self.nfft, self.n))
 
 
 def _band_response(f: np.ndarray, g: np.ndarray, band: tuple[float, float], power: int) -> np.ndarray:

@@ -22,6 +22,9 @@ and how much adding them closes the gap.
    localisation of what remains (also given when effects were added but the gap stays above
    OUTSIDE_FACTOR x the floor: then the named effects are flagged as surrogates for physics outside
    the catalog and their confidence is scaled by the share of the excess error they explain).
+5. A drifting sensor bias, which the band-limited chain removes before any gap is measured, is looked
+   for in the raw channels below the band (identify.drift) and listed after the effects; it is the
+   answer when the gap needs nothing else.
 """
 from __future__ import annotations
 
@@ -30,6 +33,7 @@ import numpy as np
 from . import admissibility
 from .candidates import all_candidates
 from .chain import reconstruct_states
+from .drift import T_REPORT, bias_trends
 from .effects import CATALOG, Effect
 from .errors import IdentificationError
 from .identifier import holdout_blocks
@@ -156,8 +160,9 @@ class DiscrepancyAnalysis:
             if e["name"] == "hysteresis" and cur.hyst is not None:
                 e["coefficients"].update(beta_per_m=cur.hyst[0], gamma_per_m=cur.hyst[1])
         self._flag_outside(effects)
+        self._add_drifts(recording, sig, effects)
         self.terms_ = effects[0]["terms"] if effects else []
-        self.pair_p_value_ = effects[0]["p_beats_runner_up"] if effects else None
+        self.pair_p_value_ = effects[0].get("p_beats_runner_up") if effects else None
 
         # models, free runs (validation) and localisation
         self.baseline_model_ = self.baseline if self.baseline is not None else fitter.model(cur if not effects
@@ -265,6 +270,26 @@ class DiscrepancyAnalysis:
                 "admissible": c["admissible"], "rejected": c["rejected"], "description": CATALOG[c["name"]].description
                 if c["name"] in CATALOG else ""}
 
+    def _add_drifts(self, recording, sig, effects: list) -> None:
+        """A drifting sensor bias, found in the raw channels below the band (identify.drift): the gap
+        cannot show it, so it is listed after whatever closed the gap; it is the answer when nothing
+        else was (`none` becomes `bias_drift`); an `unexplained` gap stays unexplained."""
+        self.bias_trends_ = bias_trends(recording, sig)
+        if any(e["name"] == "bias_drift" for e in effects):
+            return
+        for d in self.bias_trends_:
+            if abs(d["t"]) < T_REPORT:
+                continue
+            effects.append({"name": "bias_drift", "kind": "measurement", "terms": [],
+                            "coefficients": {f"bias_drift_{d['channel']}": d["change_ms2"]},
+                            "confidence": float(1 - d["p_value"]), "gap_after": self.gap_after_,
+                            "gap_share_closed": 0.0, "surrogate_for": [], "p_value": d["p_value"],
+                            "evidence": (f"the {d['channel']} accelerometer's mean below the band moves by "
+                                         f"{d['change_ms2']:+.4f} +- {d['se_ms2']:.4f} m/s^2 over the record "
+                                         f"(t = {d['t']:.1f}); the chain removes it, so the gap does not show it")})
+            if self.effect_ == "none":
+                self.effect_, self.confidence_ = "bias_drift", effects[-1]["confidence"]
+
     def _flag_outside(self, effects: list) -> None:
         """Effects added but the gap stays well above the noise floor: what they explain is partly
         something else. Flag them and scale their confidence by the share of the excess explained."""
@@ -312,4 +337,5 @@ class DiscrepancyAnalysis:
                            "none_factor": self.none_factor, "outside_factor": OUTSIDE_FACTOR,
                            "surrogate_share": SURROGATE_SHARE},
             "p_beats_runner_up": self.pair_p_value_,
+            "bias_trends": self.bias_trends_,
         }

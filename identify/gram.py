@@ -36,7 +36,9 @@ class NormalEquations:
 
 class BlockGram:
     """Per-block cross-products of [A | Y] over contiguous blocks of rows; `edges` are the block
-    boundaries (row indices, first 0, last n)."""
+    boundaries (row indices, first 0, last n). `segment` (n_blocks,) numbers the recording each block
+    comes from (all 0 for one record; BlockGram.concatenate): neighbouring blocks of different
+    segments are not contiguous in time."""
 
     def __init__(self, AY: np.ndarray, n_targets: int, edges: np.ndarray):
         n, w = AY.shape
@@ -51,14 +53,42 @@ class BlockGram:
         self.p = n_targets
         self.C = np.zeros((self.edges.size - 1, width, width))
         self.counts = np.diff(self.edges)
+        self.segment = np.zeros(self.edges.size - 1, dtype=int)
 
     @classmethod
-    def from_library(cls, library, states, inputs, targets, edges, chunk: int = CHUNK_ROWS) -> "BlockGram":
+    def concatenate(cls, grams) -> "BlockGram":
+        """One BlockGram of several recordings' (same library and targets): blocks stacked in order,
+        edges continued across recordings (rows of the concatenated records), segment = the recording's
+        index. Sums over its blocks are the summed normal equations of all recordings."""
+        grams = list(grams)
+        self = cls.__new__(cls)
+        starts = np.cumsum([0] + [int(g.edges[-1]) for g in grams[:-1]])
+        edges = np.concatenate([[0]] + [g.edges[1:] + s for g, s in zip(grams, starts)])
+        self._setup(edges, grams[0].m + grams[0].p, grams[0].p)
+        self.C = np.concatenate([g.C for g in grams])
+        self.segment = np.concatenate([np.full(g.n_blocks, i) for i, g in enumerate(grams)])
+        return self
+
+    def part(self, segment: int) -> "BlockGram":
+        """The blocks of one segment (recording) as a BlockGram of its own (edges from 0)."""
+        idx = np.flatnonzero(self.segment == segment)
+        out = BlockGram.__new__(BlockGram)
+        edges = self.edges[idx[0]: idx[-1] + 2]
+        out._setup(edges - edges[0], self.m + self.p, self.p)
+        out.C = self.C[idx]
+        return out
+
+    @classmethod
+    def from_library(cls, library, states, inputs, targets, edges, chunk: int | None = None) -> "BlockGram":
         """Per-block Grams of [library(states, inputs) | targets] without building the whole matrix.
 
-        states, targets : sequences of 1-D arrays (columns); inputs : (n, n_inputs) array."""
+        states, targets : sequences of 1-D arrays (columns); inputs : (n, n_inputs) array; chunk : rows
+        per chunk (default: CHUNK_ROWS x 18 columns' worth, so a narrow library takes longer chunks and
+        pays the per-chunk overhead less often)."""
         self = cls.__new__(cls)
         m, p = len(library), len(targets)
+        if chunk is None:
+            chunk = CHUNK_ROWS * 18 // max(m + p, 18) if m + p >= 18 else CHUNK_ROWS * 18 // (m + p)
         self._setup(edges, m + p, p)
         buf = np.empty((chunk, m + p), order="F")
         for b in range(self.n_blocks):

@@ -66,6 +66,11 @@ def holdout_blocks(sig: StateSignals, fraction: float = 0.2, first_samples: int 
     return edges, held
 
 
+def effective_samples(sig: StateSignals) -> float:
+    """Independent samples a band-limited record carries, 2 B T (the bic rule's n_eff)."""
+    return 2 * (sig.band_hz[1] - sig.band_hz[0]) * (sig.valid.stop - sig.valid.start) / sig.fs_hz
+
+
 class SparseIdentifier:
     """Parameters (stored as given, sklearn-style; fitted attributes end in `_`):
 
@@ -137,7 +142,29 @@ class SparseIdentifier:
                          normalize=self.normalize_threshold)
         raise IdentificationError(f"unknown method {self.method!r} (admm or stlsq)")
 
-    def fit(self, recording: Recording) -> "SparseIdentifier":
+    def fit(self, recording: "Recording | list[Recording]") -> "SparseIdentifier":
+        """Fit to one Recording, or to a list of them: one model for several recordings of the same
+        rig (identify.joint: chain and held-out blocks per recording, normal equations summed)."""
+        if isinstance(recording, (list, tuple)):
+            if len(recording) != 1:
+                from .joint import fit_joint
+
+                self._check_options()
+                return fit_joint(self, list(recording))
+            recording = recording[0]
+        self._check_options()
+        timings = {}
+        t0 = time.perf_counter()
+        sig = reconstruct_states(recording, self.band_hz, self.harmonics, self.taper_s)
+        timings["chain"] = time.perf_counter() - t0
+        self.recording_ = recording
+        self.states_ = sig
+        self.joint_ = None
+        self.library_ = Library(("q1", "q2"), (sig.input_name,), self.degree, self.extra_terms)
+        return self._fit_signals(sig, timings)
+
+    def _check_options(self) -> None:
+        """Options refused before any work (an unknown method, refine, budget)."""
         if self.refine not in (None, "free-run"):  # refused before any work, like an unknown method
             raise IdentificationError(f"unknown refine {self.refine!r} (free-run)")
         if self.budget not in BUDGETS:
@@ -145,14 +172,6 @@ class SparseIdentifier:
         if self.budget_refit not in BUDGET_REFITS:
             raise IdentificationError(f"unknown budget_refit {self.budget_refit!r} ({', '.join(BUDGET_REFITS)})")
         self._optimizer()
-        timings = {}
-        t0 = time.perf_counter()
-        sig = reconstruct_states(recording, self.band_hz, self.harmonics, self.taper_s)
-        timings["chain"] = time.perf_counter() - t0
-        self.recording_ = recording
-        self.states_ = sig
-        self.library_ = Library(("q1", "q2"), (sig.input_name,), self.degree, self.extra_terms)
-        return self._fit_signals(sig, timings)
 
     def _fit_signals(self, sig: StateSignals, timings: dict) -> "SparseIdentifier":
         lib = self.library_
@@ -160,7 +179,7 @@ class SparseIdentifier:
         t0 = time.perf_counter()
         gram = self._gram(sig, edges)
         timings["library_gram"] = time.perf_counter() - t0
-        train, heldout, coefs = self._fit_pass(sig, gram, held, timings)
+        train, heldout, coefs = self._fit_pass(effective_samples(sig), gram, held, timings)
         # The terms are those of the true displacement: when the selected force has an even part (an
         # asymmetric spring) it rectifies into a displacement below the band the chain cannot see; find
         # it (identify.inband) and fit again on q2 + offset. An odd force (the textbook rig) needs none.
@@ -168,7 +187,7 @@ class SparseIdentifier:
         self.offset_ = {"carried": False, "passes": 0}
         if sig.band_hz[0] > 0 and has_even_force(SparseModel(coefs, ("q1", "q2"), (sig.input_name,)), sig):
             sig, gram, self.offset_ = carry_offset(lib, sig, edges, ~held)
-            train, heldout, coefs = self._fit_pass(sig, gram, held, timings)
+            train, heldout, coefs = self._fit_pass(effective_samples(sig), gram, held, timings)
         timings["offset"] = time.perf_counter() - t0
         self.states_ = sig
         self.heldout_rows_ = np.repeat(held, np.diff(edges))
@@ -178,7 +197,12 @@ class SparseIdentifier:
         # reported coefficients are the kept terms refit on all rows, less the chain's bias
         # (identify.uncertainty, docs/identification.md section 5)
         self.training_model_ = SparseModel(coefs, ("q1", "q2"), (sig.input_name,))
-        reported, self.standard_errors_, self.uncertainty_ = self._trust(sig, gram, held)
+        bias_of = None
+        if self.bias_replicates and getattr(self, "recording_", None) is not None:
+            def bias_of(sups, coefs):
+                return unc.chain_bias(self.recording_, sig, sups, coefs,
+                                      lambda s2, cols: self._gram(s2, gram.edges, cols), self.bias_replicates)
+        reported, self.standard_errors_, self.uncertainty_ = self._trust(gram, held, effective_samples(sig), bias_of)
         timings["refit_uncertainty"] = time.perf_counter() - t0
         self.model_ = SparseModel(reported, ("q1", "q2"), (sig.input_name,), self.standard_errors_)
         validated = self.training_model_
@@ -213,23 +237,25 @@ class SparseIdentifier:
         self.timings_ = timings
         return self
 
-    def _gram(self, sig: StateSignals, edges) -> BlockGram:
+    def _gram(self, sig: StateSignals, edges, columns=None) -> BlockGram:
         """Per-block normal equations of the library on the model's states. With an offset carried
         (an even force) every column goes through the chain's band (identify.inband, as explain's
         screen does): an even term's DC and slow part are not in the measured acceleration, and on
         raw columns an offset a few % off shows as a spurious constant, q1^4, q2^4 (3e4 N/m^2 rig).
         Without one (odd forces) the columns stay as they are and are streamed in chunks: through the
         band, the degree-4 even terms fit the chain's low-frequency error on short sweeps (exact
-        supports 9 of 24 instead of 21 of 24, docs/identification.md), while raw, their DC costs."""
+        supports 9 of 24 instead of 21 of 24, docs/identification.md), while raw, their DC costs.
+        `columns`: those library columns only (indices)."""
+        lib = self.library_ if columns is None else self.library_.subset(columns)
         v = sig.valid
         # q2_dot = q1 by construction of the chain, so the second target is q1 itself
         targets = (sig.q1_dot[v], sig.q1[v])
         if sig.q2_offset is not None:
-            return band_limited_gram(self.library_, sig, targets, edges)
-        return BlockGram.from_library(self.library_, (sig.q1[v], sig.q2[v]), sig.input[v][:, None], targets, edges)
+            return band_limited_gram(lib, sig, targets, edges)
+        return BlockGram.from_library(lib, (sig.q1[v], sig.q2[v]), sig.input[v][:, None], targets, edges)
 
-    def _fit_pass(self, sig: StateSignals, gram: BlockGram, held, timings: dict):
-        """Path, selection and refit per equation on the Grams of the states.
+    def _fit_pass(self, n_eff: float, gram: BlockGram, held, timings: dict):
+        """Path, selection and refit per equation on the Grams of the states (n_eff: effective_samples).
         Returns (training and held-out normal equations, coefficients by equation)."""
         lib = self.library_
         train, heldout = gram.equations(~held), gram.equations(held) if held.any() else None
@@ -237,15 +263,14 @@ class SparseIdentifier:
         self.path_ = self._optimizer().fit_path(train)
         timings["path"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        self.selections_ = self._select(self.path_, train, heldout, sig)
+        self.selections_ = self._select(self.path_, train, heldout, n_eff)
         coefs = {eq: {lib.names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)}
                  for eq, s in self.selections_.items()}
         timings["selection_refit"] = time.perf_counter() - t0
         return train, heldout, coefs
 
-    def _select(self, path, train, heldout, sig: StateSignals) -> dict:
+    def _select(self, path, train, heldout, n_eff: float) -> dict:
         """The rule's choice per equation on a path (no side effects: the inclusion probabilities rerun it)."""
-        n_eff = 2 * (sig.band_hz[1] - sig.band_hz[0]) * (sig.valid.stop - sig.valid.start) / sig.fs_hz
         by_free_run = self.budget == "free-run" and self.max_terms is not None  # then chosen after the offset
         return {eq: select(path, e, train, heldout, self.selection, self.tolerance, n_eff,
                            None if by_free_run and e == 0 else self.max_terms)
@@ -270,19 +295,15 @@ class SparseIdentifier:
         return {eq: {lib.names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)}
                 for eq, s in self.selections_.items()}
 
-    def _trust(self, sig: StateSignals, gram: BlockGram, held) -> tuple[dict, dict, dict]:
-        """Reported coefficients, standard errors and inclusion probabilities (identify.uncertainty)."""
+    def _trust(self, gram: BlockGram, held, n_eff: float, bias_of) -> tuple[dict, dict, dict]:
+        """Reported coefficients, standard errors and inclusion probabilities (identify.uncertainty);
+        bias_of(supports, coefs) -> unc.chain_bias(...) or None."""
         names, eqs = self.library_.names, list(self.selections_)
         sups = {e: s.support for e, s in enumerate(self.selections_.values())}
-        bias_of = None
-        if self.bias_replicates and getattr(self, "recording_", None) is not None:
-            def bias_of(sups, coefs):
-                return unc.chain_bias(self.recording_, sig, sups, coefs, lambda s2: self._gram(s2, gram.edges),
-                                      self.bias_replicates)
         optimizer = self._optimizer()
 
         def fit_and_select(train, heldout):
-            return [s.support for s in self._select(optimizer.fit_path(train), train, heldout, sig).values()]
+            return [s.support for s in self._select(optimizer.fit_path(train), train, heldout, n_eff).values()]
 
         coefs, var, info = unc.assess(gram, held, sups, bias_of, fit_and_select, self.placements)
         named = {eqs[e]: {names[j]: j for j in np.flatnonzero(sups[e])} for e in sups}
@@ -332,4 +353,8 @@ class SparseIdentifier:
         }
         if sig.input_name == "zdd":
             out["physical"] = physical_parameters(self.model_, self.rig or RigConstants())
+        if getattr(self, "joint_", None) is not None:
+            from .joint import joint_result
+
+            out = joint_result(self, out)
         return out

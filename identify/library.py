@@ -55,6 +55,16 @@ class Library:
         lib.terms, lib.names = terms, [t.name for t in terms]
         return lib
 
+    def subset(self, columns) -> "Library":
+        """The library of these columns (indices) only, in the same feature space: what a refit of
+        kept terms needs (identify.uncertainty's SIMEX replicates)."""
+        lib = Library.__new__(Library)
+        lib.states, lib.inputs, lib.degree, lib.extra_terms, lib.space = (self.states, self.inputs, None, (),
+                                                                         self.space)
+        lib.terms = [self.terms[j] for j in columns]
+        lib.names = [t.name for t in lib.terms]
+        return lib
+
     def __len__(self) -> int:
         return len(self.terms)
 

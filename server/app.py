@@ -19,13 +19,14 @@ from typing import Literal
 from fastapi import Depends, FastAPI, HTTPException, Path, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, StreamingResponse
+from fastapi.responses import FileResponse, JSONResponse, StreamingResponse
 
 from daq.recorder import software_version
 
 from . import schemas
 from .auth import require
 from .catalog import ID_PATTERN, Catalog, new_id
+from .dashboard import dashboard_router
 from .ipc import ControllerRefused, ControllerUnavailable
 from .jobs import JobQueue
 from .rigclient import RigLink
@@ -202,7 +203,9 @@ def create_app(settings: Settings) -> FastAPI:
         campaign = catalog().get("campaigns", campaign_id)
         if campaign is None:
             raise HTTPException(404, f"no campaign {campaign_id}")
-        return campaign
+        joint = [j for j in catalog().list("jobs", "kind = 'identify_joint'", limit=10_000)
+                 if j["options"].get("campaign_id") == campaign_id]
+        return {**campaign, "joint_identification": max(joint, key=lambda j: j["created"]) if joint else None}
 
     @app.post("/api/campaigns/{campaign_id}/{action}", status_code=202, response_model=schemas.Accepted,
               tags=["campaigns"], responses=campaign_errors)
@@ -303,6 +306,30 @@ def create_app(settings: Settings) -> FastAPI:
         """Queue an identification with the CLI's options; poll GET /api/jobs/{id}."""
         return _submit("identify", rec_id, body.model_dump(exclude_none=True))
 
+    @app.post("/api/identify", status_code=202, response_model=schemas.JobOut, tags=["jobs"],
+              dependencies=[operator], responses={**errors, 404: {"model": schemas.Problem},
+                                                  409: {"model": schemas.Problem}})
+    def identify_joint(body: schemas.JointIdentifyIn):
+        """Queue one model of several recordings (job kind identify_joint); poll GET /api/jobs/{id}, then
+        GET /api/jobs/{id}/joint for the result (the JSON of `shakeid identify A.h5 B.h5 --json`)."""
+        ids = list(body.recording_ids)
+        for rec_id in ids:
+            if recording_or_404(rec_id)["status"] == "running":
+                raise HTTPException(409, f"recording {rec_id} is still being recorded")
+        options = body.model_dump(exclude_none=True, exclude={"recording_ids"})
+        return state["jobs"].submit("identify_joint", ids[0], {**options, "recording_ids": ids})
+
+    @app.get("/api/jobs/{job_id}/joint", tags=["jobs"], dependencies=[viewer],
+             responses={**errors, 404: {"model": schemas.Problem}})
+    def joint_result(job_id: str = Id()) -> dict:
+        """A joint identification's result (joint.json: the joint model, `recordings` per recording),
+        whether or not one model explained them all."""
+        job = catalog().get("jobs", job_id)
+        path = FsPath(job["result_dir"]) / "joint.json" if job and job["kind"] == "identify_joint" else None
+        if path is None or not path.exists():
+            raise HTTPException(404, f"no joint identification result for job {job_id}")
+        return json.loads(path.read_text())
+
     @app.post("/api/recordings/{rec_id}/explain", status_code=202, response_model=schemas.JobOut,
               tags=["jobs"], dependencies=[operator],
               responses={**errors, 404: {"model": schemas.Problem}, 409: {"model": schemas.Problem}})
@@ -360,9 +387,7 @@ def create_app(settings: Settings) -> FastAPI:
             raise HTTPException(404, f"no figure {name}")
         return FileResponse(report / name, media_type="image/png")
 
-    @app.get("/", response_class=HTMLResponse, include_in_schema=False)
-    def dashboard():
-        return (FsPath(__file__).with_name("dashboard.html")).read_text()
+    app.include_router(dashboard_router(catalog, viewer))  # the page, its script, and the JSON it shows
 
     return app
 

@@ -93,13 +93,20 @@ class JobQueue:
             if rec is None:
                 self.catalog.update("jobs", job["id"], state="failed", error="recording no longer in the catalog")
                 continue
+            path = os.path.abspath(rec["path"])
+            if job["kind"] == "identify_joint":  # several recordings: options name them all, in order
+                recs = [self.catalog.get("recordings", r) for r in job["options"].get("recording_ids", [])]
+                if any(r is None for r in recs) or len(recs) < 2:
+                    self.catalog.update("jobs", job["id"], state="failed",
+                                        error="a joint identification needs two or more recordings in the catalog")
+                    continue
+                path = [os.path.abspath(r["path"]) for r in recs]
             self.catalog.update("jobs", job["id"], state="running", attempts=job["attempts"] + 1)
             with self._pool_lock:
                 pool = self.pool
             # absolute paths: a Dask worker does not share our working directory (the data dir must be
             # mounted at the same path there)
-            fut = pool.submit(worker.run_job, job["kind"], os.path.abspath(rec["path"]), job["options"],
-                              os.path.abspath(job["result_dir"]))
+            fut = pool.submit(worker.run_job, job["kind"], path, job["options"], os.path.abspath(job["result_dir"]))
             self._running[job["id"]] = fut
             fut.add_done_callback(lambda f, jid=job["id"], rid=rec["id"], kind=job["kind"], p=pool:
                                   self._done(jid, rid, kind, f, p))

@@ -94,13 +94,22 @@ class IdentifyIn(ReadOptions):
     placements: int | None = Field(None, ge=0, le=500, description="held-out placements for inclusion probabilities")
 
 
+class JointIdentifyIn(IdentifyIn):
+    """Several recordings fitted as one model (`shakeid identify A.h5 B.h5 ...`, identify.joint); the
+    options apply to every recording."""
+    recording_ids: list[Annotated[str, Field(pattern=r"^[0-9a-f]{12}$")]] = Field(
+        min_length=2, max_length=500, description="the recordings, in the order the result lists them")
+
+
 class ExplainIn(ReadOptions):
     """The options of `shakeid explain`: the read options only."""
 
 
 class JobOut(BaseModel):
     id: str
-    kind: Literal["identify", "explain"]
+    kind: Literal["identify", "explain", "identify_joint"] = Field(
+        description="identify_joint: one model of several recordings (options.recording_ids, in order; "
+                    "recording_id is the first); its result_dir holds joint.json")
     recording_id: str
     state: JobState
     attempts: int
@@ -171,6 +180,9 @@ class CampaignOut(BaseModel):
     sweeps: list[CampaignSweepOut]
     progress: CampaignProgress
     recording_ids: list[str] = Field(description="complete recordings in plan order (for a joint identification)")
+    joint_identification: JobOut | None = Field(
+        None, description="the joint identification of recording_ids queued when the campaign completed "
+                          "(job kind identify_joint; GET /api/jobs/{id}); None before that")
     created: float
     updated: float
 

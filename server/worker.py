@@ -60,10 +60,13 @@ def read(path: str, options: dict):
 IDENTIFY_KEYS = tuple(sorted(set(IdentifyIn.model_fields) - set(ReadOptions.model_fields)))
 
 
-def run_job(kind: str, path: str, options: dict, out_dir: str) -> dict:
-    """Run one job; returns a short summary for the catalog. ShakeidError -> a message for the user."""
+def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
+    """Run one job; returns a short summary for the catalog. ShakeidError -> a message for the user.
+    kind "identify_joint": path is a list of recordings' paths, fitted as one model (identify.joint)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    if kind == "identify_joint":
+        return _run_joint(list(path), options, out)
     try:
         rec = read(path, options)
         from identify.quality import check_identifiable
@@ -98,4 +101,33 @@ def run_job(kind: str, path: str, options: dict, out_dir: str) -> dict:
             return {"effect": result["effect"], "gap_before": result["gap_before"], "gap_after": result["gap_after"]}
         raise ShakeidError(f"unknown job kind {kind!r}")
     except (ShakeidError, ValueError) as exc:  # the user's input: a message, not a traceback
+        raise ShakeidError(str(exc)) from None
+
+
+def _run_joint(paths: list, options: dict, out: Path) -> dict:
+    """One model of several recordings (a campaign's, at its end). joint.json is written whatever the
+    verdict (its `recordings` section says which recording one model does not explain); model.json only
+    for a model that passed, as for one recording; a failed joint model fails the job with the reason."""
+    from identify.identifier import SparseIdentifier
+    from identify.quality import check_identifiable
+
+    try:
+        recs = []
+        for p in paths:
+            rec = read(p, options)
+            check_identifiable(rec, Path(p).name, bool(options.get("accept_faulty")),
+                               "set accept_faulty to identify it anyway")
+            rec.source = Path(p).name
+            recs.append(rec)
+        params = {k: options[k] for k in IDENTIFY_KEYS if options.get(k) is not None}
+        if options.get("band_hz"):
+            params["band_hz"] = tuple(options["band_hz"])
+        result = SparseIdentifier(**params).fit(recs).result()
+        _write_json(out / "joint.json", result)
+        if result["status"] == "failed":
+            raise ShakeidError(f"joint identification of {len(recs)} recordings failed: {result['reason']}")
+        _write_json(out / "model.json", result)
+        return {"terms": {eq: sorted(terms) for eq, terms in result["model"].items()},
+                "recordings": {r["source"]: r["status"] for r in result["recordings"]}}
+    except (ShakeidError, ValueError) as exc:
         raise ShakeidError(str(exc)) from None

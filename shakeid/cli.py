@@ -17,6 +17,7 @@ from .batch_cmd import add_batch_parser
 from .campaign_cmd import add_campaign_parser
 from .helpformat import HelpFormatter, Parser
 from .lab_options import add_lab_parsers, add_sweep_shape
+from .ooc_cmd import add_out_of_core_options
 
 EXIT_USAGE = 2
 
@@ -118,7 +119,16 @@ def cmd_identify(args) -> int:
     --accept-faulty); 1 when the fitted model fails its validation (identify/validation.py)."""
     from identify.quality import check_identifiable
 
+    if len(args.files) > 1:
+        from .joint_cmd import cmd_identify_joint
+
+        return cmd_identify_joint(args, _identifier, _read)
+    args.file = args.files[0]
     ident = _identifier(args)  # option errors first, before any file is read
+    from .ooc_cmd import identify_out_of_core, wants_out_of_core
+
+    if wants_out_of_core(args):  # a long HDF5 recording: read and identified chunk by chunk
+        return identify_out_of_core(args, ident)
     rec = _read(args)
     data = check_identifiable(rec, args.file, args.accept_faulty)
     try:
@@ -269,8 +279,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
     q = sub.add_parser("identify", help="identify a sparse ODE model from a recording (CSV, MAT, HDF5)")
-    q.add_argument("file", help="the recording: CSV, MAT or HDF5 (a sweep's .h5)")
+    q.add_argument("files", nargs="+", metavar="FILE",
+                   help="a recording (CSV, MAT or HDF5); several: one model fitted to all of them (joint "
+                        "identification)")
     _add_identify_options(q)
+    add_out_of_core_options(q)
     q.add_argument("--report", metavar="DIR",
                    help="write index.html, figures, coefficient table and model JSON here (default: none)")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")

@@ -301,6 +301,14 @@ def _fn(rig) -> float:
 
 
 # -- scoring (the contract's rules; benchmarks/explain_robustness.py) ------------------------------------
+#: Measurement faults one record cannot tell apart. A base-excited record shows only the ratio of the two
+#: accelerometers' gains: scaling both channels by one factor scales every state and the input alike,
+#: which the model absorbs (its cubic coefficient by the factor squared). explain reports the gain on the
+#: mass channel with the table gain as its `surrogate_for` (and the equivalent table value); naming the
+#: one for the other is right, as a sensor check of either channel would find the fault.
+MEASUREMENT_EQUIVALENT = {"mass_acc_gain": ("table_acc_gain",), "table_acc_gain": ("mass_acc_gain",)}
+
+
 def result_effects(result: dict) -> list[dict]:
     """The `effects` list of a DiscrepancyAnalysis result; a result without one (before issue 12) is
     read as one physics entry for its `effect` (none when the effect is none or unexplained)."""
@@ -345,7 +353,9 @@ def score(category: str, truth_effects: list[str], result: dict) -> dict:
     elif category == "two_effects":
         right = all(t in names for t in truth_effects) and not wrong
     elif category == "sensor_fault":
-        right = bool(names) and names[0] == truth_effects[0]
+        right = bool(names) and (names[0] == truth_effects[0] or (
+            names[0] in MEASUREMENT_EQUIVALENT.get(truth_effects[0], ())
+            and truth_effects[0] in (effects[0].get("surrogate_for") or ())))
     elif category == "out_of_catalog":
         right = result.get("effect") == "unexplained" or (bool(effects) and bool(effects[0].get("surrogate_for"))
                                                           and closed_half)

@@ -163,7 +163,7 @@ def test_the_wheel_the_image_installs_carries_the_service(tmp_path):
     for package in ("identify", "sim", "daq", "reports", "server", "shakeid"):
         for module in (REPO / package).rglob("*.py"):
             assert str(module.relative_to(REPO)) in names, module
-    assert "server/dashboard.html" in names
+    assert {"server/dashboard.html", "server/static/dashboard.js", "server/static/dashboard.css"} <= names
     assert any(n.startswith("identify/_simkernel") and n.endswith(".so") for n in names)
     entry = next(n for n in names if n.endswith("entry_points.txt"))
     assert "shakeid = shakeid.cli:main" in zipfile.ZipFile(wheel).read(entry).decode()

@@ -182,12 +182,13 @@ def test_abort_paths_leave_the_table_stopped_and_the_file_valid(rig, tmp_path, e
 
     plc = ModbusPLC(*rig.endpoints["modbus"])
     runner = _runner(rig, plc)
-    fired = {"done": False}
+    fired, fractions = {"done": False}, []
     actions = {"drive_fault": lambda: rig.plc.inject_fault(),
                "estop_on_the_rig": lambda: rig.plc.command(Command.ESTOP),
                "sensor_loss": lambda: rig.fault_injection.update({"disconnect_s": 60.0})}
 
     def progress(frac, st):
+        fractions.append(frac)
         if frac > 0.1 and not fired["done"]:
             fired["done"] = True
             rig.call(actions[event])
@@ -196,6 +197,8 @@ def test_abort_paths_leave_the_table_stopped_and_the_file_valid(rig, tmp_path, e
     result = runner.run(SweepRequest(2.0, 10.0, 60.0, 1.0), tmp_path / f"{event}.h5")
     plc.close()
     assert result["status"] == status and reason in result["reason"], result
+    # the last progress reported is how far the sweep got, not a 0 from a PLC in estop or fault
+    assert fractions[-1] > 0.1, fractions[-5:]
     info = describe(tmp_path / f"{event}.h5")
     assert info["status"] == status and reason in info["status_reason"] and info["samples"] > 2048
     end = time.monotonic() + 10

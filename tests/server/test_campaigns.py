@@ -2,6 +2,7 @@
 child process, the embedded simulated rig at 10x) and HTTP clients. States are polled, never timed."""
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -116,9 +117,51 @@ def test_a_campaign_runs_its_sweeps_in_order_and_refuses_what_it_must(service):
     # every complete recording is queued for identification at its end, as any sweep's
     jobs = [x for x in viewer.get("/api/jobs", params={"limit": 500}).json() if x["kind"] == "identify"]
     assert set(c["recording_ids"]) <= {j["recording_id"] for j in jobs}
+    # and the completed campaign queues one model of all its recordings (identify.joint), shown in its status
+    # (these 4 s sweeps are too short for the chain: test_a_completed_campaign_is_identified_jointly fits one)
+    joint = _campaign(viewer, cid)["joint_identification"]
+    assert joint["kind"] == "identify_joint" and joint["options"]["recording_ids"] == c["recording_ids"]
     assert viewer.get(f"/api/campaigns/{cid}").status_code == 200
     assert viewer.get("/api/campaigns/0123456789ab").status_code == 404
     assert op.post(f"/api/campaigns/{cid}/resume").status_code == 409  # completed: nothing to resume
+
+
+def test_a_completed_campaign_is_identified_jointly(service):
+    """Two 1-20 Hz sweeps of the simulated rig at 1.0 and 1.3 mm: at the campaign's end one model of both
+    (job kind identify_joint) is queued and shown in the campaign's status; its joint.json has a section
+    per recording, in plan order, and the same rig's two levels are explained by one model."""
+    op, viewer = service.client(), service.client(VIEWER)
+    plan = {"name": "joint", "sweep": {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 30.0, "settle_s": 1.0},
+            "amplitudes_mm": [1.0, 1.3], "directions": ["up"], "rest_between_s": 0.2}
+    r = op.post("/api/campaigns", json=plan)
+    assert r.status_code == 202, r.text
+    cid = r.json()["id"]
+    c = _wait_state(viewer, cid, ENDED)
+    assert c["state"] == "completed" and len(c["recording_ids"]) == 2, c
+    joint = c["joint_identification"]
+    assert joint["kind"] == "identify_joint" and joint["options"]["recording_ids"] == c["recording_ids"]
+    deadline = time.time() + 300
+    while joint["state"] in ("queued", "running") and time.time() < deadline:
+        time.sleep(1.0)
+        joint = _campaign(viewer, cid)["joint_identification"]
+    assert joint["state"] == "completed", joint["error"]
+    assert op.get(f"/api/jobs/{joint['id']}").json()["kind"] == "identify_joint"
+    result = json.loads((service.data_dir / "results" / joint["id"] / "joint.json").read_text())
+    assert [s["source"] for s in result["recordings"]] == [f"{rid}.h5" for rid in c["recording_ids"]]
+    assert result["status"] == "ok" and all(s["status"] == "ok" for s in result["recordings"]), result["reason"]
+    assert {"q1", "q2", "q2^3", "zdd"} <= set(result["model"]["q1_dot"])
+    # the same two recordings, the other way round, through POST /api/identify
+    ids = c["recording_ids"][::-1]
+    assert op.post("/api/identify", json={"recording_ids": ids[:1]}).status_code == 422  # one is no joint fit
+    assert viewer.post("/api/identify", json={"recording_ids": ids}).status_code == 403
+    job = op.post("/api/identify", json={"recording_ids": ids, "placements": 0, "bias_replicates": 0})
+    assert job.status_code == 202, job.text
+    job = wait_for(lambda: (j := op.get(f"/api/jobs/{job.json()['id']}").json())["state"] not in ("queued", "running")
+                   and j, timeout_s=300)
+    assert job["state"] == "completed", job["error"]
+    again = op.get(f"/api/jobs/{job['id']}/joint").json()
+    assert [s["source"] for s in again["recordings"]] == [f"{rid}.h5" for rid in ids]
+    assert set(again["model"]["q1_dot"]) == set(result["model"]["q1_dot"])
 
 
 def test_estop_pauses_a_campaign_resume_reruns_the_sweep_and_abort_ends_one(service):

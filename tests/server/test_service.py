@@ -260,16 +260,24 @@ def test_explain_job_names_a_hidden_effect(service, tmp_path, make_run):
 
 
 def test_dashboard_is_served_and_calls_only_real_endpoints(service):
-    """The dashboard page: served without a token (it asks for one), and every API path its script
-    calls exists in the OpenAPI document with that method (so the page cannot drift from the API)."""
+    """The dashboard page and its scripts: served without a token (it asks for one), and every API path
+    its scripts call exists in the OpenAPI document with that method (so the page cannot drift from the API)."""
     import re
 
     page = httpx.get(service.url + "/")
     assert page.status_code == 200 and "EMERGENCY STOP" in page.text
+    scripts = re.findall(r'<script src="(/static/[a-z]+\.js)"', page.text)
+    assert len(scripts) >= 3
+    text = page.text
+    for src in scripts:
+        js = httpx.get(service.url + src)
+        assert js.status_code == 200 and "javascript" in js.headers["content-type"], src
+        text += js.text
+    assert httpx.get(service.url + "/static/../app.py").status_code == 404  # only the shipped files
     spec = httpx.get(service.url + "/openapi.json").json()["paths"]
-    calls = re.findall(r'api\("(GET|POST)", `?"?(/api/[^`"?]+)', page.text)
-    calls += [("GET", p) for p in re.findall(r'(?:new EventSource\(|href=")`?(/api/[^`"?]+)', page.text)]
-    assert len(calls) >= 8
+    calls = re.findall(r'api\("(GET|POST)", `?"?(/api/[^`"?]+)', text)
+    calls += [("GET", p) for p in re.findall(r'(?:new EventSource\(|href=")`?(/api/[^`"?]+)', text)]
+    assert len(calls) >= 15
     for method, path in calls:
         template = re.sub(r"\$\{[^}]+\}", "{x}", path)
         matches = [p for p in spec if re.fullmatch(re.sub(r"\{[^}]+\}", "[^/]+", p), template)]

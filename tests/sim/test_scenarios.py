@@ -104,6 +104,13 @@ def entry(name, confidence=0.9, kind="physics", surrogate_for=()):
     ("sensor_fault", ["channel_delay"],
      {"effect": "channel_delay", "effects": [entry("channel_delay", kind="measurement")]}, True, []),
     ("sensor_fault", ["channel_delay"], {"effect": "quadratic_damping", "confidence": 0.7}, False, ["quadratic_damping"]),
+    # a table gain shows only as the gains' ratio: the mass gain reported with the table gain as its twin
+    ("sensor_fault", ["table_acc_gain"], {"effect": "mass_acc_gain", "effects": [
+        entry("mass_acc_gain", kind="measurement", surrogate_for=["table_acc_gain"])]}, True, []),
+    ("sensor_fault", ["table_acc_gain"], {"effect": "mass_acc_gain", "effects": [
+        entry("mass_acc_gain", kind="measurement")]}, False, []),
+    ("sensor_fault", ["table_acc_gain"], {"effect": "channel_delay", "effects": [
+        entry("channel_delay", kind="measurement", surrogate_for=["table_acc_gain"])]}, False, []),
     ("out_of_catalog", ["second_mode"], {"effect": "unexplained", "gap_closed": None}, True, []),
     ("out_of_catalog", ["free_play"], {"effect": "coulomb_friction", "gap_closed": 0.6,
                                        "effects": [entry("coulomb_friction", surrogate_for=["out_of_catalog"])]},

@@ -1,0 +1,83 @@
+"""`shakeid identify A.h5 B.h5 C.csv`: one model fitted to several recordings of the rig (identify.joint).
+
+Every file is read and checked as a single `shakeid identify` would (same options, --accept-faulty
+included), then fitted jointly. The table is the joint model's; below it one line per recording: its
+band, the joint model's held-out free-run fit there, and its status ("inconsistent": the rig behaves
+differently in that recording than one model of all of them allows). Exit codes as for one file: 0 a
+model, 2 data refused, 1 the joint model failed (its validation, or a recording is inconsistent).
+"""
+from __future__ import annotations
+
+import json
+import sys
+
+from identify.errors import ShakeidError
+
+
+def cmd_identify_joint(args, make_identifier, read) -> int:
+    """`args.files` (two or more); make_identifier(args), read(args) as the single-file command's."""
+    from identify.quality import check_identifiable
+
+    if args.report:
+        raise ShakeidError("--report takes one recording; identify several without it (or one by one)")
+    ident = make_identifier(args)  # option errors first, before any file is read
+    recs, quality = [], []
+    for path in args.files:
+        args.file = path
+        rec = read(args)
+        quality.append(check_identifiable(rec, path, args.accept_faulty))
+        rec.source = path
+        recs.append(rec)
+    try:
+        ident.fit(recs)
+    except ValueError as exc:  # library/term specification problems
+        raise ShakeidError(str(exc)) from None
+    result = ident.result()
+    for section, q in zip(result["recordings"], quality):
+        section.update(q)
+    faulty = [f"{p}: {r}" for p, q in zip(args.files, quality) for r in q.get("accepted_faulty", [])]
+    result["data_quality"] = {"usable_for_identification": not faulty, "reasons": faulty,
+                              "assessed": "per recording (recordings[i].data_quality)"}
+    if faulty:
+        result["accepted_faulty"] = faulty
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(summary(result))
+    if result["status"] == "failed":
+        print(f"shakeid: identification failed: {len(args.files)} recordings: {result['reason']}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def summary(result: dict) -> str:
+    """The joint model's table, its pooled held-out fit, and one line per recording."""
+    from reports.text import coefficient_table
+
+    per = result["recordings"]
+    lines = [f"identified {len(per)} recordings jointly: method {result['method']}, selection "
+             f"{result['selection']['rule']}", ""]
+    if result.get("accepted_faulty"):
+        lines += ["accepted faulty data (--accept-faulty): " + "; ".join(result["accepted_faulty"]), ""]
+    lines.append(coefficient_table(result))
+
+    def fmt(m):
+        return "diverged" if m["fit_percent"] is None else f"{m['fit_percent']:.2f} %"
+    val = result.get("validation")
+    if val:
+        h = val["heldout"]
+        lines.append(f"free-run fit on {val['heldout_samples']} held-out samples of all recordings: acceleration "
+                     f"{fmt(h['q1_dot'])}, velocity {fmt(h['q1'])}, displacement {fmt(h['q2'])}")
+    lines += ["", "| recording | samples | band Hz | held-out fit acc / vel / disp | NRMSE joint/alone disp, vel | status |",
+              "|---|---:|---|---|---|---|"]
+    for p in per:
+        v = p.get("validation")
+        fits = " / ".join(fmt(v["heldout"][k]) for k in ("q1_dot", "q1", "q2")) if v else "-"
+        ratio = p.get("nrmse_ratio_joint_to_alone") or {}
+        rs = ", ".join("-" if ratio.get(k) is None else f"{ratio[k]:.2f}" for k in ("displacement", "velocity"))
+        lines.append(f"| {p['source']} | {p['samples']} | {p['band_hz'][0]:.3g}-{p['band_hz'][1]:.3g} | {fits} | "
+                     f"{rs or '-'} | {p['status']} |")
+    for p in per:
+        if p["reason"] and p["status"] != "ok":
+            lines.append(f"{p['source']}: {p['status']}: {p['reason']}")
+    return "\n".join(lines)

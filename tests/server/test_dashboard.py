@@ -1,0 +1,325 @@
+"""The dashboard in a real browser: Debian's Chromium driven by Playwright, against a real `shakeid serve`
+with its simulated rig at 10x (the operator's flows of issue 14).
+
+What the page shows is compared with what the API says (the truth the page must render): sweep progress,
+fits, model coefficients, standard errors, inclusion probabilities, physical parameters, campaign state.
+Chromium comes from Debian (`make tools` installs it as root); Playwright's own browser download is
+never used. A missing browser fails these tests, saying how to install it.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from identify.recording import write_csv
+from sim.sweep import SineSweep
+
+from .conftest import OPERATOR, VIEWER, Service, wait_for
+
+CHROMIUM = "/usr/bin/chromium"
+#: as root Chromium needs --no-sandbox; the rest keep it off the (closed) network: no update, sync, QUIC
+CHROMIUM_ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+TIMEOUT_MS = 60_000  # for the page's waits: sweeps and identifications on a loaded 2-core machine
+
+
+@pytest.fixture(scope="module")
+def browser():
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        pytest.fail("the browser tests need the playwright package: pip install -e '.[test]'", pytrace=False)
+    if not Path(CHROMIUM).exists():
+        pytest.fail(f"the browser tests need Debian's Chromium at {CHROMIUM}: run `make tools` as root, or "
+                    "`apt-get install --no-install-recommends chromium` (never `playwright install`)", pytrace=False)
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory):
+    s = Service(tmp_path_factory.mktemp("dash") / "data", speed=10.0).start()
+    yield s
+    s.stop()
+
+
+@pytest.fixture
+def page(browser, service):
+    """A fresh browser context signed in by link; collects every request's address and page errors."""
+    ctx = browser.new_context(viewport={"width": 1280, "height": 900}, accept_downloads=True)
+    pg = ctx.new_page()
+    pg.set_default_timeout(TIMEOUT_MS)
+    pg.requests, pg.errors = [], []
+    pg.on("request", lambda r: pg.requests.append(r.url))
+    pg.on("pageerror", lambda e: pg.errors.append(str(e)))
+    pg.goto(f"{service.url}/#token={OPERATOR}")
+    pg.wait_for_selector("#session:has-text('operator')")
+    yield pg
+    assert not pg.errors, f"JavaScript errors in the page: {pg.errors}"
+    assert not [u for u in pg.requests if "/null" in u or "/undefined" in u], "a request for a null id"
+    ctx.close()
+
+
+def sweep_body(duration_s: float, amplitude_mm: float = 1.3) -> dict:
+    return {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": duration_s, "amplitude_mm": amplitude_mm}
+
+
+def wait_idle(api):
+    """No sweep running and the PLC out of any emergency stop (a failed test must not fail the next ones)."""
+    wait_for(lambda: api.get("/api/rig").json()["active_sweep"] is None, what="the rig to be idle")
+    if api.get("/api/rig").json()["plc"]["state"] in ("estop", "fault"):
+        assert api.post("/api/rig/reset").status_code == 200
+
+
+def identified(api, rec_id: str) -> dict:
+    """The recording once its identification has completed (auto-identify after a complete sweep)."""
+    def done():
+        rec = api.get(f"/api/recordings/{rec_id}").json()
+        return rec if "identify" in rec["info"] else None
+    return wait_for(done, 120, "the identification")
+
+
+@pytest.fixture(scope="module")
+def sweep_recording(service):
+    """A complete 30 s sweep (3 s of wall time at 10x) with its identification, started through the API."""
+    with service.client() as api:
+        wait_idle(api)
+        sweep_id = api.post("/api/sweeps", json=sweep_body(30.0)).json()["id"]
+        sweep = wait_for(lambda: (s := api.get(f"/api/sweeps/{sweep_id}").json())["state"] == "completed" and s,
+                         what="the sweep")
+        return identified(api, sweep["recording_id"])
+
+
+def fill_sweep(page, duration_s: float):
+    page.fill("#f0", "1"), page.fill("#f1", "20"), page.fill("#dur", str(duration_s)), page.fill("#amp", "1.3")
+
+
+def test_sign_in_by_link_never_shows_the_token(page, service):
+    assert OPERATOR not in page.url and "token" not in page.url
+    assert OPERATOR not in page.content(), "the token is in the page"
+    assert page.locator("#login").is_hidden() and page.locator("#home").is_visible()
+    page.reload()  # kept in the browser: still signed in, still not shown
+    page.wait_for_selector("#session:has-text('operator')")
+    assert OPERATOR not in page.content()
+    # the page's own requests carry it in a header; no address but the live stream's may carry it
+    assert not [u for u in page.requests if OPERATOR in u and "/live" not in u]
+
+    page.goto(f"{service.url}/#token=not-a-valid-token")
+    page.wait_for_selector(".msg.error:has-text('token was refused')")
+    assert page.locator("#login").is_visible() and page.locator("#home").is_hidden()
+    page.fill("#token", VIEWER)
+    page.click("#login button")
+    page.wait_for_selector("#session:has-text('viewer')")
+    assert VIEWER not in page.content() and page.input_value("#token") == ""
+    # a viewer may not act (the API would answer 403): no sweep, campaign, upload, stop or reset controls
+    page.wait_for_selector("#read-only")
+    for control in ("#start", "#c-start", "#up-send", "#estop", "#reset"):
+        assert page.locator(control).is_hidden(), control
+    assert page.locator("button.identify").count() == 0
+    page.click(".msg.error .dismiss")  # leave no message behind for the next check
+
+
+def test_sweep_live_plot_moves_then_fit_shown(page, service):
+    with service.client() as api:
+        wait_idle(api)
+        fill_sweep(page, 60.0)  # 6 s of wall time
+        page.click("#start")
+        page.wait_for_selector(".msg:has-text('started')")
+        canvas = page.locator("#live")
+        wait_for(lambda: int(canvas.get_attribute("data-points")) > 50, 30, "live samples in the plot")
+        image1 = page.evaluate("document.getElementById('live').toDataURL()")
+        t1 = page.evaluate("points[points.length - 1][0]")
+        page.wait_for_timeout(1000)
+        image2 = page.evaluate("document.getElementById('live').toDataURL()")
+        t2 = page.evaluate("points[points.length - 1][0]")
+        assert t2 > t1 and image2 != image1, "the live plot did not move"
+        sweep_id = re.search(r"sweep ([0-9a-f]{12}) started", page.inner_text("#messages")).group(1)
+        page.wait_for_selector(f"#sweep-status:has-text('sweep {sweep_id}: completed')")
+        rec = identified(api, api.get(f"/api/sweeps/{sweep_id}").json()["recording_id"])
+        fit = rec["info"]["identify"]["fit_percent"]
+        row = page.locator(f"#recs tr[data-id='{rec['id']}']")
+        row.locator(f"td.fit:has-text('{fit:.1f} %')").wait_for()
+        assert "1–20 Hz · 60 s · 1.3 mm" in row.inner_text() and "complete" in row.inner_text()
+
+
+def test_refusal_stays_until_dismissed(page, service):
+    with service.client() as api:
+        wait_idle(api)
+        running = api.post("/api/sweeps", json=sweep_body(300.0)).json()["id"]
+        page.wait_for_selector(f"#sweep-status:has-text('{running}')")  # the page follows a sweep started elsewhere
+        fill_sweep(page, 30.0)
+        page.click("#start")
+        msg = page.locator(".msg.error", has_text="another sweep is running")
+        msg.wait_for()
+        page.wait_for_timeout(2500)  # two refreshes later it is still there
+        assert msg.count() == 1 and msg.is_visible()
+        msg.locator(".dismiss").click()
+        assert msg.count() == 0
+        page.click("#abort")  # the operator aborts the sweep the page follows
+        page.wait_for_selector(f"#sweep-status:has-text('sweep {running}: aborted')")
+        assert api.get(f"/api/sweeps/{running}").json()["state"] == "aborted"
+
+
+def test_estop_shows_real_progress_and_reset_clears_it(page, service):
+    with service.client() as api:
+        wait_idle(api)
+        fill_sweep(page, 300.0)
+        page.click("#start")
+        status = page.locator("#sweep-status")
+        wait_for(lambda: (m := re.search(r"· (\d+) %", status.inner_text())) and int(m.group(1)) >= 8, 60,
+                 "the sweep to run")
+        page.click("#estop")
+        page.wait_for_selector(".msg.error:has-text('EMERGENCY STOP sent')")
+        page.wait_for_selector("#sweep-status:has-text('aborted at')")
+        sweep_id = re.search(r"sweep ([0-9a-f]{12})", status.inner_text()).group(1)
+        truth = api.get(f"/api/sweeps/{sweep_id}").json()
+        assert truth["state"] == "aborted" and truth["progress"] >= 0.05
+        assert "emergency stop" in truth["error"]
+        assert f"aborted at {100 * truth['progress']:.0f} % ({truth['error']})" in status.inner_text()
+        page.wait_for_selector("#rig:has-text('PLC estop')")
+        page.click("#start")  # refused while in emergency stop
+        page.wait_for_selector(".msg.error:has-text('emergency stop')")
+        page.click("#reset")
+        page.wait_for_selector("#rig:has-text('PLC idle')")
+        page.wait_for_timeout(2000)
+        assert "estop" not in page.inner_text("#rig"), "a stale emergency stop after reset"
+        row = page.locator(f"#recs tr[data-id='{truth['recording_id']}']")
+        row.wait_for()
+        assert f"aborted at {100 * truth['progress']:.0f} %" in row.inner_text() and "emergency stop" in row.inner_text()
+
+
+def test_upload_then_identify(page, service, make_run, tmp_path):
+    run = make_run(sweep=SineSweep(duration_s=30.0), fs_hz=1000.0)
+    path = tmp_path / "bench-sweep.csv"
+    write_csv(path, run.recording)
+    page.set_input_files("#up-file", str(path))
+    page.click("#up-send")
+    rec_id = re.search(r"as recording ([0-9a-f]{12})", page.locator(".msg", has_text="uploaded").inner_text()).group(1)
+    row = page.locator(f"#recs tr[data-id='{rec_id}']")
+    row.locator("td.fit:has-text('not yet')").wait_for()
+    assert "upload" in row.inner_text() and "bench-sweep.csv" in row.inner_text()
+    row.locator("button.identify").click()
+    with service.client() as api:
+        rec = identified(api, rec_id)
+    row.locator(f"td.fit:has-text('{rec['info']['identify']['fit_percent']:.1f} %')").wait_for()
+
+
+def test_recording_page(page, service, sweep_recording):
+    rec_id = sweep_recording["id"]
+    with service.client() as api:
+        model = api.get(f"/api/recordings/{rec_id}/model").json()
+        plots = api.get(f"/api/recordings/{rec_id}/plots").json()
+        stored = api.get(f"/api/recordings/{rec_id}/file").content
+    page.click(f"#recs a[href='#/recording/{rec_id}']")
+    page.wait_for_selector("#rec-terms")
+    assert "clean" in page.inner_text("#rec-quality") and "1–20 Hz · 30 s · 1.3 mm" in page.inner_text("#rec-body")
+    # every term of the model with its coefficient, standard error and inclusion probability as stored
+    rows = page.locator("#rec-terms tr").all_inner_texts()[1:]
+    shown = {tuple(r.split("\t")[:2]): r.split("\t")[2:] for r in rows}
+    assert set(shown) == {(eq, t) for eq, terms in model["model"].items() for t in terms}
+    for (eq, term), (coef, se, incl) in shown.items():
+        assert float(coef) == pytest.approx(model["model"][eq][term], rel=1e-3)
+        assert float(se) == pytest.approx(model["standard_errors"][eq][term], rel=0.05)
+        assert float(incl) == pytest.approx(model["inclusion_probability"][eq][term], abs=0.005)
+    k = page.locator("#rec-physical tr:has-text('stiffness k')").first.inner_text().split("\t")
+    assert float(k[1]) == pytest.approx(model["physical"]["stiffness_n_per_m"]["value"], rel=1e-3)
+    # the report's figures, each loaded as an image
+    page.wait_for_function(f"[...document.querySelectorAll('#rec-model-figures img')].filter(i => i.naturalWidth > 0)"
+                           f".length === {len(plots)}")
+    assert len(plots) >= 3
+    with page.expect_download() as download:
+        page.click("#rec-download")
+    assert Path(download.value.path()).read_bytes() == stored
+    # the explanation, queued from the page
+    page.click("#rec-explain button[data-job='explain']")
+    page.wait_for_selector("#rec-effect", timeout=120_000)
+    with service.client() as api:
+        explanation = api.get(f"/api/recordings/{rec_id}/explanation").json()
+    effect = (explanation["effect"] or "no effect found").replace("_", " ")
+    assert effect in page.inner_text("#rec-effect")
+    page.wait_for_function("[...document.querySelectorAll('#rec-explain-figures img')].some(i => i.naturalWidth > 0)")
+    page.click("text=← all recordings")
+    page.wait_for_selector("#home:not([hidden])")
+
+
+def test_rig_history_matches_the_models(page, service, sweep_recording):
+    with service.client() as api:
+        history = api.get("/api/dashboard/history").json()["points"]
+        recs = [p["recording_id"] for p in history if not p["accepted_faulty"]]  # the others: shown on request
+        models = {r: api.get(f"/api/recordings/{r}/model").json()["physical"] for r in recs}
+    assert sweep_recording["id"] in recs
+    page.wait_for_selector("#history svg[data-parameter]")
+    for key in ("damping_ns_per_m", "stiffness_n_per_m", "cubic_stiffness_n_per_m3", "prestress_b_m"):
+        marks = page.locator(f"#history svg[data-parameter='{key}'] g.point")
+        assert marks.count() >= len(recs)  # a recording identified since the API call may have joined
+        for i in range(marks.count()):
+            rec = marks.nth(i).get_attribute("data-rec")
+            if rec not in models:
+                continue
+            assert float(marks.nth(i).get_attribute("data-value")) == pytest.approx(models[rec][key]["value"], rel=1e-9)
+            assert float(marks.nth(i).get_attribute("data-se")) == pytest.approx(models[rec][key]["std_error"], rel=1e-9)
+            # the error bar spans value +- 2 SE around the point: symmetric about it
+            y = [float(v) for v in marks.nth(i).evaluate(
+                "g => [g.querySelector('circle').getAttribute('cy'), g.querySelector('line').getAttribute('y1'),"
+                " g.querySelector('line').getAttribute('y2')]")]
+            assert y[1] - y[0] == pytest.approx(y[0] - y[2], abs=1e-6) and y[1] >= y[0] >= y[2]
+
+
+def test_campaign_from_the_builder(page, service):
+    with service.client() as api:
+        wait_idle(api)
+        page.fill("#c-name", "dash-amplitudes")
+        page.fill("#c-amps", "0.8, 1.3")
+        page.fill("#c-f0", "1"), page.fill("#c-f1", "20"), page.fill("#c-dur", "20"), page.fill("#c-settle", "0.5")
+        page.check("#c-up"), page.uncheck("#c-down")
+        assert "2 sweep(s)" in page.inner_text("#c-plan")
+        page.click("#c-start")
+        cid = re.search(r"campaign ([0-9a-f]{12}) started", page.locator(".msg", has_text="started").inner_text()).group(1)
+        row = page.locator(f"#campaigns tr[data-id='{cid}']")
+        row.locator("td.state:has-text('completed')").wait_for(timeout=120_000)
+        truth = api.get(f"/api/campaigns/{cid}").json()
+    assert truth["state"] == "completed" and [s["amplitude_mm"] for s in truth["sweeps"]] == [0.8, 1.3]
+    assert row.locator("td.progress").inner_text() == "2/2"
+    for rec_id in truth["recording_ids"]:  # each sweep links to its recording, listed with its amplitude
+        assert row.locator(f"a[href='#/recording/{rec_id}']").count() == 1
+        page.locator(f"#recs tr[data-id='{rec_id}']").wait_for()
+
+
+
+def test_failed_fit_is_not_not_yet_and_can_be_forced(page, service):
+    """An aborted recording: identification refused (failed, with the reason; not the 'not yet' of a
+    recording never tried), then identified anyway from its page, which says so, and kept out of the rig
+    history unless asked for."""
+    with service.client() as api:
+        wait_idle(api)
+        # aborted while recording the settle (30 s of rest after the sweep): the whole sweep is in the file,
+        # so the forced fit is a good one (a sweep cut mid-way may have too little to identify: that fails
+        # again, rightly)
+        sweep_id = api.post("/api/sweeps", json={**sweep_body(30.0), "settle_s": 30.0}).json()["id"]
+        wait_for(lambda: api.get(f"/api/sweeps/{sweep_id}").json()["progress"] >= 1.0, 60, "the sweep's end")
+        assert api.post(f"/api/sweeps/{sweep_id}/abort").status_code == 202
+        rec_id = wait_for(lambda: (s := api.get(f"/api/sweeps/{sweep_id}").json())["state"] == "aborted"
+                          and s["recording_id"], what="the abort")
+        row = page.locator(f"#recs tr[data-id='{rec_id}']")
+        row.locator("td.fit:has-text('not yet')").wait_for()
+        row.locator("button.identify").click()
+        row.locator("td.fit:has-text('failed')").wait_for()
+        job = api.get("/api/jobs", params={"limit": 5}).json()
+        error = next(j["error"] for j in job if j["recording_id"] == rec_id)
+        assert "accept_faulty" in error and error[:50] in row.inner_text()
+        page.click(f"#recs a[href='#/recording/{rec_id}']")
+        page.click("#rec-model button[data-faulty]")
+        page.wait_for_selector("#rec-model p.muted:has-text('queued'), #rec-model p.muted:has-text('running')")
+        page.wait_for_selector("#rec-faulty, #rec-model p.bad")  # identified, or failed again
+        assert page.locator("#rec-faulty").count() == 1, page.inner_text("#rec-model")
+        model = api.get(f"/api/recordings/{rec_id}/model").json()
+        assert model["accepted_faulty"] and model["accepted_faulty"][0] in page.inner_text("#rec-faulty")
+    page.click("text=← all recordings")
+    page.wait_for_selector("#history-faulty")
+    assert page.locator(f"#history g.point[data-rec='{rec_id}']").count() == 0
+    page.check("#history-faulty")
+    assert page.locator(f"#history g.point[data-rec='{rec_id}'] circle.faulty").count() == 4  # c, k, k3, b

@@ -1,0 +1,71 @@
+"""`shakeid identify A.h5 B.h5 [C.csv] [--json]`: one model of several recordings (issue 13), on simulated
+recordings of the Table 1 rig with known coefficients."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from daq.recorder import Recorder
+from identify.recording import write_csv
+from shakeid.cli import main
+from sim.rig import RigParameters
+from sim.sensors import Accelerometer
+from sim.synth import run_sweep
+from sim.sweep import SineSweep
+
+SHAKEID = str(Path(sys.executable).with_name("shakeid"))
+
+
+def _recording(amplitude_mm, seed):
+    s = Accelerometer(noise_fraction=0.005)
+    return run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 30, amplitude_mm), fs_hz=1024, seed=seed,
+                     table_sensor=s, mass_sensor=s).recording
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("joint")
+    out = []
+    for name, amp, seed in (("a.h5", 1.3, 1), ("b.h5", 1.2, 2)):
+        rec = _recording(amp, seed)
+        r = Recorder(d / name, fs_hz=rec.fs_hz)
+        r.append(0, np.column_stack([rec.input, rec.output]))
+        r.close("complete", "")
+        out.append(d / name)
+    write_csv(d / "c.csv", _recording(1.1, 3))
+    return out + [d / "c.csv"]
+
+
+def test_identify_two_h5_files_prints_one_joint_json_document(files):
+    a, b = str(files[0]), str(files[1])
+    proc = subprocess.run([SHAKEID, "identify", a, b, "--json", "--placements", "4"], capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads(proc.stdout)
+    truth = RigParameters.paper_table1().model().equations["q1_dot"]
+    assert set(res["model"]["q1_dot"]) == set(truth)
+    for term, true in truth.items():
+        assert res["model"]["q1_dot"][term] == pytest.approx(true, rel=0.02), term
+    assert set(res["standard_errors"]["q1_dot"]) == set(truth) and res["inclusion_probability"]
+    assert res["status"] == "ok" and res["validation"]["heldout"]["q2"]["fit_percent"] > 90
+    assert [r["source"] for r in res["recordings"]] == [a, b]
+    for r in res["recordings"]:
+        assert r["status"] == "ok" and r["data_quality"]["usable_for_identification"]
+        assert r["validation"]["heldout"]["q2"]["fit_percent"] > 90
+
+
+def test_identify_three_files_prints_the_joint_table_and_one_line_per_recording(files, capsys):
+    assert main(["identify", *map(str, files), "--placements", "0", "--bias-replicates", "0"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("identified 3 recordings jointly")
+    assert "| q1*q2^2 |" in out
+    rows = [line for line in out.splitlines() if any(line.startswith(f"| {f}") for f in map(str, files))]
+    assert len(rows) == 3 and all(line.rstrip().endswith("| ok |") for line in rows)
+
+
+def test_report_is_refused_for_several_files(files, capsys, tmp_path):
+    assert main(["identify", str(files[0]), str(files[1]), "--report", str(tmp_path / "r")]) == 2
+    assert "--report takes one recording" in capsys.readouterr().err
