@@ -10,8 +10,8 @@ The controller owns the sweeps and the recordings they make (their rows in the S
 HDF5 files) and queues the identification of every complete one; the web server owns jobs and uploads.
 
 Lifecycle:
-- `shakeid serve` starts it as a child (`shakeid controller --parent-pid PID`) and it lives as long as
-  the web server: if the web server dies (its session connection ends, or its PID is gone) the running
+- `shakeid serve` starts it as a child (`python -m server.run_controller --parent-pid PID`) and it lives
+  as long as the web server: if the web server dies (its session connection ends, or its PID is gone) the running
   sweep is aborted, the table stopped, the file closed, and the controller exits.
 - `shakeid controller --config RIG.toml` runs it on its own (a compose service); a web server attaches
   with `shakeid serve --controller ADDRESS`. If that web server dies the table is stopped the same way,

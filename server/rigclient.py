@@ -56,7 +56,7 @@ class RigLink:
 
     def _spawn(self) -> None:
         key_path(self.settings.data_dir).unlink(missing_ok=True)  # a dead controller's: wait for the new one
-        cmd = [sys.executable, "-m", "shakeid.cli", "controller", "--data-dir", str(self.settings.data_dir),
+        cmd = [sys.executable, "-m", "server.run_controller", "--data-dir", str(self.settings.data_dir),
                "--address", self.address, "--parent-pid", str(os.getpid())]
         if self.settings.config_path:
             cmd += ["--config", str(self.settings.config_path)]

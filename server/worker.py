@@ -37,7 +37,7 @@ def warm_up() -> bool:
     import matplotlib  # noqa: F401
 
     import identify.identifier  # noqa: F401
-    import shakeid.report  # noqa: F401
+    import reports.identification  # noqa: F401
     return True
 
 
@@ -76,7 +76,7 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
                                   f"set accept_faulty to {'identify' if kind == 'identify' else 'analyse'} it anyway")
         if kind == "identify":
             from identify.identifier import SparseIdentifier
-            from shakeid.report import write_report
+            from reports.identification import write_report
 
             params = {k: options[k] for k in IDENTIFY_KEYS if options.get(k) is not None}
             if options.get("band_hz"):
@@ -92,7 +92,7 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
                     "fit_percent": val.get("fit_percent"), "accepted_faulty": result.get("accepted_faulty", [])}
         if kind == "explain":
             from identify.explain import DiscrepancyAnalysis
-            from shakeid.explain_report import write_explain_report
+            from reports.explain import write_explain_report
 
             analysis = DiscrepancyAnalysis(band_hz=tuple(options["band_hz"]) if options.get("band_hz") else None)
             result = {**analysis.fit(rec).result(), **data}

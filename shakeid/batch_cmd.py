@@ -45,14 +45,12 @@ def identify_file(args: argparse.Namespace, path: str) -> dict:
     operator's errors come back as data (never as an exception to unpickle on the other side)."""
     from identify.quality import check_identifiable
 
-    from .cli import _identifier, _read
-
     where = worker_name()
     one = copy.copy(args)
     one.file = path
     try:
-        ident = _identifier(one)
-        rec = _read(one)
+        ident = args.make_identifier(one)
+        rec = args.read_recording(one)
         data = check_identifiable(rec, path, args.accept_faulty)
         try:
             ident.fit(rec)
@@ -124,9 +122,7 @@ def _line(name: str, result: dict) -> str:
 
 
 def cmd_batch(args) -> int:
-    from .cli import _identifier
-
-    _identifier(args)  # option errors first, before any file is read or any worker starts
+    args.make_identifier(args)  # option errors first, before any file is read or any worker starts
     if args.workers is not None and args.workers < 1:
         raise ShakeidError("--workers must be at least 1")
     names = _names(args.files)
@@ -170,18 +166,23 @@ def cmd_batch(args) -> int:
     return status
 
 
-def add_batch_parser(sub, add_identify_options) -> None:
+def add_batch_parser(sub, add_identify_options, make_identifier, read_recording) -> None:
+    """The `batch` subcommand. The CLI hands over how it adds identify's options, builds the identifier
+    from them and reads a recording (shakeid/cli.py's), so this module never imports the CLI (no import
+    circle); the two functions travel to the workers with the parsed arguments."""
     q = sub.add_parser("batch", help="identify each of many recordings on its own, in a local process pool or "
                                      "on a Dask cluster (--scheduler)")
-    q.add_argument("files", nargs="+", metavar="FILE")
+    q.add_argument("files", nargs="+", metavar="FILE", help="recordings: CSV, MAT or HDF5")
     q.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                    help="an existing Dask scheduler; the files must be at the same paths on its workers "
                         "(default: a local process pool)")
     q.add_argument("--workers", type=int, help="local pool: processes (default: the number of CPUs)")
-    q.add_argument("--connect-timeout", type=float, default=10.0, help="--scheduler: seconds to connect (10)")
-    q.add_argument("--out", metavar="DIR", help="write NAME.model.json per file and batch.json here")
+    q.add_argument("--connect-timeout", type=float, default=10.0, metavar="S",
+                   help="--scheduler: seconds to wait for the scheduler, s")
+    q.add_argument("--out", metavar="DIR", help="write NAME.model.json per file and batch.json here "
+                                                "(default: none)")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     q.add_argument("--accept-faulty", action="store_true",
                    help="identify recordings that are not complete or whose quality flags make them unusable")
     add_identify_options(q)
-    q.set_defaults(func=cmd_batch)
+    q.set_defaults(func=cmd_batch, make_identifier=make_identifier, read_recording=read_recording)

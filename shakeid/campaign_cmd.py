@@ -28,13 +28,14 @@ def add_campaign_parser(sub) -> None:
                                         "--config, or through a running shakeid serve (--server)")
     q.add_argument("plan", metavar="PLAN.toml", help="the campaign's plan (examples/campaign.toml)")
     where = q.add_mutually_exclusive_group(required=True)
-    where.add_argument("--config", metavar="RIG.toml", help="drive the rig directly")
-    where.add_argument("--server", metavar="URL", help="through the HTTP service, e.g. http://127.0.0.1:8000")
+    where.add_argument("--config", metavar="RIG.toml", help="drive the rig of this configuration directly")
+    where.add_argument("--server", metavar="URL", help="through the HTTP service at this URL, e.g. http://127.0.0.1:8000")
     q.add_argument("--token", help="with --server: an operator token (default: $SHAKEID_TOKEN)")
-    q.add_argument("--out", metavar="DIR", help="with --config: the recordings <name>-<k>.h5 and <name>.campaign.json")
+    q.add_argument("--out", metavar="DIR", help="with --config: the recordings <name>-<k>.h5 and <name>.campaign.json "
+                                                "(default: none; needed with --config)")
     q.add_argument("--resume", action="store_true",
                    help="with --config: go on with the paused campaign of the same name in --out")
-    q.add_argument("--operator", default="")
+    q.add_argument("--operator", default="", help="who runs the campaign, kept in every recording")
     q.set_defaults(func=cmd_campaign)
 
 
@@ -84,7 +85,8 @@ def _local(args, plan) -> int:
     from sim.config import load_config
     from sim.plc import Fault, State
 
-    from .lab import _progress_bar, _sweep_devices
+    from .lab import _sweep_devices
+    from .progress import Progress
 
     cfg = load_config(args.config)
     problem = plan_violation(cfg.limits, plan)
@@ -128,10 +130,12 @@ def _local(args, plan) -> int:
         except DeviceError as exc:
             return {"status": "refused", "reason": f"rig not reachable: {exc}"}
         devices = [plc, source]
+        progress = None
         try:
             devices.append(open_plc(cfg.plc))  # the heartbeat's own link: never behind a status poll
+            progress = Progress(f"sweep {planned.index}", planned.duration_s)
             runner = SweepRunner(plc, source, cfg.limits, float(cfg.stream["sensitivity_counts_per_ms2"]),
-                                 cfg.channels, on_progress=_progress_bar, heartbeat_plc=devices[2],
+                                 cfg.channels, on_progress=progress.sweep_status, heartbeat_plc=devices[2],
                                  rig_config={"source": cfg.source, "plc": cfg.plc})
             if control.held():
                 return {"status": "held"}
@@ -144,7 +148,8 @@ def _local(args, plan) -> int:
             return {"status": "refused", "reason": f"rig not reachable: {exc}"}
         finally:
             current.pop("runner", None)
-            sys.stderr.write("\n")
+            if progress is not None:
+                progress.close()
             for dev in devices:
                 dev.close()
         print(f"  {path.name}: {result['status']}{' (' + result['reason'] + ')' if result['reason'] else ''}, "
@@ -212,7 +217,7 @@ def _remote(args, plan) -> int:
             time.sleep(0.2)
         _report(c, seen)
     print(f"campaign {plan.name} ({cid}): {c['state']}, {c['progress']['done']} of {c['progress']['total']} sweeps "
-          f"complete{'; ' + c['reason'] if c['reason'] else ''}; recordings {', '.join(c['recording_ids']) or '-'}")
+          f"complete{'; ' + c['reason'] if c['reason'] else ''}; recordings {', '.join(c['recording_ids']) or 'none'}")
     if c["state"] == "paused":
         print(f"to go on: POST {args.server}/api/campaigns/{cid}/resume (after POST /api/rig/reset if needed)")
     return 0 if c["state"] == "completed" else 1

@@ -11,53 +11,74 @@ import sys
 from pathlib import Path
 
 from identify.errors import ShakeidError
+from reports.text import summary
 
 from .batch_cmd import add_batch_parser
 from .campaign_cmd import add_campaign_parser
-from .lab import cmd_controller, cmd_demo, cmd_recordings, cmd_serve, cmd_sim, cmd_sweep
-from .rigcmd import cmd_rig
+from .helpformat import HelpFormatter, Parser
+from .lab_options import add_lab_parsers, add_sweep_shape
+from .ooc_cmd import add_out_of_core_options
 
 EXIT_USAGE = 2
 
 
-def _add_identify_options(p: argparse.ArgumentParser) -> None:
+def _add_layout_options(p: argparse.ArgumentParser) -> None:
+    """Which columns of the file are the input, the output and the time (identify, batch, explain)."""
     g = p.add_argument_group("recording layout")
     g.add_argument("--layout", choices=("base", "force"), default="base",
-                   help="base: table/mass accelerations (default); force: input u, displacement-like output y")
-    g.add_argument("--input", help="input column/variable (default table_acc, or u for --layout force)")
-    g.add_argument("--output", help="output column/variable (default mass_acc, or y)")
-    g.add_argument("--time", help="time column (default t)")
-    g.add_argument("--fs", type=float, help="sample rate in Hz when the file has no time column")
+                   help="base: table and mass accelerations in m/s²; force: an input u and a displacement-like "
+                        "output y (e.g. Silverbox, volts)")
+    g.add_argument("--input", metavar="NAME", help="input column/variable (default: table_acc, or u with --layout force)")
+    g.add_argument("--output", metavar="NAME", help="output column/variable (default: mass_acc, or y with --layout force)")
+    g.add_argument("--time", metavar="NAME", help="time column, s (default: t)")
+    g.add_argument("--fs", type=float, metavar="HZ",
+                   help="sample rate in Hz when the file has no time column (default: from the time column)")
     g.add_argument("--samples", type=int, nargs=2, metavar=("START", "STOP"),
-                   help="use samples [START, STOP) only (0-based), e.g. Silverbox's estimation range")
+                   help="use samples [START, STOP) only (0-based), e.g. Silverbox's estimation range "
+                        "(default: all)")
+    g.add_argument("--band", type=float, nargs=2, metavar=("F_LO", "F_HI"),
+                   help="integration band in Hz (default: the excited band, found from the table's spectrum)")
+
+
+def _add_identify_options(p: argparse.ArgumentParser) -> None:
+    _add_layout_options(p)
     g = p.add_argument_group("identification")
-    g.add_argument("--degree", type=int, default=4, help="highest monomial degree of the library (4)")
-    g.add_argument("--extra-terms", default="", help="comma-separated extra terms, e.g. 'sign(q1),q1*|q1|'")
-    g.add_argument("--method", choices=("admm", "stlsq"), default="admm")
-    g.add_argument("--lambdas", type=int, default=100, help="points on the path (100)")
-    g.add_argument("--threshold", type=float, help="STLSQ: a single threshold instead of a path")
+    g.add_argument("--degree", type=int, default=4, metavar="N", help="highest monomial degree of the library")
+    g.add_argument("--extra-terms", default="", metavar="TERMS",
+                   help="comma-separated extra terms, e.g. 'sign(q1),q1*|q1|'")
+    g.add_argument("--method", choices=("admm", "stlsq"), default="admm",
+                   help="admm: LASSO solved by ADMM along a lambda path (the paper); stlsq: sequentially "
+                        "thresholded least squares")
+    g.add_argument("--lambdas", type=int, default=100, metavar="N", help="number of points on the lambda path")
+    g.add_argument("--threshold", type=float,
+                   help="STLSQ: a single threshold on the coefficients, dimensionless (normalised unless "
+                        "--raw-threshold), instead of a path (default: none, a path)")
     g.add_argument("--raw-threshold", action="store_true",
                    help="STLSQ: threshold raw coefficients, as the paper's Table 2 (lambda = 0.95)")
-    g.add_argument("--selection", choices=("heldout", "paper", "bic"), default="heldout")
-    g.add_argument("--tolerance", type=float, help="selection tolerance (paper 0.25, heldout 0.003)")
-    g.add_argument("--max-terms", type=int, help="at most this many terms per equation")
+    g.add_argument("--selection", choices=("heldout", "paper", "bic"), default="heldout",
+                   help="how a model is chosen on the path: held-out error of the refit (heldout), the paper's "
+                        "relative-MSE tolerance (paper), or the Bayesian information criterion (bic)")
+    g.add_argument("--tolerance", type=float,
+                   help="selection tolerance, relative MSE (default: 0.25 for paper, 0.003 for heldout)")
+    g.add_argument("--max-terms", type=int, metavar="K", help="at most K terms per equation (default: no limit)")
     g.add_argument("--budget", choices=("equation-error", "free-run"), default="equation-error",
-                   help="how --max-terms chooses q1_dot's terms: by one-step acceleration error (default) or "
-                        "by the free-run error of refit candidates on the data (slower; implies the refit)")
+                   help="how --max-terms chooses q1_dot's terms: by one-step acceleration error or by the "
+                        "free-run error of refit candidates on the data (slower; implies the refit)")
     g.add_argument("--budget-refit", choices=("fit", "all"), default="fit",
-                   help="--budget free-run: refit the chosen terms on the fit rows (default) or on all rows, "
-                        "held-out ones included (validation figures are then not out-of-sample)")
+                   help="--budget free-run: refit the chosen terms on the fit rows or on all rows, held-out ones "
+                        "included (validation figures are then not out-of-sample)")
     g.add_argument("--refine", choices=("free-run",),
-                   help="refit the kept coefficients on the free-run simulation error")
-    g.add_argument("--holdout-samples", type=int, help="hold out the first N samples (the paper: 30000)")
-    g.add_argument("--holdout-fraction", type=float, default=0.2,
-                   help="share held out in interleaved blocks when --holdout-samples is not given (0.2)")
-    g.add_argument("--band", type=float, nargs=2, metavar=("F_LO", "F_HI"), help="integration band in Hz")
-    g.add_argument("--bias-replicates", type=int, default=16,
-                   help="SIMEX replicates for the measurement chain's bias (16; 0: none, faster)")
-    g.add_argument("--placements", type=int, default=24,
-                   help="random held-out placements for the inclusion probabilities (24; 0: none, faster)")
-    g.add_argument("--mass-kg", type=float, default=0.49, help="moving mass for physical parameters (0.49)")
+                   help="refit the kept coefficients on the free-run simulation error (default: no refinement)")
+    g.add_argument("--holdout-samples", type=int, metavar="N",
+                   help="hold out the first N samples, as the paper (30000) (default: --holdout-fraction)")
+    g.add_argument("--holdout-fraction", type=float, default=0.2, metavar="F",
+                   help="share of samples held out in interleaved blocks when --holdout-samples is not given, 0-0.9")
+    g.add_argument("--bias-replicates", type=int, default=16, metavar="N",
+                   help="SIMEX replicates for the measurement chain's bias (0: none, faster)")
+    g.add_argument("--placements", type=int, default=24, metavar="N",
+                   help="random held-out placements for the inclusion probabilities (0: none, faster)")
+    g.add_argument("--mass-kg", type=float, default=0.49, metavar="KG",
+                   help="moving mass for the physical parameters, kg")
 
 
 def _identifier(args):
@@ -116,7 +137,7 @@ def cmd_identify(args) -> int:
         raise ShakeidError(str(exc)) from None
     result = {**ident.result(), **data}
     if args.report:
-        from .report import write_report
+        from reports.identification import write_report
 
         write_report(ident, args.report)
     if args.json:
@@ -129,38 +150,6 @@ def cmd_identify(args) -> int:
         print(f"shakeid: identification failed: {args.file}: {result['reason']}", file=sys.stderr)
         return 1
     return 0
-
-
-def summary(result: dict, source: str) -> str:
-    from .report import coefficient_table
-
-    lines = [f"identified {source}: method {result['method']}, selection {result['selection']['rule']}", ""]
-    if result.get("accepted_faulty"):
-        lines += ["accepted faulty data (--accept-faulty): " + "; ".join(result["accepted_faulty"]), ""]
-    lines.append(coefficient_table(result))
-    val = result.get("validation")
-    if val:
-        h = val["heldout"]
-        fmt = lambda m: "diverged" if m["fit_percent"] is None else f"{m['fit_percent']:.2f} %"  # noqa: E731
-        lines.append(f"free-run fit on {val['heldout_samples']} held-out samples: acceleration {fmt(h['q1_dot'])},"
-                     f" velocity {fmt(h['q1'])}, displacement {fmt(h['q2'])}")
-    offset = result.get("chain", {}).get("displacement_below_band") or {}
-    if offset.get("carried"):
-        lines.append(f"displacement below the band carried (an even force rectifies it; the terms are those of the "
-                     f"true displacement): rms {offset['rms_mm']:.3g} mm, {offset['min_mm']:.3g} to {offset['max_mm']:.3g} mm, "
-                     f"{offset['passes']} passes{'' if offset['converged'] else ', NOT converged'}")
-    phys = result.get("physical")
-    if phys:
-        def pv(key, unit, scale=1.0):
-            v = phys[key]["value"]
-            return f"{key} = {v * scale:.5g} {unit}" if v is not None else f"{key}: term not in model"
-        lines.append("physical: " + "; ".join([pv("damping_ns_per_m", "N s/m"), pv("stiffness_n_per_m", "N/m"),
-                                               pv("cubic_stiffness_n_per_m3", "N/m^3"),
-                                               pv("prestress_b_m", "mm", 1e3)]) +
-                     f" (design k3 = {phys['design']['cubic_stiffness_n_per_m3']:.4g} N/m^3)")
-    if result.get("status") == "failed":
-        lines.append(f"MODEL FAILED: {result['reason']}")
-    return "\n".join(lines)
 
 
 def cmd_explain(args) -> int:
@@ -176,7 +165,7 @@ def cmd_explain(args) -> int:
     analysis = DiscrepancyAnalysis(baseline=baseline, band_hz=tuple(args.band) if args.band else None).fit(rec)
     result = {**analysis.result(), **data}
     if args.report:
-        from .explain_report import write_explain_report
+        from reports.explain import write_explain_report
 
         write_explain_report(analysis, args.report)
     if args.json:
@@ -190,16 +179,17 @@ def cmd_explain(args) -> int:
           f"{worst['excitation_hz']:.1f} Hz")
     for c in result["candidates"]:
         closed = c.get("gap_share_closed")
-        p = "-" if c.get("kind") == "measurement" else f"{c['p_value']:.1e}"  # searched, no Wald test
+        p = "not tested" if c.get("kind") == "measurement" else f"{c['p_value']:.1e}"  # searched, no Wald test
         print(f"  {c['name']:32s} equation-error share {c['score']:+.3f}  p = {p}  "
-              f"shooting gap closed {'-' if closed is None else f'{closed:+.2f}'}"
+              f"shooting gap closed {'n/a' if closed is None else f'{closed:+.2f}'}"
               + (f"  (rejected: {c['rejected']})" if c.get("rejected") else ""))
     if result["effect"] in ("none", "unexplained"):
         print(f"missing effect: {result['effect']} (confidence {result['confidence']:.2f})")
     else:
         for e in result["effects"]:
             sur = f"; stands in for {', '.join(e['surrogate_for'])}" if e["surrogate_for"] else ""
-            print(f"missing effect: {e['name']} ({e['kind']}) {json.dumps(e['coefficients'])} (confidence "
+            coefs = ", ".join(f"{t} {c:.4g}" for t, c in e["coefficients"].items())
+            print(f"missing effect: {e['name']} ({e['kind']}{'; ' + coefs if coefs else ''}) (confidence "
                   f"{e['confidence']:.2f}; gap after {f(e['gap_after'])}{sur})")
         print(f"gap {f(result['gap_before'])} -> {f(result['gap_after'])}")
         print("model: " + json.dumps(result["model"]))
@@ -208,23 +198,24 @@ def cmd_explain(args) -> int:
         print(f"still missed most at t = {top['t_start_s']:.1f}-{top['t_end_s']:.1f} s "
               f"(excitation {top['excitation_hz']:.1f} Hz, {100 * top['share_of_error']:.0f} % of the error)")
     if args.report:
-        print(f"report: {args.report}")
+        print(f"report: {Path(args.report) / 'index.html'}")
     return 0
 
 
 def _add_sweep_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--f-start-hz", type=float, default=1.0)
-    p.add_argument("--f-end-hz", type=float, default=20.0)
-    p.add_argument("--duration-s", type=float, default=60.0)
-    p.add_argument("--amplitude-mm", type=float, default=1.3)
-    p.add_argument("--fs-hz", type=float, default=2048.0, help="sample rate (2048 Hz = the paper's 0.488 ms)")
-    p.add_argument("--noise", type=float, default=0.005, help="sensor noise as a fraction of each channel's std")
-    p.add_argument("--bias-ms2", type=float, default=0.0, help="accelerometer bias, m/s^2 (both sensors)")
-    p.add_argument("--lsb-ms2", type=float, default=0.0, help="ADC quantisation step, m/s^2 (0: none)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--rig", choices=("paper-table1", "design"), default="paper-table1")
+    """The simulated sweep of `shakeid simulate`: the table's motion, the sensors, the rig."""
+    add_sweep_shape(p, required=False)
+    p.add_argument("--fs-hz", type=float, default=2048.0, metavar="HZ",
+                   help="sample rate, Hz (2048 Hz is the paper's 0.488 ms step)")
+    p.add_argument("--noise", type=float, default=0.005, metavar="F",
+                   help="sensor noise std as a fraction of each channel's std (0.005: 0.5 %%)")
+    p.add_argument("--bias-ms2", type=float, default=0.0, metavar="M/S²", help="accelerometer bias, m/s² (both sensors)")
+    p.add_argument("--lsb-ms2", type=float, default=0.0, metavar="M/S²", help="ADC quantisation step, m/s² (0: none)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the sensor noise")
+    p.add_argument("--rig", choices=("paper-table1", "design"), default="paper-table1",
+                   help="the rig's parameters: the paper's identified Table 1 model, or its design values")
     p.add_argument("--effect", action="append", default=[], metavar="NAME=COEF",
-                   help="add a physical effect (force coefficient, SI), e.g. coulomb_friction=0.3")
+                   help="add a physical effect (force coefficient, SI units), e.g. coulomb_friction=0.3; repeatable")
 
 
 def _synthesize(args):
@@ -283,109 +274,42 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="shakeid", description="Sparse nonlinear identification of shaker rigs")
+    p = argparse.ArgumentParser(prog="shakeid", description="Sparse nonlinear identification of shaker rigs",
+                                formatter_class=HelpFormatter)
     p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
     q = sub.add_parser("identify", help="identify a sparse ODE model from a recording (CSV, MAT, HDF5)")
     q.add_argument("files", nargs="+", metavar="FILE",
-                   help="a recording; several: one model fitted to all of them (joint identification)")
+                   help="a recording (CSV, MAT or HDF5); several: one model fitted to all of them (joint "
+                        "identification)")
     _add_identify_options(q)
-    from .ooc_cmd import add_out_of_core_options
-
     add_out_of_core_options(q)
-    q.add_argument("--report", metavar="DIR", help="write figures, coefficient table and model JSON here")
+    q.add_argument("--report", metavar="DIR",
+                   help="write index.html, figures, coefficient table and model JSON here (default: none)")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     q.add_argument("--accept-faulty", action="store_true",
                    help="identify a recording that is not complete or whose quality flags make it unusable")
     q.set_defaults(func=cmd_identify)
-    add_batch_parser(sub, _add_identify_options)
+    add_batch_parser(sub, _add_identify_options, _identifier, _read)
     q = sub.add_parser("explain", help="where a model misses the rig, which effect is missing, and the fix")
-    q.add_argument("file")
-    q.add_argument("--model", metavar="MODEL.json", help="baseline model (default: textbook Duffing fitted)")
-    g = q.add_argument_group("recording layout")
-    g.add_argument("--layout", choices=("base", "force"), default="base")
-    g.add_argument("--input")
-    g.add_argument("--output")
-    g.add_argument("--time")
-    g.add_argument("--fs", type=float)
-    g.add_argument("--samples", type=int, nargs=2, metavar=("START", "STOP"))
-    g.add_argument("--band", type=float, nargs=2, metavar=("F_LO", "F_HI"))
+    q.add_argument("file", help="the recording: CSV, MAT or HDF5 (a sweep's .h5)")
+    q.add_argument("--model", metavar="MODEL.json",
+                   help="baseline model, e.g. model.json of an identify --report (default: the textbook Duffing, "
+                        "fitted to the data)")
+    _add_layout_options(q)
     q.add_argument("--accept-faulty", action="store_true",
                    help="analyse a recording that is not complete or whose quality flags make it unusable")
-    q.add_argument("--report", metavar="DIR")
+    q.add_argument("--report", metavar="DIR", help="write index.html, figures and explain.json here (default: none)")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     q.set_defaults(func=cmd_explain)
-    q = sub.add_parser("sweep", help="run a sweep on the rig of --config and record it to HDF5, or through a "
-                                     "running shakeid serve (--server)")
-    where = q.add_mutually_exclusive_group(required=True)
-    where.add_argument("--config", metavar="RIG.toml", help="drive the rig directly")
-    where.add_argument("--server", metavar="URL", help="through the HTTP service, e.g. http://127.0.0.1:8000")
-    q.add_argument("--token", help="with --server: an operator token (default: $SHAKEID_TOKEN)")
-    q.add_argument("--wait-model", action="store_true", help="with --server: wait for the model and print it")
-    q.add_argument("--f-start-hz", type=float, required=True)
-    q.add_argument("--f-end-hz", type=float, required=True)
-    q.add_argument("--duration-s", type=float, required=True)
-    q.add_argument("--amplitude-mm", type=float, required=True)
-    q.add_argument("--settle-s", type=float, default=2.0)
-    q.add_argument("--operator", default="")
-    q.add_argument("--note", default="")
-    q.add_argument("--out", metavar="FILE.h5", help="the recording (with --server: a copy, downloaded)")
-    q.set_defaults(func=cmd_sweep)
+    add_lab_parsers(sub)
     add_campaign_parser(sub)
-    q = sub.add_parser("recordings", help="inspect HDF5 recordings (metadata, status, gaps)")
-    q.add_argument("files", nargs="+")
-    q.add_argument("--recover", action="store_true", help="mark recordings left running by a crash as aborted")
-    q.add_argument("--process", action="store_true",
-                   help="add processed signals: relative acceleration, velocity, displacement (/entry/processed)")
-    q.add_argument("--json", action="store_true")
-    q.set_defaults(func=cmd_recordings)
-    q = sub.add_parser("rig", help="the PLC of --config directly (works while the service is wedged): status, "
-                                   "reset, estop")
-    q.add_argument("action", choices=("status", "reset", "estop"))
-    q.add_argument("--config", metavar="RIG.toml", required=True, help="rig configuration: its [plc] section")
-    q.add_argument("--json", action="store_true")
-    q.set_defaults(func=cmd_rig)
-    q = sub.add_parser("sim", help="run the simulated rig: PLC over Modbus TCP, accelerometer stream over TCP")
-    q.add_argument("--config", metavar="RIG.toml", help="rig configuration (examples/sim-rig.toml)")
-    q.add_argument("--host", help="listen address (default: the config's, else 127.0.0.1)")
-    q.add_argument("--modbus-port", type=int, help="default: the config's [plc] port, else 5020")
-    q.add_argument("--stream-port", type=int, help="default: the config's [stream] url port, else 5021")
-    q.add_argument("--speed", type=float, help="rig seconds per wall second (PLC and streams; default 1)")
-    q.set_defaults(func=cmd_sim)
-    q = sub.add_parser("serve", help="the HTTP service: sweeps, recordings, models (FastAPI + uvicorn)")
-    q.add_argument("--config", metavar="RIG.toml", help="rig + [server] configuration; none: embedded simulated rig")
-    q.add_argument("--host", default="127.0.0.1")
-    q.add_argument("--port", type=int, default=8000)
-    q.add_argument("--data-dir", help="recordings, models, catalog (default: [server] data_dir, SHAKEID_DATA_DIR, "
-                                      "./shakeid-data)")
-    q.add_argument("--sim-speed", type=float, help="embedded simulated rig: rig seconds per wall second")
-    q.add_argument("--log-level", default="warning", choices=("debug", "info", "warning", "error"))
-    q.add_argument("--controller", metavar="ADDRESS",
-                   help="attach to a rig controller that runs on its own (`shakeid controller`), e.g. "
-                        "unix:/run/shakeid/controller.sock or tcp:127.0.0.1:8765 (default: start one as a child)")
-    q.set_defaults(func=cmd_serve)
-    q = sub.add_parser("controller", help="the rig controller process: sweeps, heartbeat, emergency stop (the "
-                                          "service starts one itself; run it alone for a separate deployment)")
-    q.add_argument("--config", metavar="RIG.toml", help="rig configuration; none: embedded simulated rig")
-    q.add_argument("--data-dir", help="shared with the web server: catalog, recordings (default as serve)")
-    q.add_argument("--address", help="where to listen (default unix:DATA_DIR/controller.sock)")
-    q.add_argument("--sim-speed", type=float, help="embedded simulated rig: rig seconds per wall second")
-    q.add_argument("--parent-pid", type=int, help=argparse.SUPPRESS)  # set by `shakeid serve` for its child
-    q.set_defaults(func=cmd_controller)
     q = sub.add_parser("simulate", help="write a synthetic recording of the simulated rig (CSV + truth JSON)")
-    q.add_argument("--out", required=True, metavar="FILE.csv")
+    q.add_argument("--out", required=True, metavar="FILE.csv",
+                   help="the recording (t, table_acc, mass_acc); the truth goes to FILE.truth.json")
     _add_sweep_options(q)
     q.set_defaults(func=cmd_simulate)
-    q = sub.add_parser("demo", help="sweep the simulated rig over Modbus, record HDF5, identify, report")
-    q.add_argument("--out", default="demo-output")
-    q.add_argument("--f-start-hz", type=float, default=1.0)
-    q.add_argument("--f-end-hz", type=float, default=20.0)
-    q.add_argument("--duration-s", type=float, default=60.0)
-    q.add_argument("--amplitude-mm", type=float, default=1.3)
-    q.set_defaults(func=cmd_demo)
     return p
-
-
 
 
 def main(argv=None) -> int:

@@ -52,7 +52,7 @@ def cmd_identify_joint(args, make_identifier, read) -> int:
 
 def summary(result: dict) -> str:
     """The joint model's table, its pooled held-out fit, and one line per recording."""
-    from .report import coefficient_table
+    from reports.text import coefficient_table
 
     per = result["recordings"]
     lines = [f"identified {len(per)} recordings jointly: method {result['method']}, selection "

@@ -19,8 +19,10 @@ def cmd_demo(args) -> int:
     from sim.plc import Limits, PLCConfig
     from sim.server import SENSITIVITY, SimulatedRig
 
-    from .cli import summary  # here, not at the top: cli imports this module
-    from .report import write_report
+    from reports.identification import write_report
+    from reports.text import summary
+
+    from .progress import Progress
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -36,10 +38,11 @@ def cmd_demo(args) -> int:
           f"(the paper's Table 1 rig) -> {h5}", flush=True)
     try:
         plc, source = ModbusPLC(host, port), SerialSource(rig.endpoints["stream"], rig.plc.config.fs_hz)
-        runner = SweepRunner(plc, source, Limits(), SENSITIVITY, on_progress=_progress_bar)
+        progress = Progress("sweep", args.duration_s)
+        runner = SweepRunner(plc, source, Limits(), SENSITIVITY, on_progress=progress.sweep_status)
         result = runner.run(SweepRequest(args.f_start_hz, args.f_end_hz, args.duration_s, args.amplitude_mm,
                                          operator="demo"), h5)
-        sys.stderr.write("\n")
+        progress.close()
         plc.close()
         source.close()
     finally:
@@ -56,19 +59,6 @@ def cmd_demo(args) -> int:
     print(f"report: {out / 'report' / 'index.html'}")
     print("next: `.venv/bin/shakeid serve` runs the same chain behind HTTP, with a dashboard (docs/service.md)")
     return 0
-
-
-def _progress_bar(frac, st):
-    from sim.plc import State
-
-    _progress_bar_fraction(frac, f"{State(st.state).name.lower():8s} {st.frequency_hz:6.2f} Hz  "
-                                 f"table {st.position_mm:+6.2f} mm")
-
-
-def _progress_bar_fraction(frac: float, label: str) -> None:
-    bar = "#" * int(30 * frac)
-    sys.stderr.write(f"\r[{bar:<30s}] {100 * frac:5.1f} %  {label}")
-    sys.stderr.flush()
 
 
 def _sweep_devices(cfg):
@@ -105,16 +95,19 @@ def cmd_sweep(args) -> int:
     from daq.devices import open_plc
     from daq.realtime import CONTROLLER_PRIORITY, make_realtime
 
+    from .progress import Progress
+
     make_realtime(CONTROLLER_PRIORITY, round_robin=True)  # where allowed: the heartbeat is never late
     plc, source = _sweep_devices(cfg)
     beat_plc = open_plc(cfg.plc)  # the heartbeat's own link: never behind a status poll
+    progress = Progress("sweep", args.duration_s)
     runner = SweepRunner(plc, source, cfg.limits, float(cfg.stream["sensitivity_counts_per_ms2"]), cfg.channels,
-                         on_progress=_progress_bar, rig_config={"source": cfg.source, "plc": cfg.plc},
+                         on_progress=progress.sweep_status, rig_config={"source": cfg.source, "plc": cfg.plc},
                          heartbeat_plc=beat_plc)
     try:
         result = runner.run(req, args.out)
     finally:
-        sys.stderr.write("\n")
+        progress.close()
         for dev in (plc, beat_plc, source):
             dev.close()
     print(f"{result['path']}: {result['status']}{' (' + result['reason'] + ')' if result['reason'] else ''}, "
@@ -195,8 +188,10 @@ def cmd_recordings(args) -> int:
         dur = info["samples"] / info["fs_hz"] if info.get("fs_hz") else 0
         print(f"{path}: {info['status']}{' (' + info['status_reason'] + ')' if info['status_reason'] else ''}; "
               f"{info['samples']} samples ({dur:.1f} s at {info['fs_hz']:g} Hz), channels {', '.join(info['channels'])}, "
-              f"{len(info['gaps'])} gap(s); started {info['start_time']} by {info['operator'] or '-'}; "
-              f"sweep {info['sweep'] or '-'}")
+              f"{len(info['gaps'])} gap(s)")
+        print(f"  started {when(info.get('start_time'))}"
+              + (f" by {info['operator']}" if info.get("operator") else " (no operator recorded)")
+              + f"; {sweep_text(info.get('sweep'))}")
         if "link_frames" in info:
             print(f"  sensor link: {info['link_frames']} frames, {info.get('link_frames_lost', 0)} lost, "
                   f"{info.get('link_frames_corrupt', 0)} corrupt, {info.get('link_saturated_frames', 0)} saturated")
@@ -209,6 +204,31 @@ def cmd_recordings(args) -> int:
         for line in quality_lines(info["quality"]):
             print("  " + line)
     return 0
+
+
+def when(iso) -> str:
+    """A recording's ISO 8601 time as a person reads it: '2026-11-23 10:57:34 UTC' (its own zone kept)."""
+    from datetime import datetime
+
+    if not iso:
+        return "at an unknown time"
+    try:
+        t = datetime.fromisoformat(str(iso))
+    except ValueError:
+        return str(iso)
+    zone = "UTC" if t.utcoffset() is not None and not t.utcoffset() else t.strftime("%z")
+    return t.strftime("%Y-%m-%d %H:%M:%S") + (f" {zone}" if zone else "")
+
+
+def sweep_text(sweep) -> str:
+    """The sweep a recording was made with (its /entry/sweep attributes), in words and units."""
+    if not sweep or "f_start_hz" not in sweep:
+        return "no sweep recorded (not made by a sweep)"
+    text = (f"sweep {float(sweep['f_start_hz']):g}-{float(sweep['f_end_hz']):g} Hz over "
+            f"{float(sweep['duration_s']):g} s at {float(sweep['amplitude_mm']):g} mm")
+    if sweep.get("settle_s") is not None:
+        text += f", {float(sweep['settle_s']):g} s settle"
+    return text + (f"; note: {sweep['note']}" if sweep.get("note") else "")
 
 
 def quality_lines(q: dict, max_flags: int = 10) -> list[str]:
@@ -267,10 +287,6 @@ def cmd_serve(args) -> int:
 
 def cmd_controller(args) -> int:
     """The rig controller process (server/controller.py): started by `shakeid serve`, or on its own."""
-    from server.controller import main
-    from server.settings import Settings
+    from server.run_controller import run
 
-    settings = Settings.load(args.config, data_dir=args.data_dir)
-    if args.sim_speed is not None:
-        settings.sim_speed = args.sim_speed
-    return main(settings, args.address or settings.controller, args.parent_pid)
+    return run(args.config, args.data_dir, args.sim_speed, args.address, args.parent_pid)

@@ -127,7 +127,7 @@ def identify_out_of_core(args, ident) -> int:
     if args.json:
         print(json.dumps(result))
     else:
-        from .cli import summary
+        from reports.text import summary
 
         print(summary(result, path))
     if result["status"] == "failed":

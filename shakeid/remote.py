@@ -51,8 +51,9 @@ class ServiceClient:
 
 
 def cmd_sweep_remote(args) -> int:
-    from .cli import summary
-    from .lab import _progress_bar_fraction
+    from reports.text import summary
+
+    from .progress import Progress
 
     token = args.token or os.environ.get("SHAKEID_TOKEN", "")
     if not token:
@@ -62,19 +63,20 @@ def cmd_sweep_remote(args) -> int:
             "amplitude_mm": args.amplitude_mm, "settle_s": args.settle_s, "note": args.note}
     sweep_id = client.request("POST", "/api/sweeps", body)["id"]
     print(f"sweep {sweep_id} started on {args.server}", flush=True)
+    progress = Progress("sweep", args.duration_s)
     try:
         while (sweep := client.request("GET", f"/api/sweeps/{sweep_id}"))["state"] in ("queued", "running"):
-            _progress_bar_fraction(sweep["progress"], sweep["state"])
+            progress.update(sweep["progress"], sweep["state"])
             time.sleep(0.2)
     except KeyboardInterrupt:
         client.request("POST", f"/api/sweeps/{sweep_id}/abort")
         while (sweep := client.request("GET", f"/api/sweeps/{sweep_id}"))["state"] in ("queued", "running"):
             time.sleep(0.2)
-    _progress_bar_fraction(sweep["progress"], sweep["state"])
-    sys.stderr.write("\n")
+    progress.update(sweep["progress"], sweep["state"])
+    progress.close(sweep["state"])
     rec_id = sweep["recording_id"]
     print(f"sweep {sweep_id}: {sweep['state']}{' (' + sweep['error'] + ')' if sweep['error'] else ''}; "
-          f"recording {rec_id or '-'}")
+          + (f"recording {rec_id}" if rec_id else "no recording"))
     if rec_id and args.out:
         Path(args.out).write_bytes(client.request("GET", f"/api/recordings/{rec_id}/file", raw=True))
         print(f"{args.out}: the recording, downloaded")

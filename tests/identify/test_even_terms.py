@@ -41,7 +41,7 @@ def test_displacement_below_the_band_is_the_true_one(quadratic):
     assert offset["carried"] and offset["converged"]
     assert np.std((sig.q2_offset - missing)[v]) < 0.1 * np.std(missing[v])
     assert offset["min_mm"] == pytest.approx(missing[v].min() * 1e3, rel=0.1)
-    from shakeid.cli import summary
+    from reports.text import summary
     assert "displacement below the band carried" in summary(ident.result(), "sweep.csv")
 
 

@@ -152,7 +152,7 @@ def test_validation_scores_a_fit_that_never_saw_the_heldout_rows(issue_case):
 
 
 def test_report_table_shows_the_inclusion_probabilities(issue_case):
-    from shakeid.report import coefficient_table
+    from reports.text import coefficient_table
 
     run, ident = issue_case
     lines = coefficient_table(ident.result()).splitlines()

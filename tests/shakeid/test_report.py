@@ -1,10 +1,15 @@
-"""The identification report: files a person opens, with the content the paper's figures carry."""
+"""The identification report: files a person opens, with the content the paper's figures carry, laid out
+like a lab report (tables, not JSON; captions; residuals; units; the design k3 explained)."""
 import json
+import re
 
+import numpy as np
 import pytest
 
+import reports.identification as idrep
 from identify.identifier import SparseIdentifier
-from shakeid.report import FIGURES, coefficient_table, write_report
+from reports.identification import FIGURES, write_report
+from reports.text import coefficient_table
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -15,6 +20,22 @@ def report_dir(table1_run, tmp_path_factory):
     return write_report(ident, tmp_path_factory.mktemp("report")), ident
 
 
+@pytest.fixture(scope="module")
+def figures(report_dir, tmp_path_factory):
+    """The report drawn again with every figure kept open: {file name: matplotlib Figure}."""
+    _, ident = report_dir
+    kept = {}
+    mp = pytest.MonkeyPatch()
+    mp.setattr(idrep, "_save", lambda fig, path: kept.__setitem__(path.name, fig))
+    try:
+        write_report(ident, tmp_path_factory.mktemp("again"))
+    finally:
+        mp.undo()
+    yield kept
+    for fig in kept.values():
+        idrep.plt.close(fig)
+
+
 def test_report_files(report_dir):
     out, ident = report_dir
     for fig in FIGURES:
@@ -23,7 +44,7 @@ def test_report_files(report_dir):
     doc = json.loads((out / "model.json").read_text())
     assert doc["model"] == ident.result()["model"]
     html = (out / "index.html").read_text()
-    assert all(f'src="{f}"' in html for f in FIGURES)
+    assert all(f"src='{f}'" in html for f in FIGURES)
 
 
 def test_coefficient_table_has_table1_layout(report_dir):
@@ -35,3 +56,70 @@ def test_coefficient_table_has_table1_layout(report_dir):
     assert q2_row.split("|")[2].strip() == "0"
     assert "±" in next(r for r in rows if r.split("|")[1].strip() == "q2^3")
     assert coefficient_table(ident.result()) == table
+
+
+def _cells(html: str, caption_start: str) -> list[list[str]]:
+    """The rows (header included) of the table whose caption contains caption_start."""
+    for table in re.findall(r"<table>(.*?)</table>", html, re.S):
+        if caption_start in table:
+            return [re.findall(r"<t[hd][^>]*>(.*?)</t[hd]>", row) for row in re.findall(r"<tr>(.*?)</tr>", table)]
+    raise AssertionError(f"no table with {caption_start!r}")
+
+
+def test_index_is_tables_and_captions_not_json(report_dir):
+    out, ident = report_dir
+    html = (out / "index.html").read_text()
+    result = ident.result()
+    assert "<pre>" not in html and "{&quot;" not in html and '{"' not in html  # no JSON dumped on the page
+    assert html.count("<figcaption>") == len(FIGURES) and html.count("<caption>") >= 4
+    # the validation as a table: one row per signal, the held-out fit as model.json has it
+    rows = _cells(html, "Free-run simulation of the model")
+    assert rows[0][:2] == ["signal", "fit, held-out"]
+    by_signal = {r[0]: r for r in rows[1:]}
+    for key, name in (("q1_dot", "acceleration"), ("q1", "velocity"), ("q2", "displacement")):
+        assert by_signal[name][1] == f"{result['validation']['heldout'][key]['fit_percent']:.2f} %"
+    assert by_signal["acceleration"][3].endswith(" m/s²") and by_signal["displacement"][3].endswith(" mm")
+    # every library term is a row of the model table, with the coefficients of model.json
+    model_rows = _cells(html, "in the layout of the paper")
+    assert [r[0] for r in model_rows[1:]] == ident.library_.names
+    q23 = next(r for r in model_rows if r[0] == "q2^3")
+    assert float(q23[1].split(" ± ")[0]) == pytest.approx(result["model"]["q1_dot"]["q2^3"], rel=1e-4)
+    # the design k3 beside the identified one, and said what it is
+    phys = _cells(html, "moving mass")
+    k3 = next(r for r in phys if r[0].startswith("cubic stiffness"))
+    assert float(k3[4]) == pytest.approx(result["physical"]["design"]["cubic_stiffness_n_per_m3"], rel=1e-3)
+    assert "design k3 = 4 k_l a²" in html
+    # typographic units and grammar everywhere on the page
+    assert "m/s^2" not in html and "N/m^3" not in html and "m/s²" in html
+    assert "1 terms" not in html and re.search(r"\b1 term\b", html)  # q2_dot = q1: one term
+
+
+def test_validation_figure_has_residual_panels(figures, report_dir):
+    """Under each signal its residual, measured − simulated, on its own axis; every panel has an x label."""
+    _, ident = report_dir
+    fig = figures["validation.png"]
+    axes = fig.get_axes()
+    residual_axes = [ax for ax in axes if ax.get_ylabel().startswith("residual")]
+    assert len(residual_axes) == 3
+    sig = ident.states_
+    full = residual_axes[0].get_lines()[0].get_ydata()
+    assert np.allclose(full, sig.q1_dot[sig.valid] - ident.simulated_q1_dot_)
+    assert all(ax.get_xlabel() == "time (s)" for ax in axes)
+
+
+def test_lambda_path_figure_reads(figures):
+    """Integer ticks on the term count, '1 term' / '5 terms', the legend outside the data area."""
+    fig = figures["lambda_path.png"]
+    fig.canvas.draw()
+    main = [ax for ax in fig.get_axes() if ax.get_ylabel() == "MSE"]
+    twins = [ax for ax in fig.get_axes() if ax.get_ylabel() == "terms in the model"]
+    assert len(main) == len(twins) == 2
+    for ax in twins:
+        ticks = [t for t in ax.get_yticks() if ax.get_ylim()[0] <= t <= ax.get_ylim()[1]]
+        assert ticks and all(float(t).is_integer() for t in ticks)
+    labels = {ax.get_title(): [t.get_text() for t in ax.get_legend().get_texts()] for ax in main}
+    assert "chosen: 5 terms" in labels["q1_dot"] and "chosen: 1 term" in labels["q2_dot"]
+    for ax in main:
+        assert ax.get_xlabel()
+        legend, data = ax.get_legend().get_window_extent(), ax.get_window_extent()
+        assert legend.y1 <= data.y0  # wholly below the axes: it covers no curve

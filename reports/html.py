@@ -1,0 +1,65 @@
+"""The HTML both report folders are written in: one page with numbered tables and figures, each with a
+caption saying what it shows and how to read it. Plain HTML with a little CSS: it opens from the file
+system, from the service's /report/ route and from an e-mail attachment alike."""
+from __future__ import annotations
+
+import html
+import re
+
+#: a cell that is a number: "-3.7291", "1.2e+06", "-970.96 ± 0.089", "99.90 %"
+_NUMBER = re.compile(r"[-+−]?\d[\d.]*(e[-+]?\d+)?( ± \d[\d.]*(e[-+]?\d+)?)?( %)?")
+
+STYLE = ("body{font-family:sans-serif;max-width:1100px;margin:1em auto;padding:0 1em;line-height:1.4}"
+         "table{border-collapse:collapse;margin:.5em 0}th,td{border:1px solid #bbb;padding:.2em .6em}"
+         "td.num{text-align:right;white-space:nowrap;font-variant-numeric:tabular-nums}th{background:#eee}"
+         "caption{caption-side:bottom;text-align:left;font-size:.9em;color:#333;padding-top:.3em}"
+         "figure{margin:1.5em 0}figure img{max-width:100%}figcaption{font-size:.9em;color:#333}"
+         ".note{font-size:.9em;color:#333}")
+
+
+def esc(text) -> str:
+    return html.escape(str(text))
+
+
+def _is_number(cell: str) -> bool:
+    return bool(_NUMBER.fullmatch(cell))
+
+
+class Page:
+    """One report page; tables and figures are numbered in the order they are added."""
+
+    def __init__(self, title: str):
+        self.title = title
+        self.parts: list[str] = [f"<h1>{esc(title)}</h1>"]
+        self.n_tables = self.n_figures = 0
+
+    def heading(self, text: str) -> None:
+        self.parts.append(f"<h2>{esc(text)}</h2>")
+
+    def paragraph(self, text: str, cls: str = "") -> None:
+        self.parts.append(f"<p{' class=' + repr(cls) if cls else ''}>{esc(text)}</p>")
+
+    def table(self, headers, rows, caption: str) -> None:
+        """A table with a numbered caption under it; the first column names the row, numeric cells in the
+        others are right-aligned."""
+        self.n_tables += 1
+        head = "".join(f"<th>{esc(h)}</th>" for h in headers)
+        body = "".join("<tr>" + "".join(f"<td class='num'>{esc(c)}</td>" if i and _is_number(str(c)) else f"<td>{esc(c)}</td>"
+                                        for i, c in enumerate(row)) + "</tr>" for row in rows)  # column 0: names
+        self.parts.append(f"<table><caption><b>Table {self.n_tables}.</b> {esc(caption)}</caption>"
+                          f"<tr>{head}</tr>{body}</table>")
+
+    def figure(self, src: str, caption: str) -> None:
+        """A figure (a PNG beside the page) with a numbered caption under it."""
+        self.n_figures += 1
+        self.parts.append(f"<figure><img src='{esc(src)}' alt='{esc(src)}'><figcaption><b>Figure {self.n_figures}."
+                          f"</b> {esc(caption)}</figcaption></figure>")
+
+    def links(self, items) -> None:
+        """[(href, text)]: the machine-readable files beside the page."""
+        self.parts.append("<p class='note'>Files: " + ", ".join(f"<a href='{esc(h)}'>{esc(t)}</a>" for h, t in items)
+                          + "</p>")
+
+    def render(self) -> str:
+        return (f"<!doctype html><html lang='en'><meta charset='utf-8'><title>{esc(self.title)}</title>"
+                f"<style>{STYLE}</style><body>" + "\n".join(self.parts) + "</body></html>\n")

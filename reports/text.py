@@ -1,0 +1,99 @@
+"""Identification results as plain text: the coefficient table (Markdown, the paper's Table 1 layout),
+the physical parameters and the summary `shakeid identify` prints. No plotting here, so the terminal
+summary does not import matplotlib."""
+from __future__ import annotations
+
+#: what the design value of k3 is, said wherever it is printed beside the identified one
+DESIGN_K3_NOTE = ("design k3 = 4 k_l a²: what the rig's linear springs (k_l each) on the cam profile "
+                  "f(x) = a x² + b give on paper (identify/physical.py); the identified k3 is what the rig "
+                  "has, so a difference means the springs or the profile differ from the drawing")
+
+
+def unit(text: str) -> str:
+    """A unit as printed: 'm/s^2' -> 'm/s²', 'N/m^3' -> 'N/m³' (the recordings store ASCII units)."""
+    return text.replace("^2", "²").replace("^3", "³")
+
+
+def plural(n: int, word: str) -> str:
+    """'1 term', '5 terms', '0 terms'."""
+    return f"{n} {word}" + ("" if n == 1 else "s")
+
+
+def coefficient_rows(result: dict) -> tuple[list[str], list[list[str]]]:
+    """(headers, rows) in the layout of the paper's Table 1: every library term, its coefficient per
+    equation (0 when not selected) ± its standard error, then per equation the term's inclusion
+    probability: the share of random held-out placements whose selection kept it."""
+    model, se = result["model"], result.get("standard_errors", {})
+    p_in = result.get("inclusion_probability") or {}
+    eqs = list(model)
+    headers = ["term"] + eqs + [f"P(kept) {eq}" for eq in eqs if eq in p_in]
+    rows = []
+    for term in result["library"]["terms"]:
+        cells = [term]
+        for eq in eqs:
+            c = model[eq].get(term)
+            if c is None:
+                cells.append("0")
+            else:
+                s = se.get(eq, {}).get(term)
+                cells.append(f"{c:.5g}" + (f" ± {s:.2g}" if s else ""))
+        cells += [f"{p_in[eq].get(term, 0.0):.2f}" for eq in eqs if eq in p_in]
+        rows.append(cells)
+    return headers, rows
+
+
+def coefficient_table(result: dict) -> str:
+    """coefficient_rows as a Markdown table (coefficients.md, the terminal summary)."""
+    headers, rows = coefficient_rows(result)
+    lines = ["| " + " | ".join(headers) + " |", "|---|" + "---:|" * (len(headers) - 1)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+#: (key in result["physical"], name, unit, scale from SI to the unit shown)
+PHYSICAL = (("damping_ns_per_m", "damping c", "N s/m", 1.0), ("stiffness_n_per_m", "stiffness k", "N/m", 1.0),
+            ("cubic_stiffness_n_per_m3", "cubic stiffness k3", "N/m³", 1.0),
+            ("prestress_b_m", "spring pre-stress b", "mm", 1e3))
+
+
+def physical_rows(phys: dict) -> list[tuple[str, str, str, str]]:
+    """(name, value, standard error, unit) per physical parameter, as text; 'term not in model' when the
+    term that carries it was not kept."""
+    rows = []
+    for key, name, u, scale in PHYSICAL:
+        v, s = phys[key]["value"], phys[key].get("std_error")
+        rows.append((name, "term not in model" if v is None else f"{v * scale:.5g}",
+                     "" if v is None or s is None else f"{s * scale:.2g}", u))
+    return rows
+
+
+def fit_text(metric: dict) -> str:
+    """A free-run fit as printed: '99.80 %', or 'diverged' when the simulation left the data's range."""
+    return "diverged" if metric.get("fit_percent") is None else f"{metric['fit_percent']:.2f} %"
+
+
+def summary(result: dict, source: str) -> str:
+    """What `shakeid identify` prints: the coefficient table, the held-out fit, the physical parameters."""
+    lines = [f"identified {source}: method {result['method']}, selection {result['selection']['rule']}", ""]
+    if result.get("accepted_faulty"):
+        lines += ["accepted faulty data (--accept-faulty): " + "; ".join(result["accepted_faulty"]), ""]
+    lines.append(coefficient_table(result))
+    val = result.get("validation")
+    if val:
+        h = val["heldout"]
+        lines.append(f"free-run fit on {val['heldout_samples']} held-out samples: acceleration {fit_text(h['q1_dot'])},"
+                     f" velocity {fit_text(h['q1'])}, displacement {fit_text(h['q2'])}")
+    offset = result.get("chain", {}).get("displacement_below_band") or {}
+    if offset.get("carried"):
+        lines.append(f"displacement below the band carried (an even force rectifies it; the terms are those of the "
+                     f"true displacement): rms {offset['rms_mm']:.3g} mm, {offset['min_mm']:.3g} to {offset['max_mm']:.3g} mm, "
+                     f"{offset['passes']} passes{'' if offset['converged'] else ', NOT converged'}")
+    phys = result.get("physical")
+    if phys:
+        lines.append("physical: " + "; ".join(f"{name}: {v}" if v == "term not in model" else f"{name} = {v} {u}"
+                                              for name, v, _, u in physical_rows(phys)))
+        lines.append(f"  design k3 = {phys['design']['cubic_stiffness_n_per_m3']:.4g} N/m³, for comparison: what the "
+                     "rig's springs and cam profile give on paper (identify/physical.py)")
+    if result.get("status") == "failed":
+        lines.append(f"MODEL FAILED: {result['reason']}")
+    return "\n".join(lines)

@@ -1,0 +1,26 @@
+"""How `shakeid ... --help` shows each option: its help text, its unit, and its default.
+
+The default is appended as "(default: X)" from the parser itself, so the help cannot drift from the
+code. Options whose default is computed (None: "the config's port, else 5020") say it in words, with
+"default" in the text, and get nothing appended; flags (store_true) have no default to show.
+"""
+from __future__ import annotations
+
+import argparse
+import functools
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if "default" in text.lower() or not action.option_strings:
+            return text  # said in words already; positionals have no default to show
+        if action.default is None or action.default is argparse.SUPPRESS or isinstance(action.default, bool):
+            return text
+        if action.default in ("", []):
+            return text + " (default: none)"
+        return text + " (default: %(default)s)"
+
+
+#: the parser class of every `shakeid` subcommand (add_subparsers(parser_class=...)): defaults shown
+Parser = functools.partial(argparse.ArgumentParser, formatter_class=HelpFormatter)

@@ -1,0 +1,103 @@
+"""The command explains itself: every option's help gives its unit and default; human output has no
+Python reprs; progress is readable without a terminal."""
+import io
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from daq.recorder import Recorder
+from shakeid.cli import build_parser
+from shakeid.progress import Progress
+
+SHAKEID = str(Path(sys.executable).with_name("shakeid"))
+#: words that name a unit (or say there is none) in the help of a numeric option
+UNIT = re.compile(r"Hz|, s\b|\bs\)|mm|m/s²|\bkg\b|fraction|share|relative|seconds|dimensionless")
+TRIVIAL = (None, False, True, "", [])
+
+
+def _subcommands():
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+    return sub.choices
+
+
+@pytest.mark.parametrize("command", sorted(_subcommands()))
+def test_every_option_has_help_with_its_default_and_unit(command):
+    parser = _subcommands()[command]
+    text = " ".join(parser.format_help().split())  # line breaks of the help screen undone
+    for action in parser._actions:
+        if not action.option_strings or action.help == "==SUPPRESS==" or action.dest == "help":
+            continue
+        name = action.option_strings[-1]
+        assert action.help, f"shakeid {command} {name}: no help"
+        if action.default not in TRIVIAL and "default" not in action.help.lower():
+            assert f"(default: {action.default})" in text, f"shakeid {command} {name}: default not shown"
+        if action.type is float:
+            assert UNIT.search(action.help), f"shakeid {command} {name}: no unit in {action.help!r}"
+
+
+def test_help_screen_shows_defaults_of_the_issue():
+    """The options the issue named: serve --port, --sim-speed, demo --out, the sweep's frequencies."""
+    out = {c: " ".join(p.format_help().split()) for c, p in _subcommands().items()}
+    assert "--port PORT TCP port (default: 8000)" in out["serve"]
+    assert "else 1)" in out["serve"].split("--sim-speed X")[-1].split("--log-level")[0]  # the option, not the usage
+    assert "(default: demo-output)" in out["demo"]
+    assert "--f-start-hz HZ frequency the sweep starts at, Hz (default: 1.0)" in out["simulate"]
+    assert "--f-start-hz HZ frequency the sweep starts at, Hz (required)" in out["sweep"]
+
+
+def test_recordings_prints_plain_words_not_reprs(tmp_path):
+    path = tmp_path / "sweep.h5"
+    sweep = {"f_start_hz": np.float64(1.0), "f_end_hz": np.float64(20.0), "duration_s": np.float64(60.0),
+             "amplitude_mm": np.float64(1.3), "settle_s": np.float64(2.0), "note": ""}
+    r = Recorder(path, fs_hz=1000.0, sweep=sweep)  # no operator recorded
+    r.append(0, np.random.default_rng(0).normal(size=(5000, 2)))
+    r.close("complete", "")
+    p = subprocess.run([SHAKEID, "recordings", str(path)], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert "np.float64" not in p.stdout and "{" not in p.stdout and "by -" not in p.stdout
+    assert "sweep 1-20 Hz over 60 s at 1.3 mm, 2 s settle" in p.stdout
+    assert "(no operator recorded)" in p.stdout
+    assert re.search(r"started \d{4}-\d\d-\d\d \d\d:\d\d:\d\d UTC", p.stdout)
+
+
+class Status:
+    """A PLC status as SweepRunner hands it to on_progress."""
+    def __init__(self, frac):
+        self.state, self.frequency_hz, self.position_mm = 1, 1 + 19 * frac, 0.5
+
+
+def test_progress_without_a_tty_prints_plain_lines():
+    out = io.StringIO()  # not a TTY
+    progress = Progress("sweep", duration_s=30.0, stream=out)
+    for i in range(0, 201):  # a status poll every 0.15 s of a 30 s sweep
+        progress.sweep_status(i / 200, Status(i / 200))
+    progress.close()
+    lines = out.getvalue().splitlines()
+    assert "\r" not in out.getvalue()
+    assert len(lines) == 11  # 0, 10, ..., 100 %: one line each tenth
+    assert lines[4].startswith("sweep 40 % (12.0 s of 30 s)  running")
+    assert lines[-1].startswith("sweep 100 % (30.0 s of 30 s)")
+
+
+def test_progress_without_a_tty_says_where_an_aborted_sweep_ended():
+    out = io.StringIO()
+    progress = Progress("sweep", duration_s=60.0, stream=out)
+    for frac in (0.0, 0.05, 0.1, 0.2, 0.26):
+        progress.update(frac, "running")
+    progress.close("aborted")
+    assert out.getvalue().splitlines()[-1] == "sweep 26 % (15.6 s of 60 s)  aborted"
+
+
+def test_progress_on_a_tty_redraws_one_line():
+    out = io.StringIO()
+    progress = Progress("sweep", duration_s=30.0, stream=out, tty=True)
+    for i in range(0, 101):
+        progress.update(i / 100, "running")
+    progress.close()
+    text = out.getvalue()
+    assert text.count("\r") == 101 and text.count("\n") == 1 and "100.0 %" in text
