@@ -185,12 +185,16 @@ def cmd_explain(args) -> int:
               + (f"  (rejected: {c['rejected']})" if c.get("rejected") else ""))
     if result["effect"] in ("none", "unexplained"):
         print(f"missing effect: {result['effect']} (confidence {result['confidence']:.2f})")
+        for e in result["effects"]:  # a drifting sensor bias does not explain a gap, but is still there
+            print(f"also: {e['name']} ({e['kind']}): {e.get('evidence', '')}")
     else:
         for e in result["effects"]:
             sur = f"; stands in for {', '.join(e['surrogate_for'])}" if e["surrogate_for"] else ""
             coefs = ", ".join(f"{t} {c:.4g}" for t, c in e["coefficients"].items())
             print(f"missing effect: {e['name']} ({e['kind']}{'; ' + coefs if coefs else ''}) (confidence "
                   f"{e['confidence']:.2f}; gap after {f(e['gap_after'])}{sur})")
+            if e.get("evidence"):
+                print(f"  {e['evidence']}")
         print(f"gap {f(result['gap_before'])} -> {f(result['gap_after'])}")
         print("model: " + json.dumps(result["model"]))
     if result.get("remaining"):
