@@ -97,7 +97,8 @@ class SparseIdentifier:
     band_hz, harmonics, taper_s : measurement-chain settings (identify.chain.reconstruct_states).
     rig : RigConstants for physical parameters (base-excited layout only).
     validate : run the free-run validation.
-    bias_replicates : SIMEX replicates of the measurement chain for its bias (0: none, coefficients and
+    bias_replicates : SIMEX replicates of the measurement chain for its bias (None: by the record's
+        length, 64 up to 250 000 samples down to 16 from 1e6, uncertainty.replicates_for; 0: none, coefficients and
         standard errors then ignore it); placements : random held-out placements for the inclusion
         probabilities (0: none). identify.uncertainty.
     """
@@ -108,7 +109,7 @@ class SparseIdentifier:
                  budget: str = "equation-error", budget_refit: str = "fit", refine: str | None = None,
                  holdout_fraction: float = 0.2, holdout_samples: int | None = None, band_hz=None,
                  harmonics: float = 5.0, taper_s: float | None = None, rig: RigConstants | None = None,
-                 validate: bool = True, bias_replicates: int = unc.N_REPLICATES,
+                 validate: bool = True, bias_replicates: int | None = unc.N_REPLICATES,
                  placements: int = unc.N_PLACEMENTS):
         self.degree = degree
         self.extra_terms = tuple(extra_terms)
@@ -198,7 +199,7 @@ class SparseIdentifier:
         # (identify.uncertainty, docs/identification.md section 5)
         self.training_model_ = SparseModel(coefs, ("q1", "q2"), (sig.input_name,))
         bias_of = None
-        if self.bias_replicates and getattr(self, "recording_", None) is not None:
+        if self.bias_replicates != 0 and getattr(self, "recording_", None) is not None:
             def bias_of(sups, coefs):
                 return unc.chain_bias(self.recording_, sig, sups, coefs,
                                       lambda s2, cols: self._gram(s2, gram.edges, cols), self.bias_replicates)

@@ -108,7 +108,7 @@ def fit_joint(ident, recordings: list):
 
     t0 = time.perf_counter()
     bias_of = None
-    if ident.bias_replicates:
+    if ident.bias_replicates != 0:
         def gram_of(noisy, columns):
             return BlockGram.concatenate([ident._gram(s, e, columns) for s, (e, _) in zip(noisy, parts)])
 

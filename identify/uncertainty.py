@@ -39,10 +39,17 @@ from .spectral import welch_psd
 
 #: Random held-out placements for the inclusion probabilities (a probability to +-0.1 at worst).
 N_PLACEMENTS = 24
-#: SIMEX replicates: 8 antithetic pairs (each: one band-limited noise draw, two Gram passes on the kept
-#: columns). The pairs' spread is also a variance estimate: its square root is good to about
-#: 1/sqrt(2 x 8) = 25 % (16 independent replicates gave 18 % for twice the cost).
-N_REPLICATES = 16
+#: SIMEX replicates by default: None = by the record's length (replicates_for). Each pair of replicates
+#: is one band-limited noise draw and two Gram passes on the kept columns. The pairs' spread is also a
+#: variance estimate, its square root good to about 1/sqrt(2 x pairs): 25 % with 8 pairs, 12.5 % with 32.
+#: That error is in every standard error it sets, and it hid what a joint fit gains: three recordings
+#: of 30 s at 1024 Hz reported the weak term's SE 26.1 against 23.2 for one alone with 16 replicates,
+#: 20.7 against 31.5 with 64 (identify.joint, benchmarks/joint_se.py).
+N_REPLICATES = None
+#: ... as many as the budget of replicate samples allows, between the two bounds: 64 replicates up to
+#: 250 000 samples in all, 16 from 1 000 000 (the 1e6-sample record's cost, benchmarks/identify_speed.py).
+REPLICATE_SAMPLES = 16_000_000
+MIN_REPLICATES, MAX_REPLICATES = 16, 64
 #: The noise floor is read above this multiple of the band top (past the band edge's roll-off, 1.25 f_hi).
 NOISE_FLOOR_ABOVE = 1.3
 #: ... up to this fraction of Nyquist (anti-alias filters roll off beyond).
@@ -128,7 +135,13 @@ class NoiseChain:
         return tuple(self._fresh.draw((s_in, s_out), rng))
 
 
-def chain_bias(recording, sig, supports: dict, coefs: dict, gram_of, n_replicates: int = N_REPLICATES,
+def replicates_for(n_samples: int) -> int:
+    """Default number of SIMEX replicates for records of n_samples in all (even: antithetic pairs)."""
+    n = int(np.clip(REPLICATE_SAMPLES / max(n_samples, 1), MIN_REPLICATES, MAX_REPLICATES))
+    return n + (n % 2)
+
+
+def chain_bias(recording, sig, supports: dict, coefs: dict, gram_of, n_replicates: int | None = N_REPLICATES,
                seed: int = 0) -> dict | None:
     """SIMEX estimate of the bias the noisy measurement chain puts into each equation's refit.
 
@@ -147,6 +160,8 @@ def chain_bias(recording, sig, supports: dict, coefs: dict, gram_of, n_replicate
     two refits, and the bias estimate's Monte Carlo error is that of the quadratic part alone."""
     several = isinstance(recording, (list, tuple))
     pairs = list(zip(recording, sig)) if several else [(recording, sig)]
+    if n_replicates is None:
+        n_replicates = replicates_for(sum(r.input.size for r, _ in pairs))
     floors = [noise_floors(r, s.band_hz) for r, s in pairs]
     if any(f is None for fl in floors for f in fl) or n_replicates < 2:
         return None

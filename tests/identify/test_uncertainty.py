@@ -221,3 +221,10 @@ def test_noise_drawn_on_the_band_has_the_chains_statistics(layout):
     on_the_band = covariance(chain.draw(rng, 0.01, 0.02) for _ in range(200))
     sd = np.sqrt(np.diag(through_chain))
     assert np.all(np.abs(on_the_band - through_chain) <= 0.05 * np.outer(sd, sd)), (on_the_band, through_chain)
+
+
+def test_replicates_follow_the_record_length():
+    """64 SIMEX replicates (32 antithetic pairs) where they are cheap, 16 at a million samples."""
+    from identify.uncertainty import replicates_for
+
+    assert [replicates_for(n) for n in (30_000, 250_000, 500_000, 1_000_000, 10_000_000)] == [64, 64, 32, 16, 16]
