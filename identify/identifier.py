@@ -326,7 +326,9 @@ class SparseIdentifier:
             sel[eq] = {"index": s.index, "n_terms": int(s.support.sum()),
                        self.path_.param_name: float(self.path_.params[s.index, e]),
                        "score": float(s.score[s.index]),
-                       "threshold": None if np.isnan(s.threshold) else float(s.threshold)}
+                       # the rule's tolerance line on the score (an STLSQ path's own parameter is
+                       # also named "threshold": this key must not overwrite it)
+                       "score_tolerance": None if np.isnan(s.threshold) else float(s.threshold)}
         out = {
             "status": self.verdict_["status"],
             "reason": self.verdict_["reason"],
