@@ -4,8 +4,8 @@ of docs/identification.md ("Even terms", "Short records", "Beyond the jump").
     python benchmarks/identification_limits.py [--part even|short|jump]     # ~4 min on 2 cores
 
 Uses only the public API (SparseIdentifier.fit / result), so the same script measures an older checkout:
-    git archive <commit> identify sim | tar -x -C /tmp/base && cp identify/_simkernel*.so /tmp/base/identify/
-    PYTHONPATH=/tmp/base python benchmarks/identification_limits.py
+    BASE=$(mktemp -d) && git archive <commit> identify sim | tar -x -C "$BASE" && cp identify/_simkernel*.so "$BASE/identify/"
+    PYTHONPATH="$BASE" python benchmarks/identification_limits.py
 """
 import argparse
 import itertools

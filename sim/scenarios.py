@@ -50,7 +50,7 @@ from .sweep import SineSweep
 from .synth import SyntheticRun, run_sweep
 
 CATEGORIES = ("none", "single", "two_effects", "sensor_fault", "out_of_catalog")
-#: Catalog physics (the names of the contract, docs: /work/wt/_notes/EXPLAIN_CONTRACT.md).
+#: Catalog physics: the effect names identify.effects.CATALOG uses (docs/discrepancy.md, Catalog).
 PHYSICS = ("coulomb_friction", "displacement_dependent_damping", "quadratic_stiffness", "quadratic_damping",
            "cubic_damping", "asymmetric_stiffness", "end_stop", "stiffness_drift", "hysteresis")
 MEASUREMENT = ("mass_acc_gain", "table_acc_gain", "channel_delay", "bias_drift")
