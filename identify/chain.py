@@ -165,6 +165,34 @@ def padded_length(n: int, fs_hz: float, band: tuple[float, float]) -> int:
     return next_fast_len(n + pad, real=True)
 
 
+#: (signal row, power) for q1, q2, q1_dot and the input, in that order, from the signals [response,
+#: input]: base layout, the relative acceleration integrated once and twice; force layout, the output
+#: (a displacement) as q2, differentiated once and twice.
+STATE_REQUESTS = {"base": [(0, -1), (0, -2), (0, 0), (1, 0)], "force": [(0, 1), (0, 0), (0, 2), (1, 0)]}
+
+
+def taper_ramp(k: np.ndarray, taper_n: int) -> np.ndarray:
+    """The edge taper's half-cosine at sample k (0-based) of a taper_n-sample edge."""
+    return 0.5 - 0.5 * np.cos(np.pi * (np.asarray(k) + 0.5) / taper_n)
+
+
+def band_bins(nfft: int, fs_hz: float, band: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """Frequencies (Hz) and band gains of the bins 0..k_max an nfft-point spectrum keeps: the bins above
+    the band's roll-off are zero, so only these are transformed (identify.spectral)."""
+    f = rfftfreq(nfft, 1.0 / fs_hz)
+    g = band_gain(f, band, fs_hz)
+    k_max = int(np.flatnonzero(g)[-1])
+    return f[:k_max + 1], g[:k_max + 1]
+
+
+def band_filter(pairs, f: np.ndarray, g: np.ndarray, band: tuple[float, float]) -> np.ndarray:
+    """(len(pairs), f.size) spectra: each (spectrum, power) pair times the band-limited (j w)^power."""
+    out = np.empty((len(pairs), f.size), dtype=complex)
+    for k, (spectrum, power) in enumerate(pairs):
+        np.multiply(spectrum, _band_response(f, g, band, power), out=out[k])
+    return out
+
+
 def spectral_op(x: np.ndarray, fs_hz: float, band: tuple[float, float], power: int, taper_n: int) -> np.ndarray:
     """Band-limit x and multiply its spectrum by (j w)^power (power < 0 integrates)."""
     return spectral_ops([x], fs_hz, band, [(0, power)], taper_n)[0]
@@ -183,7 +211,7 @@ def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, tap
     rows = sorted({(i, power < 0) for i, power in requests})
     lines = []
     xd = np.empty((len(rows), n))
-    ramp = 0.5 - 0.5 * np.cos(np.pi * (np.arange(taper_n) + 0.5) / taper_n) if taper_n > 0 else None
+    ramp = taper_ramp(np.arange(taper_n), taper_n) if taper_n > 0 else None
     for r, (i, integrating) in enumerate(rows):
         x = signals[i]
         line = np.full(n, x.mean()) if integrating else x[0] + (x[-1] - x[0]) * np.arange(n) / max(n - 1, 1)
@@ -193,17 +221,10 @@ def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, tap
             xd[r, :taper_n] *= ramp
             xd[r, n - taper_n:] *= ramp[::-1]
     nfft = padded_length(n, fs_hz, band)  # zero-padded: no circular wrap-around of the integrals
-    f = rfftfreq(nfft, 1.0 / fs_hz)
-    g = band_gain(f, band, fs_hz)
-    # bins above the band's roll-off are zeroed: only bins 0..k_max are transformed (identify.spectral)
-    k_max = int(np.flatnonzero(g)[-1])
-    f, g = f[:k_max + 1], g[:k_max + 1]
-    spectra = lowband_rfft(xd, nfft, k_max)
+    f, g = band_bins(nfft, fs_hz, band)
+    spectra = lowband_rfft(xd, nfft, f.size - 1)
     del xd
-    out = np.empty((len(requests), k_max + 1), dtype=complex)
-    for k, (i, power) in enumerate(requests):
-        h = _band_response(f, g, band, power)
-        np.multiply(spectra[rows.index((i, power < 0))], h, out=out[k])
+    out = band_filter([(spectra[rows.index((i, power < 0))], power) for i, power in requests], f, g, band)
     del spectra
     y = lowband_irfft(out, nfft, n)
     results = []
@@ -218,9 +239,8 @@ def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, tap
 
 
 class BandLimitedNoise:
-    """Images under the chain's band-limited (j w)^power operators of independent white noises, drawn
-    on the band's bins directly: `requests` are (weights over the noises, power), each giving one (n,)
-    array per draw.
+    """The chain's image (q1, q2, q1_dot, input; STATE_REQUESTS) of independent white noise on the two
+    raw channels, drawn on the band's bins directly.
 
     The spectrum of white noise on nfft points is an independent complex Gaussian per bin (variance
     nfft std^2, real at DC and Nyquist); drawing the band's bins alone skips the rfft and most of the
@@ -229,32 +249,29 @@ class BandLimitedNoise:
     the stationary image the chain's output has on its valid rows (tests/identify/test_uncertainty.py
     compares covariances)."""
 
-    def __init__(self, n: int, fs_hz: float, band: tuple[float, float], requests):
-        self.n, self.nfft = n, padded_length(n, fs_hz, band)
-        f = rfftfreq(self.nfft, 1.0 / fs_hz)
-        g = band_gain(f, band, fs_hz)
-        self.k_max = int(np.flatnonzero(g)[-1])
-        f, g = f[:self.k_max + 1], g[:self.k_max + 1]
-        self.weights = [w for w, _ in requests]
-        self.responses = [_band_response(f, g, band, power) for _, power in requests]
+    def __init__(self, n: int, fs_hz: float, band: tuple[float, float], layout: str):
+        self.n, self.layout, self.nfft = n, layout, padded_length(n, fs_hz, band)
+        f, g = band_bins(self.nfft, fs_hz, band)
+        self.requests = STATE_REQUESTS[layout]
+        self.responses = [_band_response(f, g, band, power) for _, power in self.requests]  # drawn often
 
-    def draw(self, stds, rng: np.random.Generator) -> list[np.ndarray]:
-        """One draw for white noises of std `stds[i]` (per sample): a list of (n,) arrays, one per request."""
-        kk = self.k_max + 1
-        draws = []
-        for std in stds:
+    def draw(self, std_in: float, std_out: float, rng: np.random.Generator) -> list[np.ndarray]:
+        """One draw for white noise of std std_in, std_out (per sample) on the input and output
+        channels: [q1, q2, q1_dot, input], each (n,)."""
+        kk = self.responses[0].size
+
+        def white(std: float) -> np.ndarray:
             z = rng.standard_normal((2, kk)) * (std * np.sqrt(self.nfft / 2.0))
             spec = z[0] + 1j * z[1]
             spec[0] = z[0, 0] * np.sqrt(2.0)  # DC: real, variance nfft std^2
-            if self.k_max == self.nfft // 2:
-                spec[-1] = z[0, -1] * np.sqrt(2.0)
-            draws.append(spec)
-        out = np.zeros((len(self.responses), kk), dtype=complex)
-        for k, (weights, h) in enumerate(zip(self.weights, self.responses)):
-            for w, d in zip(weights, draws):
-                if w:
-                    out[k] += w * d
-            out[k] *= h
+            if kk - 1 == self.nfft // 2:
+                spec[-1] = z[0, -1] * np.sqrt(2.0)  # Nyquist: real too
+            return spec
+
+        e_in, e_out = white(std_in), white(std_out)
+        # the signals the chain transforms: [response, input]; base layout's response is output - input
+        rows = [e_out - e_in if self.layout == "base" else e_out, e_in]
+        out = np.array([rows[i] * h for (i, _), h in zip(self.requests, self.responses)])
         return list(lowband_irfft(out, self.nfft, self.n))
 
 
@@ -271,6 +288,33 @@ def _band_response(f: np.ndarray, g: np.ndarray, band: tuple[float, float], powe
     return h
 
 
+def band_and_taper(fs_hz: float, n: int, layout: str, band_hz, harmonics: float, taper_s, excited):
+    """The chain's band (f_lo, f_hi) in Hz, edge taper (samples) and live-edge guard (samples), from the
+    given band or, when band_hz is None, from excited() -> ((f_lo, f_hi) the input excites, f_lo where
+    the response clears its noise floor, or None for the force layout): reconstruct_states reads them
+    from the record, identify.chunked from spectra accumulated chunk by chunk; the rule is this one."""
+    nyq = fs_hz / 2
+    if band_hz is None:
+        (lo, hi), response_lo = excited()
+        if layout == "base":
+            # What is integrated is the response q'', which below resonance is weaker than the input by
+            # (f/f_n)^2: where it does not clear its own noise floor, integrating amplifies only noise.
+            lo = 0.8 * max(lo, response_lo)
+        else:
+            lo = 0.0
+        band_hz = (lo, min(hi * harmonics, 0.8 * nyq))
+    lo, hi = float(band_hz[0]), float(band_hz[1])
+    if not (0 <= lo < hi <= nyq):
+        raise IdentificationError(f"band {band_hz} Hz must satisfy 0 <= f_lo < f_hi <= Nyquist ({nyq:g} Hz)")
+    if layout == "base" and lo <= 0:
+        raise IdentificationError("integrating accelerations needs a band with f_lo > 0 Hz")
+    if taper_s is None:
+        taper_s = 1.0 / lo if lo > 0 else 64.0 / fs_hz
+    taper_n = int(min(round(taper_s * fs_hz), n // 8))
+    live_guard = int(round(LIVE_EDGE_PERIODS * fs_hz / lo)) if lo > 0 else 4 * taper_n
+    return (lo, hi), taper_n, live_guard
+
+
 def reconstruct_states(rec: Recording, band_hz: tuple[float, float] | None = None, harmonics: float = 5.0,
                        taper_s: float | None = None) -> StateSignals:
     """States of the paper (q1 = velocity, q2 = displacement) and q1_dot from a recording.
@@ -281,26 +325,10 @@ def reconstruct_states(rec: Recording, band_hz: tuple[float, float] | None = Non
     taper_s : edge taper length; default one period of f_lo (base layout) or 64 samples (force layout).
     """
     fs = rec.fs_hz
-    nyq = fs / 2
-    if band_hz is None:
-        lo, hi = excited_band(rec.input, fs)
-        if rec.layout == "base":
-            # What is integrated is the response q'', which below resonance is weaker than the input by
-            # (f/f_n)^2: where it does not clear its own noise floor, integrating amplifies only noise.
-            lo = 0.8 * max(lo, excited_band(rec.output - rec.input, fs)[0])
-        else:
-            lo = 0.0
-        band_hz = (lo, min(hi * harmonics, 0.8 * nyq))
-    lo, hi = float(band_hz[0]), float(band_hz[1])
-    if not (0 <= lo < hi <= nyq):
-        raise IdentificationError(f"band {band_hz} Hz must satisfy 0 <= f_lo < f_hi <= Nyquist ({nyq:g} Hz)")
-    if rec.layout == "base" and lo <= 0:
-        raise IdentificationError("integrating accelerations needs a band with f_lo > 0 Hz")
-    if taper_s is None:
-        taper_s = 1.0 / lo if lo > 0 else 64.0 / fs
-    taper_n = int(min(round(taper_s * fs), rec.n_samples // 8))
     response = rec.output - rec.input if rec.layout == "base" else rec.output
-    live_guard = int(round(LIVE_EDGE_PERIODS * fs / lo)) if lo > 0 else 4 * taper_n
+    (lo, hi), taper_n, live_guard = band_and_taper(
+        fs, rec.n_samples, rec.layout, band_hz, harmonics, taper_s,
+        lambda: (excited_band(rec.input, fs), excited_band(response, fs)[0] if rec.layout == "base" else None))
     trims = [taper_n + (live_guard if _edge_is_live(response, edge, taper_n) else taper_n // 2 + 1)
              for edge in ("start", "end")]
     if rec.n_samples - sum(trims) < 64:
@@ -309,10 +337,9 @@ def reconstruct_states(rec: Recording, band_hz: tuple[float, float] | None = Non
     band = (lo, hi)
     if rec.layout == "base":
         qdd = rec.output - rec.input  # relative acceleration q'' = x'' - z''
-        q1, q2, q1_dot, u = spectral_ops([qdd, rec.input], fs, band, [(0, -1), (0, -2), (0, 0), (1, 0)], taper_n)
+        q1, q2, q1_dot, u = spectral_ops([qdd, rec.input], fs, band, STATE_REQUESTS["base"], taper_n)
     else:
-        q2, q1, q1_dot, u = spectral_ops([rec.output, rec.input], fs, band, [(0, 0), (0, 1), (0, 2), (1, 0)],
-                                         taper_n)
+        q1, q2, q1_dot, u = spectral_ops([rec.output, rec.input], fs, band, STATE_REQUESTS["force"], taper_n)
     return StateSignals(q1, q2, q1_dot, u, fs, band, slice(trims[0], rec.n_samples - trims[1]),
                         "zdd" if rec.layout == "base" else "u", taper_n)
 

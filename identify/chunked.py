@@ -17,7 +17,7 @@ Memory is O(chunk + 2 L) whatever the record's length (tests/identify/test_chunk
 
 A record comes from a *chunk source*: any object with `n_samples`, `fs_hz`, `layout`, `source` and
 `read(start, stop) -> (input, output)` float arrays in the recording's units (identify.recording's
-channels: base layout table and mass acceleration). ArraySource wraps arrays; daq.h5source reads the
+channels: base layout table and mass acceleration). A Recording in memory is one; daq.h5source reads the
 DAQ's HDF5 files (identify itself stays numpy/scipy only).
 """
 from __future__ import annotations
@@ -26,12 +26,11 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from scipy.fft import next_fast_len, rfftfreq
+from scipy.fft import next_fast_len
 
-from .chain import (EDGE_FRACTION, LIVE_EDGE_PERIODS, AT_REST_FRACTION, PAD_PERIODS, StateSignals,
-                    _band_response, band_from_psd, band_gain, welch_length)
+from .chain import (EDGE_FRACTION, AT_REST_FRACTION, PAD_PERIODS, STATE_REQUESTS, StateSignals, band_and_taper,
+                    band_bins, band_filter, band_from_psd, taper_ramp, welch_length)
 from .errors import IdentificationError
-from .recording import Recording
 from .spectral import lowband_irfft, lowband_rfft, welch_psd
 
 #: Overlap on each side of a chunk, in periods of f_lo: the same reach as the whole-record chain's padding.
@@ -49,28 +48,6 @@ class ChunkSource(Protocol):
 
     def read(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
         """(input, output) samples [start, stop) as float arrays."""
-
-
-@dataclass
-class ArraySource:
-    """A chunk source over arrays already in memory (tests; a Recording)."""
-
-    input: np.ndarray
-    output: np.ndarray
-    fs_hz: float
-    layout: str = "base"
-    source: str = "<memory>"
-
-    @classmethod
-    def from_recording(cls, rec: Recording) -> "ArraySource":
-        return cls(rec.input, rec.output, rec.fs_hz, rec.layout, rec.source)
-
-    @property
-    def n_samples(self) -> int:
-        return int(np.size(self.input))
-
-    def read(self, start: int, stop: int):
-        return (np.asarray(self.input[start:stop], dtype=float), np.asarray(self.output[start:stop], dtype=float))
 
 
 def chunk_ranges(start: int, stop: int, size: int) -> list[tuple[int, int]]:
@@ -110,7 +87,6 @@ class ChunkedChain:
         """One pass over the record: Welch PSD (band), means, RMS; then the edges. Arguments as
         identify.chain.reconstruct_states; progress(stage, done, total) is called after each chunk."""
         n, fs, layout = int(source.n_samples), float(source.fs_hz), source.layout
-        nyq = fs / 2
         nper = welch_length(n, fs)
         hop = nper - nper // 2
         n_seg = (n - nper // 2) // hop
@@ -136,22 +112,10 @@ class ChunkedChain:
         means = shift + sums / n
         rms = np.sqrt(np.maximum(sumsq / n - (sums / n) ** 2, 0.0))
         psd = psd / n_seg
-        if band_hz is None:
-            lo, hi = band_from_psd(f, psd[1], n, nper)
-            if layout == "base":  # as reconstruct_states: the response must clear its own noise floor
-                lo = 0.8 * max(lo, band_from_psd(f, psd[0], n, nper)[0])
-            else:
-                lo = 0.0
-            band_hz = (lo, min(hi * harmonics, 0.8 * nyq))
-        lo, hi = float(band_hz[0]), float(band_hz[1])
-        if not (0 <= lo < hi <= nyq):
-            raise IdentificationError(f"band {band_hz} Hz must satisfy 0 <= f_lo < f_hi <= Nyquist ({nyq:g} Hz)")
-        if layout == "base" and lo <= 0:
-            raise IdentificationError("integrating accelerations needs a band with f_lo > 0 Hz")
-        if taper_s is None:
-            taper_s = 1.0 / lo if lo > 0 else 64.0 / fs
-        taper_n = int(min(round(taper_s * fs), n // 8))
-        live_guard = int(round(LIVE_EDGE_PERIODS * fs / lo)) if lo > 0 else 4 * taper_n
+        (lo, hi), taper_n, live_guard = band_and_taper(
+            fs, n, layout, band_hz, harmonics, taper_s,
+            lambda: (band_from_psd(f, psd[1], n, nper), band_from_psd(f, psd[0], n, nper)[0] if layout == "base"
+                     else None))
         m = max(taper_n, 1)
         head = _regressed(layout, *source.read(0, min(m, n)))
         tail = _regressed(layout, *source.read(max(n - m, 0), n))
@@ -168,12 +132,6 @@ class ChunkedChain:
         return cls(fs, n, layout, (lo, hi), taper_n, slice(trims[0], n - trims[1]), overlap, means,
                    head[:, 0].copy(), tail[:, -1].copy())
 
-    def _requests(self):
-        """(signal row, power) for q1, q2, q1_dot, input, in that order (as reconstruct_states)."""
-        if self.layout == "base":
-            return [(0, -1), (0, -2), (0, 0), (1, 0)]
-        return [(0, 1), (0, 0), (0, 2), (1, 0)]
-
     def _line(self, row: int, idx: np.ndarray) -> np.ndarray:
         """The straight line through the record's end samples of signal `row`, at sample indices idx."""
         return self.firsts[row] + (self.lasts[row] - self.firsts[row]) * idx / max(self.n - 1, 1)
@@ -185,7 +143,7 @@ class ChunkedChain:
         s0, s1 = max(a - L, 0), min(b + L, n)
         x = _regressed(self.layout, *source.read(s0, s1))
         idx = np.arange(s0, s1, dtype=float)
-        requests = self._requests()
+        requests = STATE_REQUESTS[self.layout]
         rows = sorted({(i, p < 0) for i, p in requests})
         length = (b - a) + 2 * L
         nfft = next_fast_len(length, real=True)
@@ -193,28 +151,21 @@ class ChunkedChain:
         xd = np.zeros((len(rows), s1 - s0 + off))
         taper = self.taper_n
         w = None
-        if taper > 0 and (s0 < taper or s1 > n - taper):
+        if taper > 0 and (s0 < taper or s1 > n - taper):  # the chain's half-cosine at the record's edges
             w = np.ones(s1 - s0)
-            ramp = lambda k: 0.5 - 0.5 * np.cos(np.pi * (k + 0.5) / taper)  # noqa: E731  chain's half-cosine
-            head = idx < taper
-            w[head] = ramp(idx[head])
-            tail = idx >= n - taper
-            w[tail] = ramp(n - 1 - idx[tail])
+            head, tail = idx < taper, idx >= n - taper
+            w[head] = taper_ramp(idx[head], taper)
+            w[tail] = taper_ramp(n - 1 - idx[tail], taper)
         for r, (i, integrating) in enumerate(rows):
             trend = self.means[i] if integrating else self._line(i, idx)
             xd[r, off:] = x[i] - trend
             if w is not None:
                 xd[r, off:] *= w
         del x
-        f = rfftfreq(nfft, 1.0 / fs)
-        g = band_gain(f, band, fs)
-        k_max = int(np.flatnonzero(g)[-1])
-        f, g = f[:k_max + 1], g[:k_max + 1]
-        spectra = lowband_rfft(xd, nfft, k_max)
+        f, g = band_bins(nfft, fs, band)
+        spectra = lowband_rfft(xd, nfft, f.size - 1)
         del xd
-        out = np.empty((len(requests), k_max + 1), dtype=complex)
-        for k, (i, p) in enumerate(requests):
-            np.multiply(spectra[rows.index((i, p < 0))], _band_response(f, g, band, p), out=out[k])
+        out = band_filter([(spectra[rows.index((i, p < 0))], p) for i, p in requests], f, g, band)
         del spectra
         y = lowband_irfft(out, nfft, L + (b - a))[:, L:]
         results = []

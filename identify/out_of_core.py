@@ -1,6 +1,6 @@
 """Identification of a recording larger than memory: SparseIdentifier's method on per-chunk normal equations.
 
-    src = H5ChunkSource("long.h5")                 # daq.h5source, or identify.chunked.ArraySource
+    src = H5ChunkSource("long.h5")                 # daq.h5source, or a Recording in memory
     ident = ChunkedIdentifier(chunk_samples=2**20).fit_source(src)
     ident.result()                                  # the document SparseIdentifier.result() gives
 
@@ -88,9 +88,7 @@ class ChunkedIdentifier(SparseIdentifier):
 
     def fit(self, recording):
         """A Recording in memory, identified chunk by chunk (tests compare it with the in-core path)."""
-        from .chunked import ArraySource
-
-        return self.fit_source(ArraySource.from_recording(recording))
+        return self.fit_source(recording)
 
     def fit_source(self, source, progress=None, map_chunks=None) -> "ChunkedIdentifier":
         """Identify the record of a chunk source (identify.chunked). progress(stage, done, total) after

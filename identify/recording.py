@@ -63,6 +63,10 @@ class Recording:
     def n_samples(self) -> int:
         return self.input.size
 
+    def read(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """(input, output) samples [start, stop): a Recording is a chunk source too (identify.chunked)."""
+        return self.input[start:stop], self.output[start:stop]
+
     @property
     def dt(self) -> float:
         return 1.0 / self.fs_hz

@@ -32,7 +32,7 @@ import dataclasses
 
 import numpy as np
 
-from .chain import BandLimitedNoise, spectral_ops
+from .chain import STATE_REQUESTS, BandLimitedNoise, spectral_ops
 from .gram import BlockGram, scaled_pinv
 from .optimizers.base import least_squares
 from .spectral import welch_psd
@@ -103,36 +103,26 @@ def white_noise_std(x: np.ndarray, fs_hz: float, band_hz, spectrum=None) -> floa
 class NoiseChain:
     """The measurement chain (identify.chain, in `sig`'s band and taper) applied to added noise alone.
     Every step of the chain (detrending, taper, FFT, band-limited (j w)^p, trimming) is linear, so the
-    states of a record plus noise are sig's states plus these: a SIMEX replicate needs the batched
-    transforms of the noise (chain.spectral_ops), not a rerun of the chain with its band search
-    (tests/identify/test_uncertainty.py checks it against the chain)."""
+    states of a record plus noise are sig's states plus these: a SIMEX replicate needs the transforms of
+    the noise, not a rerun of the chain with its band search (tests/identify/test_uncertainty.py checks
+    it against the chain)."""
 
     def __init__(self, sig, n: int, layout: str):
         self.n, self.layout, self.band, self.fs, self.taper_n = n, layout, tuple(sig.band_hz), sig.fs_hz, sig.taper_n
-        # (weights over (input noise, output noise), power) for q1, q2, q1_dot, input
-        if layout == "base":  # q = integrals of the relative acceleration, input = table acceleration
-            self.requests = [((-1, 1), -1), ((-1, 1), -2), ((-1, 1), 0), ((1, 0), 0)]
-        else:  # q2 = output, q1 its derivative, q1_dot its second derivative
-            self.requests = [((0, 1), 1), ((0, 1), 0), ((0, 1), 2), ((1, 0), 0)]
         self._fresh = None
 
     def __call__(self, e_in: np.ndarray, e_out: np.ndarray):
         """(q1, q2, q1_dot, input) that noise e_in, e_out on the raw channels adds, on all rows."""
-        if self.layout == "base":
-            q1, q2, q1_dot, u = spectral_ops([e_out - e_in, e_in], self.fs, self.band,
-                                             [(0, -1), (0, -2), (0, 0), (1, 0)], self.taper_n)
-        else:
-            q2, q1, q1_dot, u = spectral_ops([e_out, e_in], self.fs, self.band,
-                                             [(0, 0), (0, 1), (0, 2), (1, 0)], self.taper_n)
-        return q1, q2, q1_dot, u
+        response = e_out - e_in if self.layout == "base" else e_out
+        return tuple(spectral_ops([response, e_in], self.fs, self.band, STATE_REQUESTS[self.layout], self.taper_n))
 
     def draw(self, rng: np.random.Generator, s_in: float, s_out: float):
         """(q1, q2, q1_dot, input) of fresh white noise of std s_in, s_out on the raw channels: the
         stationary image the chain gives it on the valid rows, drawn on the band's bins alone
-        (chain.BandLimitedNoise; 5x cheaper than transforming a million samples of noise)."""
+        (chain.BandLimitedNoise: no forward transform, random numbers for the band's bins only)."""
         if self._fresh is None:
-            self._fresh = BandLimitedNoise(self.n, self.fs, self.band, self.requests)
-        return tuple(self._fresh.draw((s_in, s_out), rng))
+            self._fresh = BandLimitedNoise(self.n, self.fs, self.band, self.layout)
+        return tuple(self._fresh.draw(s_in, s_out, rng))
 
 
 def replicates_for(n_samples: int) -> int:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from identify.chain import excited_band, reconstruct_states
-from identify.chunked import ArraySource, ChunkedChain, chunk_ranges
+from identify.chunked import ChunkedChain, chunk_ranges
 from identify.recording import Recording
 from sim.sweep import SineSweep
 
@@ -44,7 +44,7 @@ def test_chunked_chain_equals_the_whole_record_chain(sweep, chunk):
     """Base layout (integration of accelerations): chunks smaller than, near and not a power of two of
     the overlap (29 k samples at f_lo = 1.4 Hz, 1024 Hz)."""
     rec = sweep.recording
-    src = ArraySource.from_recording(rec)
+    src = rec
     chain = ChunkedChain.scan(src, chunk=chunk)
     assert chain.n == rec.n_samples and chunk < chain.overlap * 2 < rec.n_samples
     _assert_same(reconstruct_states(rec), chain, src, chunk)
@@ -54,7 +54,7 @@ def test_band_from_chunked_welch_equals_excited_band(sweep):
     """The band comes from a Welch PSD accumulated over reads: the same segments, the same band as
     excited_band on the whole input (the scan's lower edge is 0.8 x the higher of input's and response's)."""
     rec = sweep.recording
-    chain = ChunkedChain.scan(ArraySource.from_recording(rec), chunk=5000)  # not a multiple of the Welch hop
+    chain = ChunkedChain.scan(rec, chunk=5000)  # not a multiple of the Welch hop
     lo_in, hi_in = excited_band(rec.input, rec.fs_hz)
     lo_resp = excited_band(rec.output - rec.input, rec.fs_hz)[0]
     assert chain.band_hz[0] == pytest.approx(0.8 * max(lo_in, lo_resp), rel=1e-12)
@@ -68,7 +68,7 @@ def test_chunked_chain_force_layout(sweep):
     rng = np.random.default_rng(3)
     y = sweep.states[:, 1] + 0.005 * np.std(sweep.states[:, 1]) * rng.standard_normal(rec.n_samples)
     force = Recording(rec.input, y, rec.fs_hz, "force", "u", "y", ("", ""))
-    src = ArraySource(force.input, force.output, force.fs_hz, "force")
+    src = force
     chain = ChunkedChain.scan(src, chunk=1 << 14)
     assert chain.band_hz[0] == 0.0
     _assert_same(reconstruct_states(force), chain, src, 1 << 14)

@@ -4,7 +4,6 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from identify.chunked import ArraySource
 from identify.errors import IdentificationError
 from identify.identifier import SparseIdentifier
 from identify.out_of_core import ChunkedIdentifier
@@ -77,7 +76,7 @@ def test_memory_stays_bounded_by_the_chunk(make_run):
     rec = make_run(sweep=SineSweep(1.0, 20.0, 30.0, 1.3), fs_hz=1024, seed=2).recording
     peaks = {}
     for reps in (12, 24):
-        src = ArraySource(np.tile(rec.input, reps), np.tile(rec.output, reps), rec.fs_hz)
+        src = Recording(np.tile(rec.input, reps), np.tile(rec.output, reps), rec.fs_hz)
         ident = ChunkedIdentifier(chunk_samples=1 << 15, window_s=2.0, placements=4)
         peaks[reps] = _peak(lambda: ident.fit_source(src))
         assert ident.result()["status"] == "ok"
