@@ -76,6 +76,7 @@ class ChunkedChain:
     means: np.ndarray   # (2,) mean of response and input (detrending before integration)
     firsts: np.ndarray  # (2,) first samples (the line through the ends, before filtering/differentiation)
     lasts: np.ndarray   # (2,) last samples
+    live_guard: int     # samples guarded at an edge that is not at rest (chain.band_and_taper)
 
     @property
     def input_name(self) -> str:
@@ -130,7 +131,7 @@ class ChunkedChain:
         reach_hz = lo if lo > 0 else hi * EDGE_FRACTION / 2
         overlap = int(np.ceil(OVERLAP_PERIODS * fs / reach_hz))
         return cls(fs, n, layout, (lo, hi), taper_n, slice(trims[0], n - trims[1]), overlap, means,
-                   head[:, 0].copy(), tail[:, -1].copy())
+                   head[:, 0].copy(), tail[:, -1].copy(), live_guard)
 
     def _line(self, row: int, idx: np.ndarray) -> np.ndarray:
         """The straight line through the record's end samples of signal `row`, at sample indices idx."""

@@ -34,7 +34,7 @@ from .physical import RigConstants, physical_parameters
 from .recording import Recording
 from .refine import refine_free_run
 from .selection import DEFAULT_TOLERANCE, select
-from .validation import model_verdict, physics_verdict, validate
+from .validation import fit_verdict, validate
 
 N_BLOCKS = 50
 BUDGETS = ("equation-error", "free-run")
@@ -230,11 +230,7 @@ class SparseIdentifier:
         # reported as failed: verdict_ = {"status": "ok" | "failed" | "unvalidated", "reason": ...}
         # judged on the validated fit (the training-only one, unless a budget or refine replaced both) and,
         # when the reported all-rows fit differs, on its physics too: failed if either cannot be the rig
-        self.verdict_ = model_verdict(self.validation_, validated, sig.input_name)
-        if self.verdict_["status"] != "failed" and validated is not self.model_:
-            physics = physics_verdict(self.model_, sig.input_name)
-            if physics:
-                self.verdict_ = {"status": "failed", "reason": "the reported all-rows fit: " + physics}
+        self.verdict_ = fit_verdict(self.validation_, validated, self.model_, sig.input_name)
         self.timings_ = timings
         return self
 

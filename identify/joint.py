@@ -47,7 +47,7 @@ from .gram import BlockGram
 from .inband import has_even_force
 from .library import Library
 from .model import SparseModel
-from .validation import SIGNALS, first_equation, fit_metrics, model_verdict, physics_verdict, validate
+from .validation import SIGNALS, first_equation, fit_metrics, fit_verdict, model_verdict, validate
 
 #: |own - joint| / own SE of a q1_dot coefficient above which a recording's rig differs (with the practical
 #: condition below). One rig, 54 recordings at 0.5-5 % noise: at most 4.7 (benchmarks/joint_change.py).
@@ -123,11 +123,7 @@ def fit_joint(ident, recordings: list):
     timings["per_recording"] = time.perf_counter() - t0
     runs = [p.pop("_runs") for p in per]
     ident.validation_ = _pooled(training, runs) if ident.validate else None
-    ident.verdict_ = model_verdict(ident.validation_, training, sigs[0].input_name)
-    if ident.verdict_["status"] != "failed":  # as for one record: the reported all-rows fit's physics too
-        physics = physics_verdict(ident.model_, sigs[0].input_name)
-        if physics:
-            ident.verdict_ = {"status": "failed", "reason": "the reported all-rows fit: " + physics}
+    ident.verdict_ = fit_verdict(ident.validation_, training, ident.model_, sigs[0].input_name)
     flagged = [p for p in per if p["status"] == "inconsistent"]
     failed = [p for p in per if p["status"] == "failed"]
     if flagged or failed:  # the per-recording findings first: they say what is wrong with the set

@@ -31,7 +31,7 @@ block a window of up to VALIDATION_WINDOW_S seconds (plus a guard at each end) i
 measured state at its start; the simulated states pass through the band on the window (as in
 identify.validation.free_run), the guard (taper + LIVE_EDGE_PERIODS periods of f_lo, the chain's own
 guard for a live edge) is dropped, and the fit metrics are those of identify.validation over all
-windows' scored rows together; the verdict is identify.validation.model_verdict's.
+windows' scored rows together; the verdict is identify.validation.fit_verdict's.
 """
 from __future__ import annotations
 
@@ -42,7 +42,6 @@ from collections import Counter
 
 import numpy as np
 
-from .chain import LIVE_EDGE_PERIODS
 from .chunked import CHUNK_SAMPLES, ChunkedChain, chunk_ranges
 from .errors import IdentificationError
 from .gram import BlockGram
@@ -50,7 +49,7 @@ from .identifier import SparseIdentifier, effective_samples, holdout_blocks
 from .inband import has_even_force
 from .library import Library
 from .model import SparseModel
-from .validation import first_equation, fit_metrics, free_run, model_verdict, physics_verdict
+from .validation import first_equation, fit_metrics, fit_verdict, free_run
 
 #: Scored length of each held-out validation window (s); the 10 held-out blocks of a 13-hour record
 #: give 10 minutes of free run in all.
@@ -127,11 +126,7 @@ class ChunkedIdentifier(SparseIdentifier):
         if self.validation_ is not None and self.validation_.pop("even_force"):
             self.offset_["note"] = ("the selected force has an even part; its displacement below the band is "
                                     "not carried out of core (identify.out_of_core)")
-        self.verdict_ = model_verdict(self.validation_, self.training_model_, sig.input_name)
-        if self.verdict_["status"] != "failed":
-            physics = physics_verdict(self.model_, sig.input_name)
-            if physics:
-                self.verdict_ = {"status": "failed", "reason": "the reported all-rows fit: " + physics}
+        self.verdict_ = fit_verdict(self.validation_, self.training_model_, self.model_, sig.input_name)
         self.timings_ = timings
         return self
 
@@ -155,9 +150,8 @@ class ChunkedIdentifier(SparseIdentifier):
         middle of a held-out block, up to window_s long, scored; a guard on each side (into the
         neighbouring blocks, never scored) lets the start's transient and the band's edge effects decay."""
         chain, edges = self.chain_, self.edges_
-        fs, lo = chain.fs_hz, chain.band_hz[0]
-        guard = chain.taper_n + (int(round(LIVE_EDGE_PERIODS * fs / lo)) if lo > 0 else 4 * chain.taper_n)
-        scored = int(round(self.window_s * fs))
+        guard = chain.taper_n + chain.live_guard
+        scored = int(round(self.window_s * chain.fs_hz))
         v0, nv = chain.valid.start, int(edges[-1])
         out = []
         for k in np.flatnonzero(self.held_) if self.held_.any() else range(len(edges) - 1):

@@ -150,3 +150,15 @@ def model_verdict(validation: dict | None, model: SparseModel | None = None, inp
     if physics:
         return {"status": "failed", "reason": physics}
     return {"status": "ok", "reason": ""}
+
+
+def fit_verdict(validation: dict | None, validated: SparseModel, reported: SparseModel, input_name: str) -> dict:
+    """The identification's verdict: model_verdict of the validated fit (the training-only one) and,
+    when the reported fit differs (kept terms refit on all rows), the physics of that one too: failed if
+    either cannot be the rig."""
+    verdict = model_verdict(validation, validated, input_name)
+    if verdict["status"] != "failed" and reported is not validated:
+        physics = physics_verdict(reported, input_name)
+        if physics:
+            return {"status": "failed", "reason": "the reported all-rows fit: " + physics}
+    return verdict
