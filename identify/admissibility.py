@@ -33,6 +33,9 @@ def check(name: str, coef: dict, baseline_coef: dict, baseline_se: dict) -> str:
             c1, c2 = coef.get("stop(q2)", 0.0), coef.get("sign(q2)*stop(q2)", 0.0)
             if c1 + c2 > SIGN_TOL * (abs(c1) + abs(c2)) or c1 - c2 > SIGN_TOL * (abs(c1) + abs(c2)):
                 return "the end stop pushes the mass outwards on one side instead of stopping it"
+            d1, d2 = coef.get("q1*contact(q2)", 0.0), coef.get("q1*sign(q2)*contact(q2)", 0.0)
+            if d1 + d2 > SIGN_TOL * (abs(d1) + abs(d2)) or d1 - d2 > SIGN_TOL * (abs(d1) + abs(d2)):
+                return "the end stop's contact damping injects energy on one side instead of dissipating it"
         if name == "hysteresis" and coef.get("z", 0.0) > 0:
             return "the hysteretic force pushes along the displacement instead of restoring"
     for t, c0 in baseline_coef.items():

@@ -2,7 +2,9 @@
 equation error (and a search over the effect's own nonlinear parameter), and its Wald statistic.
 
 - plain physics terms: least squares with the new term(s) (band-limited columns);
-- end_stop: travel d searched over fractions of the measured max |q2|, best held-out equation error;
+- end_stop: two sided, or one sided (the asymmetry terms tied to the symmetric ones, Structure.side), its
+  travel d searched over fractions of the measured max |q2| (of that side's peak, one sided); the best
+  held-out equation error among the tries that stop the mass on every side;
 - hysteresis: (beta, gamma) searched on a grid scaled by the measured stroke; the state z integrated
   from the measured velocity gives the column;
 - stiffness_drift: the term q2*tau, tau = t/T - 1/2 a known input;
@@ -18,6 +20,7 @@ import numpy as np
 from scipy import stats
 from scipy.optimize import minimize_scalar
 
+from . import admissibility
 from .effects import CATALOG, Effect
 from .gram import scaled_pinv
 from .measurement import PARAMS
@@ -57,7 +60,12 @@ def propose(fitter: Fitter, cur: Structure, name: str, effect: Effect) -> dict |
     if name == "end_stop":
         if cur.travel:
             return None
-        tries = [cur.adding(name, effect.terms, travel=f * qmax) for f in END_STOP_FRACTIONS]
+        # two sided at fractions of max |q2|; one sided at fractions of that side's own peak (a stop on one
+        # side only holds that side's excursion well below the other's)
+        q2 = sig.q2[sig.valid]
+        peaks = {None: qmax, 1: float(max(np.max(q2), 0.0)), -1: float(max(-np.min(q2), 0.0))}
+        tries = [cur.adding(name, effect.terms, travel=f * peak, side=side)
+                 for side, peak in peaks.items() if peak > 0 for f in END_STOP_FRACTIONS]
     elif name == "hysteresis":
         if cur.hyst is not None:
             return None
@@ -73,14 +81,17 @@ def propose(fitter: Fitter, cur: Structure, name: str, effect: Effect) -> dict |
     best = None
     for st in tries:
         fit = fitter.equation_fit(st)
-        if best is None or fit.mse_heldout < best[1].mse_heldout:
-            best = (st, fit)
-    st, fit = best
+        # a stop that pushes outwards somewhere is no stop: the best that holds on every side, if any
+        sane = name != "end_stop" or not admissibility.check(name, fit.coef, {}, {})
+        if best is None or (sane, -fit.mse_heldout) > (best[2], -best[1].mse_heldout):
+            best = (st, fit, sane)
+    st, fit, _ = best
     new = [t for t in st.terms if t not in cur.terms]
     w, p = wald_p(fit, new)
     extra = {}
     if st.travel and not cur.travel:
         extra["travel_m"] = st.travel
+        extra["sides"] = {None: "both", 1: "upper", -1: "lower"}[st.side]
     if st.hyst is not None and cur.hyst is None:
         extra.update(beta_per_m=st.hyst[0], gamma_per_m=st.hyst[1])
     return {"name": name, "kind": "physics", "terms": new, "structure": replace(st, coef=tuple(fit.coef.items())),

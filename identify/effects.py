@@ -55,8 +55,9 @@ CATALOG: dict[str, Effect] = {e.name: e for e in (
            "shear at high rates)", sign=-1, group="damping"),
     Effect("asymmetric_stiffness", ("|q2|",), "N/m", "a spring stiffer on one side: F = dk max(q2, 0) = "
            "dk/2 (q2 + |q2|), the |q2| term next to the model's own q2", group="asymmetry"),
-    Effect("end_stop", ("stop(q2)", "sign(q2)*stop(q2)"), "N/m", "contact beyond a travel d, one or two sided "
-           "(stop(q2) = sign(q2) max(|q2| - d, 0)); d is searched", group="asymmetry", plain=False),
+    Effect("end_stop", ("stop(q2)", "sign(q2)*stop(q2)", "q1*contact(q2)", "q1*sign(q2)*contact(q2)"), "N/m",
+           "contact beyond a travel d, one or two sided, with the contact's spring (stop(q2) = sign(q2) "
+           "max(|q2| - d, 0)) and damping (q1 contact(q2)); d is searched", group="asymmetry", plain=False),
     Effect("stiffness_drift", ("q2*tau",), "N/m", "stiffness drifting over the record, k (1 + r t/T), e.g. "
            "a warming spring (tau = t/T - 1/2)", plain=False),
     Effect("hysteresis", ("z",), "N/m", "Bouc-Wen hysteresis with an internal state z: "

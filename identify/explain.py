@@ -162,6 +162,8 @@ class DiscrepancyAnalysis:
             e["coefficients"].update({t: final.get(t, 0.0) for t in e["terms"]})
             if e["name"] == "hysteresis" and cur.hyst is not None:
                 e["coefficients"].update(beta_per_m=cur.hyst[0], gamma_per_m=cur.hyst[1])
+            if e["name"] == "end_stop" and cur.travel:
+                e["coefficients"].update(travel_m=cur.travel)
         self._flag_outside(effects)
         self._add_drifts(recording, sig, effects)
         self.terms_ = effects[0]["terms"] if effects else []
@@ -271,6 +273,8 @@ class DiscrepancyAnalysis:
         coef.update(c["extra"])
         if "beta_per_m" in coef:  # refit on the shooting error with the coefficients
             coef.update(beta_per_m=st.hyst[0], gamma_per_m=st.hyst[1])
+        if "travel_m" in coef:  # refit on the shooting error with the coefficients
+            coef.update(travel_m=st.travel)
         return {"name": c["name"], "kind": c["kind"], "terms": c["terms"], "coefficients": coef,
                 "score": c["score"], "p_value": c["p_value"], "gap_share_closed": c["gap_share_closed"],
                 "gap_after": self._gap(c["err"]), "p_beats_baseline": c["p_beats_current"],

@@ -27,6 +27,9 @@ from .simulate import simulate
 #: The gap is measured on what was measured: the relative acceleration for the accelerometer rig, the
 #: output y itself for a force-input layout (its second derivative is a noise-amplified derived signal).
 GAP_SIGNAL = {"base": "q1_dot", "force": "q2"}
+#: An end stop's asymmetry term and the symmetric term it follows on a one-sided stop: on the stop's
+#: side s, f + s sign(q2) f = 2 f there and 0 on the other side.
+ONE_SIDED = {"sign(q2)*stop(q2)": "stop(q2)", "q1*sign(q2)*contact(q2)": "q1*contact(q2)"}
 
 
 @dataclass(frozen=True)
@@ -37,6 +40,16 @@ class Structure:
     hyst: tuple[float, float] | None = None  # Bouc-Wen (beta, gamma) in 1/m
     coef: tuple = ()                        # ((term, dq1/dt coefficient), ...)
     effects: tuple[str, ...] = ()           # catalog names added to the baseline, in order
+    #: a one-sided end stop: +1 upper, -1 lower (None: two sided). Its asymmetry terms are tied to the
+    #: symmetric ones, coef(sign(q2)*f) = side x coef(f), so the stop acts on that side only.
+    side: int | None = None
+
+    @property
+    def ties(self) -> dict:
+        """{tied term: (free term, factor)}: coefficients that follow another's."""
+        if self.side is None:
+            return {}
+        return {t: (f, float(self.side)) for t, f in ONE_SIDED.items() if t in self.terms and f in self.terms}
 
     @property
     def p(self) -> dict:
@@ -122,18 +135,31 @@ class Fitter:
         sig = self.signals(st)
         lib = self.library(st)
         X, U = self.arrays(st, sig)
-        A = lib.evaluate(X, U)
+        T = self.tie_matrix(st, lib.names)  # all coefficients = T @ the free ones
+        A = lib.evaluate(X, U) @ T
         if band_limited:
             A = np.column_stack([sig.band_limit(c) for c in A.T])
         gram = BlockGram(np.column_stack([A, sig.q1_dot[sig.valid]]), 1, self.edges)
         train, heldout = gram.equations(~self.held), gram.equations(self.held)
-        support = np.ones(len(lib), bool)
+        support = np.ones(A.shape[1], bool)
         x = least_squares(train.G, train.B[:, 0], support)
-        S = np.arange(len(lib))
-        cov = sandwich_covariance(gram, ~self.held, train.G, S, x, 0)
-        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        S = np.arange(A.shape[1])
+        cov = T @ sandwich_covariance(gram, ~self.held, train.G, S, x, 0) @ T.T
         mse = float(heldout.mse(x[:, None], 0)[0])
+        x = T @ x
+        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
         return Fit(dict(zip(lib.names, map(float, x))), dict(zip(lib.names, map(float, se))), cov, lib.names, mse)
+
+    @staticmethod
+    def tie_matrix(st: Structure, names) -> np.ndarray:
+        """(all terms, free terms) matrix mapping the free coefficients to every term's (Structure.ties)."""
+        ties = st.ties
+        free = [t for t in names if t not in ties]
+        T = np.zeros((len(names), len(free)))
+        for i, t in enumerate(names):
+            src, factor = ties.get(t, (t, 1.0))
+            T[i, free.index(src)] = factor
+        return T
 
     # -- models and the shooting error ------------------------------------------------------------
     def model(self, st: Structure, coef: dict | None = None) -> SparseModel:
@@ -179,19 +205,27 @@ class Fitter:
     def refine(self, st: Structure, max_nfev: int = 12) -> Structure:
         """Coefficients refit on the training segments' shooting error (trust region, Gauss-Newton); for
         a Bouc-Wen structure (beta, gamma) too, on a log scale (the grid only starts them), the state
-        z at each segment start integrated again from the measured velocity for every trial pair."""
-        names = list(st.coefficients)
+        z at each segment start integrated again from the measured velocity for every trial pair; for an
+        end stop just added, its travel too (log scale: the grid's step is 6-10 % of the peak, and a
+        stiff contact's force is its stiffness times a penetration of that order)."""
+        ties = st.ties
+        names = [t for t in st.coefficients if t not in ties]  # tied terms follow their free term
         theta0 = np.array([st.coefficients[t] for t in names])
         k = len(names)
         hyst = st.hyst is not None
-        if hyst:
-            theta0 = np.concatenate([theta0, np.log(np.maximum(st.hyst, 1e-3))])
+        travel = bool(st.travel) and st.effects[-1:] == ("end_stop",)
+        extra = (list(np.log(np.maximum(st.hyst, 1e-3))) if hyst else []) + ([np.log(st.travel)] if travel else [])
+        theta0 = np.concatenate([theta0, extra])
         train = ~self.seg_held
         norm = float(np.sqrt(np.sum(self.data(st).measured ** 2))) or 1.0
 
         def build(theta) -> Structure:
-            out = replace(st, coef=tuple(zip(names, map(float, theta[:k]))))
-            return replace(out, hyst=tuple(map(float, np.exp(theta[k:])))) if hyst else out
+            coef = dict(zip(names, map(float, theta[:k])))
+            coef.update({t: factor * coef[src] for t, (src, factor) in ties.items()})
+            out = replace(st, coef=tuple((t, coef[t]) for t in st.coefficients))
+            if hyst:
+                out = replace(out, hyst=tuple(map(float, np.exp(theta[k:k + 2]))))
+            return replace(out, travel=float(np.exp(theta[-1]))) if travel else out
 
         def resid(theta):
             cand = build(theta)
@@ -199,8 +233,7 @@ class Fitter:
 
         r0 = resid(theta0)
         scale = np.maximum(np.abs(theta0), 1e-12)
-        if hyst:
-            scale[k:] = 1.0
+        scale[k:] = 1.0
         sol = nl_least_squares(resid, theta0, x_scale=scale, diff_step=1e-6, max_nfev=max_nfev, method="trf")
         if not (np.all(np.isfinite(sol.x)) and 2 * sol.cost < float(r0 @ r0)):
             return st
