@@ -62,11 +62,13 @@ NEAR_P_BEATS = 0.95
 MIN_P_BEATS = 0.9
 #: A candidate closing at least this share of what the named one closes is reported as its surrogate.
 SURROGATE_SHARE = 0.7
-#: Once an effect is added, the next one is looked for while the gap is above this multiple of the
-#: (upper-estimate) noise floor: perfect models reach 0.6-0.9x of it (measured: Coulomb friction, gain
-#: and delay faults on the design rig at 2048 Hz), a missing second effect left 1.07x at 1000 Hz and
-#: 1.7x at 2048 Hz. Spurious additions are held off by the closure and bootstrap requirements instead.
-CONTINUE_FACTOR = 0.7
+#: Once an effect is added, the next one is looked for while the gap is above the (upper-estimate) noise
+#: floor, as the issue asks. Perfect models reach 0.6-0.9x of it (measured: Coulomb friction, gain and
+#: delay faults on the design rig at 2048 Hz), a missing second effect left 1.07x at 1000 Hz and 1.7x at
+#: 2048 Hz. It was 0.7x: below the floor the rest is mostly the noise plus what an effect's form misses,
+#: and the suite's quadratic damping + hysteresis rig (case 57 of benchmarks/explain_robustness.py) then
+#: took displacement-dependent damping at 0.95x the floor, confidence 1.0, for what Bouc-Wen n = 1 left.
+CONTINUE_FACTOR = 1.0
 #: Above this multiple of the noise floor after the explanation, the rest is outside the catalog.
 OUTSIDE_FACTOR = 5.0
 OUTSIDE = "physics outside the catalog"
