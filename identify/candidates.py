@@ -60,32 +60,18 @@ def propose(fitter: Fitter, cur: Structure, name: str, effect: Effect) -> dict |
     if name == "end_stop":
         if cur.travel:
             return None
-        # two sided at fractions of max |q2|; one sided at fractions of that side's own peak (a stop on one
-        # side only holds that side's excursion well below the other's)
-        q2 = sig.q2[sig.valid]
-        peaks = {None: qmax, 1: float(max(np.max(q2), 0.0)), -1: float(max(-np.min(q2), 0.0))}
-        tries = [cur.adding(name, effect.terms, travel=f * peak, side=side)
-                 for side, peak in peaks.items() if peak > 0 for f in END_STOP_FRACTIONS]
-    elif name == "hysteresis":
-        if cur.hyst is not None:
-            return None
-        tries = []
-        for sat in HYST_SATURATION:
-            for share in HYST_GAMMA_SHARE:
-                s = 1.0 / (sat * qmax)
-                tries.append(cur.adding(name, effect.terms, hyst=((1 - share) * s, share * s)))
+        st, fit = _end_stop(fitter, cur, effect, sig)
     else:
-        if all(t in cur.terms for t in effect.terms):
-            return None
-        tries = [cur.adding(name, effect.terms)]
-    best = None
-    for st in tries:
-        fit = fitter.equation_fit(st)
-        # a stop that pushes outwards somewhere is no stop: the best that holds on every side, if any
-        sane = name != "end_stop" or not admissibility.check(name, fit.coef, {}, {})
-        if best is None or (sane, -fit.mse_heldout) > (best[2], -best[1].mse_heldout):
-            best = (st, fit, sane)
-    st, fit, _ = best
+        if name == "hysteresis":
+            if cur.hyst is not None:
+                return None
+            tries = [cur.adding(name, effect.terms, hyst=((1 - share) / (sat * qmax), share / (sat * qmax)))
+                     for sat in HYST_SATURATION for share in HYST_GAMMA_SHARE]
+        else:
+            if all(t in cur.terms for t in effect.terms):
+                return None
+            tries = [cur.adding(name, effect.terms)]
+        st, fit = min(((st, fitter.equation_fit(st)) for st in tries), key=lambda v: v[1].mse_heldout)
     new = [t for t in st.terms if t not in cur.terms]
     w, p = wald_p(fit, new)
     extra = {}
@@ -96,6 +82,46 @@ def propose(fitter: Fitter, cur: Structure, name: str, effect: Effect) -> dict |
         extra.update(beta_per_m=st.hyst[0], gamma_per_m=st.hyst[1])
     return {"name": name, "kind": "physics", "terms": new, "structure": replace(st, coef=tuple(fit.coef.items())),
             "fit": fit, "wald": w, "p_value": p, "extra": extra}
+
+
+def _end_stop(fitter: Fitter, cur: Structure, effect: Effect, sig):
+    """(structure, equation fit) of the end stop that fits best.
+
+    Three variants: two sided, travel d at fractions of max |q2|, and one sided above or below, at
+    fractions of that side's own peak (a stop on one side holds that side's excursion well below the
+    other's). Within each, d by held-out equation error: the grid, then a bounded search between the best
+    point's neighbours (the error changes several-fold over a grid step: a 9 mm stop fitted at 8.8 mm
+    closed 17 % of the gap, at 9.4 mm it closed most of it). Tries whose stop pushes outwards somewhere
+    count 10x, here and between the variants, which are compared on the same held-out error (comparing
+    them on the training segments' shooting error instead always chose the two-sided form, which has
+    the one-sided as special cases: the suite's one-sided stop at case 72 then closed 45 % of the gap
+    instead of 90 %)."""
+    q2 = sig.q2[sig.valid]
+    peaks = {None: float(np.max(np.abs(q2))), 1: float(max(np.max(q2), 0.0)), -1: float(max(-np.min(q2), 0.0))}
+    fr = np.array(END_STOP_FRACTIONS)
+    variants = []
+    for side, peak in peaks.items():
+        if not peak > 0:
+            continue
+        memo = {}
+
+        def attempt(d: float):
+            if d not in memo:
+                st = cur.adding("end_stop", effect.terms, travel=float(d), side=side)
+                fit = fitter.equation_fit(st)
+                sane = not admissibility.check("end_stop", fit.coef, {}, {})
+                memo[d] = (st, fit, sane, fit.mse_heldout * (1.0 if sane else 10.0))
+            return memo[d]
+
+        costs = [attempt(f * peak)[3] for f in fr]
+        i = int(np.argmin(costs))
+        lo, hi = fr[max(i - 1, 0)] * peak, (fr[i + 1] if i + 1 < fr.size else 1.0) * peak
+        res = minimize_scalar(lambda d: attempt(d)[3], bounds=(lo, hi), method="bounded",
+                              options={"xatol": 2e-3 * peak, "maxiter": 12})
+        variants.append(min((attempt(fr[i] * peak), attempt(float(res.x))), key=lambda v: v[3]))
+
+    st, fit, _, _ = min(variants, key=lambda v: v[3])
+    return st, fit
 
 
 def _fault(fitter: Fitter, cur: Structure, name: str) -> dict:
