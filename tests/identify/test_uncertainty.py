@@ -107,7 +107,7 @@ def test_closed_form_bias_matches_a_large_simex():
     """The corrected-score bias (identify.corrected, the default) against SIMEX with 256 replicates on
     the same fit: Table 1 rig, 60 s, 5 % noise. SIMEX is a Monte Carlo (mc_var: its variance) and
     extrapolates linearly in the noise variance, the closed form is exact for Gaussian noise: they agree
-    to first order. Measured: every kept term within 1.5 of SIMEX's Monte Carlo standard errors; asked
+    to first order. Measured: every kept term within 0.42 of SIMEX's Monte Carlo standard errors; asked
     within 4 of them plus 5 % of the bias (the curvature SIMEX's linear extrapolation misses), and the
     bias must be well resolved (> 5 Monte Carlo SE for q2 and q2^3) so the comparison means something."""
     from identify import uncertainty as unc
