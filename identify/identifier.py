@@ -39,6 +39,7 @@ from .validation import fit_verdict, validate
 N_BLOCKS = 50
 BUDGETS = ("equation-error", "free-run")
 BUDGET_REFITS = ("fit", "all")
+BIAS_METHODS = ("auto", "simex")
 N_REPORTED = 10  # budget candidates listed in the result
 
 
@@ -97,9 +98,12 @@ class SparseIdentifier:
     band_hz, harmonics, taper_s : measurement-chain settings (identify.chain.reconstruct_states).
     rig : RigConstants for physical parameters (base-excited layout only).
     validate : run the free-run validation.
-    bias_replicates : SIMEX replicates of the measurement chain for its bias (None: by the record's
-        length, 64 up to 250 000 samples down to 16 from 1e6, uncertainty.replicates_for; 0: none, coefficients and
-        standard errors then ignore it); placements : random held-out placements for the inclusion
+    bias_method : how the measurement chain's bias is estimated: "auto" (default; in closed form by the
+        corrected score when every kept term is a monomial of the states and input and no offset is
+        carried, identify.corrected; SIMEX otherwise) or "simex" (always SIMEX, the Monte Carlo).
+    bias_replicates : SIMEX replicates, when SIMEX runs (None: by the record's length, 64 up to 250 000
+        samples down to 16 from 1e6, uncertainty.replicates_for); 0: no chain-bias correction at all,
+        coefficients then ignore it; placements : random held-out placements for the inclusion
         probabilities (0: none). identify.uncertainty.
     """
 
@@ -110,7 +114,7 @@ class SparseIdentifier:
                  holdout_fraction: float = 0.2, holdout_samples: int | None = None, band_hz=None,
                  harmonics: float = 5.0, taper_s: float | None = None, rig: RigConstants | None = None,
                  validate: bool = True, bias_replicates: int | None = unc.N_REPLICATES,
-                 placements: int = unc.N_PLACEMENTS):
+                 placements: int = unc.N_PLACEMENTS, bias_method: str = "auto"):
         self.degree = degree
         self.extra_terms = tuple(extra_terms)
         self.method = method
@@ -133,6 +137,7 @@ class SparseIdentifier:
         self.validate = validate
         self.bias_replicates = bias_replicates
         self.placements = placements
+        self.bias_method = bias_method
 
     # ------------------------------------------------------------------------------------------------
     def _optimizer(self):
@@ -170,6 +175,8 @@ class SparseIdentifier:
             raise IdentificationError(f"unknown refine {self.refine!r} (free-run)")
         if self.budget not in BUDGETS:
             raise IdentificationError(f"unknown budget {self.budget!r} ({', '.join(BUDGETS)})")
+        if self.bias_method not in BIAS_METHODS:
+            raise IdentificationError(f"unknown bias_method {self.bias_method!r} ({', '.join(BIAS_METHODS)})")
         if self.budget_refit not in BUDGET_REFITS:
             raise IdentificationError(f"unknown budget_refit {self.budget_refit!r} ({', '.join(BUDGET_REFITS)})")
         self._optimizer()
@@ -200,9 +207,11 @@ class SparseIdentifier:
         self.training_model_ = SparseModel(coefs, ("q1", "q2"), (sig.input_name,))
         bias_of = None
         if self.bias_replicates != 0 and getattr(self, "recording_", None) is not None:
-            def bias_of(sups, coefs):
-                return unc.chain_bias(self.recording_, sig, sups, coefs,
-                                      lambda s2, cols: self._gram(s2, gram.edges, cols), self.bias_replicates)
+            def bias_of(sups, coefs):  # in closed form where the terms allow it, else SIMEX
+                return ((self.bias_method == "auto"
+                         and unc.analytic_chain_bias(self.recording_, sig, gram, self.library_, sups, coefs))
+                        or unc.chain_bias(self.recording_, sig, sups, coefs,
+                                          lambda s2, cols: self._gram(s2, gram.edges, cols), self.bias_replicates))
         reported, self.standard_errors_, self.uncertainty_ = self._trust(gram, held, effective_samples(sig), bias_of)
         timings["refit_uncertainty"] = time.perf_counter() - t0
         self.model_ = SparseModel(reported, ("q1", "q2"), (sig.input_name,), self.standard_errors_)

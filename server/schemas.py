@@ -90,7 +90,7 @@ class IdentifyIn(ReadOptions):
     holdout_fraction: float | None = Field(None, gt=0, lt=0.9)
     n_lambdas: int | None = Field(None, ge=2, le=1000)
     extra_terms: list[str] | None = Field(None, max_length=20)
-    bias_replicates: int | None = Field(None, ge=0, le=200, description="SIMEX replicates (0: no chain-bias correction)")
+    bias_replicates: int | None = Field(None, ge=0, le=200, description="SIMEX replicates where SIMEX runs (0: no chain-bias correction)")
     placements: int | None = Field(None, ge=0, le=500, description="held-out placements for inclusion probabilities")
 
 

@@ -74,8 +74,9 @@ def _add_identify_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--holdout-fraction", type=float, default=0.2, metavar="F",
                    help="share of samples held out in interleaved blocks when --holdout-samples is not given, 0-0.9")
     g.add_argument("--bias-replicates", type=int, default=None, metavar="N",
-                   help="SIMEX replicates for the measurement chain's bias (0: none, faster; default: by the "
-                        "record's length, 64 up to 250 000 samples, 16 from 1 000 000)")
+                   help="0: no correction of the measurement chain's bias; else SIMEX replicates where SIMEX "
+                        "estimates it (the bias is in closed form when every kept term is a monomial; default: "
+                        "by the record's length, 64 up to 250 000 samples, 16 from 1 000 000)")
     g.add_argument("--placements", type=int, default=24, metavar="N",
                    help="random held-out placements for the inclusion probabilities (0: none, faster)")
     g.add_argument("--mass-kg", type=float, default=0.49, metavar="KG",
