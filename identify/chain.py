@@ -70,6 +70,11 @@ class StateSignals:
         q2 = self.q2 if self.q2_offset is None else self.q2 + self.q2_offset
         return np.column_stack([self.q1, q2])
 
+    def state_columns(self, rows=slice(None)) -> tuple[np.ndarray, np.ndarray]:
+        """(q1, q2 [+ q2_offset]) on `rows`: the states' columns, without building the (n, 2) array."""
+        q2 = self.q2[rows] if self.q2_offset is None else self.q2[rows] + self.q2_offset[rows]
+        return self.q1[rows], q2
+
     def band_limit(self, x: np.ndarray) -> np.ndarray:
         """Pass a signal on the valid rows (a simulation, a library column) through the same band as the
         measured states, so that it is compared with them like with like: accelerometers cannot see
@@ -209,14 +214,23 @@ def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, tap
     # Differentiating/filtering: the straight line through the end samples, whose own derivative is
     # known exactly and is restored below when DC is in the band.
     rows = sorted({(i, power < 0) for i, power in requests})
-    lines = []
+    lines = {}  # the end-point lines, kept only when DC is in the band (restored below)
     xd = np.empty((len(rows), n))
     ramp = taper_ramp(np.arange(taper_n), taper_n) if taper_n > 0 else None
+    steps = None  # 0, 1, ..., n - 1 as floats, shared by the lines
     for r, (i, integrating) in enumerate(rows):
         x = signals[i]
-        line = np.full(n, x.mean()) if integrating else x[0] + (x[-1] - x[0]) * np.arange(n) / max(n - 1, 1)
-        lines.append(line)
-        np.subtract(x, line, out=xd[r])
+        if integrating:
+            np.subtract(x, x.mean(), out=xd[r])
+        else:
+            # x[0] + (x[-1] - x[0]) k / (n - 1), in place, operation for operation (the same numbers)
+            steps = np.arange(n, dtype=float) if steps is None else steps
+            line = np.multiply(steps, x[-1] - x[0])
+            line /= max(n - 1, 1)
+            line += x[0]
+            np.subtract(x, line, out=xd[r])
+            if band[0] == 0:
+                lines[i] = line
         if taper_n > 0:
             xd[r, :taper_n] *= ramp
             xd[r, n - taper_n:] *= ramp[::-1]
@@ -233,7 +247,7 @@ def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, tap
         if band[0] == 0 and power in (0, 1):
             # DC is in the band: the detrending line is signal, restore it (or its slope)
             x = signals[i]
-            yk += lines[rows.index((i, False))] if power == 0 else (x[-1] - x[0]) * fs_hz / max(n - 1, 1)
+            yk += lines[i] if power == 0 else (x[-1] - x[0]) * fs_hz / max(n - 1, 1)
         results.append(yk)
     return results
 

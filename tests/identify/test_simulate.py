@@ -66,3 +66,33 @@ def test_fine_grid_input_keeps_samples_and_interpolates(method):
     inner = slice(600, fine.size - 600)  # away from the record's edges
     tol = {"bandlimited": 1e-3, "cubic": 1e-6, "linear": 2e-3}[method]
     assert np.max(np.abs(fine[inner] - np.sin(2 * np.pi * 7 * tf[inner]))) < tol
+
+
+@pytest.mark.parametrize("equations, travel", [
+    (TABLE1, None),
+    # constant, |q|, sign, products across states and input, a term shared by both equations
+    ({"q1_dot": {"1": 0.3, "sign(q1)": -0.2, "q1*|q1|": 4.0, "q2^2": 3e4, "q2^3*|q2|": 7.0,
+                 "q1^2*q2^2*zdd": 2.0, "zdd": -1.0},
+      "q2_dot": {"q1": 1.0, "q2^2": 5.0}}, None),
+    # end stops: the penetration and the contact indicator on each row's own side
+    ({"q1_dot": {"q2": -900.0, "stop(q2)": -5e5, "q1*contact(q2)": -30.0, "zdd": -1.0},
+      "q2_dot": {"q1": 1.0}}, {"q2": 0.02}),
+    ({"q1_dot": {}, "q2_dot": {"q1": 1.0}}, None),  # an empty equation is zero
+])
+@pytest.mark.parametrize("equation", [0, 1])
+def test_equation_rows_is_the_models_rhs(equations, travel, equation):
+    """The compiled one-equation evaluation against SparseModel.rhs (numpy, the library's columns), on
+    strided state columns and an input column: the same sums, so equal to rounding."""
+    from identify.simulate import equation_rows
+
+    rng = np.random.default_rng(3)
+    model = SparseModel(equations, travel=travel)
+    n = 3001  # not a multiple of the kernel's block of rows
+    x = rng.standard_normal((n, 2)) * [0.3, 0.025]  # q2 on both sides of the 0.02 m travel
+    u = rng.standard_normal((n, 1))
+    got = equation_rows(model, (x[:, 0], x[:, 1]), u, equation)
+    want = model.rhs(x, u)[:, equation]
+    assert got.shape == (n,)
+    np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-13 * max(np.max(np.abs(want)), 1.0))
+    if travel:
+        assert np.any(np.abs(x[:, 1]) > 0.02) and np.any(np.abs(x[:, 1]) < 0.02)
