@@ -54,6 +54,8 @@ def fine_grid_input(inputs: np.ndarray, substeps: int, interpolation: str = "ban
         # resample_poly keeps the original samples' positions (output[k*up] ~= input[k]) and handles
         # non-periodic records without wrap-around; mean removed so its zero-padded edges do not ring.
         mean = inputs.mean(axis=0)
+        if inputs.shape[1] == 1:  # one channel as a 1-D signal: the same numbers, without the strided axis
+            return (resample_poly(inputs[:, 0] - mean[0], up, 1)[:n_fine] + mean[0])[:, None]
         fine = resample_poly(inputs - mean, up, 1, axis=0)[:n_fine] + mean
         return np.ascontiguousarray(fine)
     raise ValueError(f"unknown interpolation {interpolation!r} (bandlimited, cubic, linear)")
