@@ -90,10 +90,14 @@ def equation_rows(model: SparseModel, states, inputs, equation: int = 0) -> np.n
     independent rows, in the compiled kernel: one pass, none of the library's intermediate columns.
 
     states : sequence of n_states 1-D arrays (n,) (strided views are fine), or an (n, n_states) array;
-    inputs : (n, n_inputs) array or sequence of columns. End-stop features take each row's own side."""
-    cols = list(states.T) if isinstance(states, np.ndarray) and states.ndim == 2 else list(states)
-    ins = np.asarray(inputs, dtype=float) if isinstance(inputs, np.ndarray) else inputs
-    cols += list(ins.T) if isinstance(ins, np.ndarray) and ins.ndim == 2 else list(ins)
+    inputs : (n, n_inputs) array, a sequence of columns, or one column (n,). End-stop features take each
+    row's own side."""
+    def columns(a):
+        if isinstance(a, np.ndarray):
+            return list(a.T) if a.ndim == 2 else [a]
+        return list(a)
+
+    cols = columns(states) + columns(inputs)
     cols = [np.asarray(c, dtype=float) for c in cols]
     n = cols[0].shape[0] if cols else 0
     if len(cols) != len(model.states) + len(model.inputs):
