@@ -26,15 +26,14 @@
  *   side at n independent rows (the one-step prediction and the free run's q1_dot, identify.validation).
  *
  * Speed: a free-run step is four dependent right-hand sides, a chain of latencies rather than of
- * arithmetic, so a model without end stops steps through stage(), which keeps each value in registers from
- * the state it reads to the next stage's state, and touches only the terms with a nonzero coefficient:
+ * arithmetic, so equation() keeps every value in registers, from the state it reads to the next stage's
+ * state (stage()), and touches only the terms with a nonzero coefficient:
  * 1e6 samples of the Table 1 model in 0.07 s (was 0.16-0.18 s; a hand-written Duffing RK4, the floor,
  * 0.037 s), the same numbers bit for bit. Loaded 2-core machine, CPU time.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
-#include <stdlib.h>
 #include <string.h>
 
 #define MAX_STATES 8
@@ -43,7 +42,6 @@
 
 #define MAX_POW 16
 #define MAX_NZ 512
-#define ROWS_BLOCK 512 /* rows_rhs: rows per block (a few columns of 4 kB, in L1/L2 cache) */
 
 typedef struct {
     const int *ptr, *feat, *pow;
@@ -53,12 +51,10 @@ typedef struct {
     int used[MAX_FEATS], n_used, max_pow[MAX_FEATS];
     int nz_eq[MAX_NZ], nz_term[MAX_NZ], n_nz;
     double nz_coef[MAX_NZ];
-    /* the same, flattened for rhs(): per used feature (slot) its kind (FEAT_*) and source index; the
-       terms with a nonzero coefficient ("active"), each a range of offsets slot * MAX_POW + power into
-       the slots' power table; nz_act: the active term of each nonzero coefficient */
-    int kind[MAX_FEATS], src[MAX_FEATS], slot_pow[MAX_FEATS];
-    int n_act, act_ptr[MAX_NZ + 1], act_off[MAX_NZ * MAX_POW], nz_act[MAX_NZ], eq_end[MAX_STATES];
-    /* per nonzero coefficient, its term's factors as (slot, power) pairs: stage()'s straight walk */
+    /* flattened by prepare(): per used feature (slot) its kind (FEAT_*) and source index; per nonzero
+       coefficient (in equation order, eq_end[e] past equation e's last), its term's factors as
+       (slot, power) pairs */
+    int kind[MAX_FEATS], src[MAX_FEATS], eq_end[MAX_STATES];
     int nz_fptr[MAX_NZ + 1], f_slot[MAX_NZ * MAX_POW], f_pow[MAX_NZ * MAX_POW];
 } model_t;
 
@@ -91,11 +87,10 @@ static int prepare(model_t *m, const double *coef) {
     for (i = 0; i < m->n_nz; i++) m->eq_end[m->nz_eq[i]] = i + 1;
     for (e = 1; e < m->n_states; e++)
         if (m->eq_end[e] < m->eq_end[e - 1]) m->eq_end[e] = m->eq_end[e - 1];
-    int slot_of[MAX_FEATS], term_act[MAX_NZ], n_off = 0;
+    int slot_of[MAX_FEATS], n_off;
     for (i = 0; i < m->n_used; i++) {
         f = m->used[i];
         slot_of[f] = i;
-        m->slot_pow[i] = m->max_pow[f];
         if (f < 3 * m->n_states) {
             m->kind[i] = f % 3 == 0 ? FEAT_Q : f % 3 == 1 ? FEAT_ABS : FEAT_SIGN;
             m->src[i] = f / 3;
@@ -107,21 +102,6 @@ static int prepare(model_t *m, const double *coef) {
             m->kind[i] = g % 2 == 0 ? FEAT_STOP : FEAT_CONTACT;
             m->src[i] = g / 2;
         }
-    }
-    for (j = 0; j < m->n_terms; j++) term_act[j] = -1;
-    m->n_act = 0;
-    m->act_ptr[0] = 0;
-    for (i = 0; i < m->n_nz; i++) {
-        j = m->nz_term[i];
-        if (term_act[j] < 0) {
-            term_act[j] = m->n_act++;
-            for (k = m->ptr[j]; k < m->ptr[j + 1]; k++) {
-                if (n_off >= MAX_NZ * MAX_POW) return 0;
-                m->act_off[n_off++] = slot_of[m->feat[k]] * MAX_POW + m->pow[k];
-            }
-            m->act_ptr[m->n_act] = n_off;
-        }
-        m->nz_act[i] = term_act[j];
     }
     m->nz_fptr[0] = 0;
     for (i = 0, n_off = 0; i < m->n_nz; i++) {
@@ -141,74 +121,59 @@ static int side(const model_t *m, const double *x, int i) {
     return (x[i] > m->travel[i]) - (x[i] < -m->travel[i]);
 }
 
-/* dx = f(x, u); `mode` (one side per state) holds the end-stop features on that side, NULL: x's own.
-   Only the features and terms with a nonzero coefficient are evaluated (prepare's flattened tables);
-   each product and sum is taken in the order of the term's factors and of the coefficients. */
-static void rhs(const model_t *m, const double *x, const double *u, const int *mode, double *dx) {
-    double pw[MAX_FEATS * MAX_POW], val[MAX_NZ];
-    int i, a, k, p;
-    for (i = 0; i < m->n_used; i++) {
-        int s = m->src[i], st;
-        double b, *row = pw + i * MAX_POW;
-        switch (m->kind[i]) {
-        case FEAT_Q: b = x[s]; break;
-        case FEAT_ABS: b = fabs(x[s]); break;
-        case FEAT_SIGN: b = (double)((x[s] > 0) - (x[s] < 0)); break;
-        case FEAT_INPUT: b = u[s]; break;
-        case FEAT_STOP:
-            st = mode ? mode[s] : side(m, x, s);
-            b = st ? x[s] - st * m->travel[s] : 0.0;
-            break;
-        default: /* FEAT_CONTACT */
-            st = mode ? mode[s] : side(m, x, s);
-            b = (double)(st != 0);
+/* Equation e of the right-hand side at state x, input u; `mode` (one side per state) holds the end-stop
+   features on that side, NULL: x's own. Only the terms with a nonzero coefficient, each factor's power as
+   repeated products, the products and the sum in a fixed order, all in registers: a free-run step is
+   four right-hand sides in a chain, so round trips through memory (tables of powers and terms) were most
+   of its time. */
+static inline __attribute__((always_inline)) double equation(const model_t *m, int e, const double *x, const double *u, const int *mode,
+                                                                const int stops) {
+    double acc = 0.0;
+    for (int j = e ? m->eq_end[e - 1] : 0; j < m->eq_end[e]; j++) {
+        double v = 1.0;
+        for (int f = m->nz_fptr[j]; f < m->nz_fptr[j + 1]; f++) {
+            int sl = m->f_slot[f], s = m->src[sl], st;
+            double b, t;
+            switch (m->kind[sl]) {
+            case FEAT_Q: b = x[s]; break;
+            case FEAT_ABS: b = fabs(x[s]); break;
+            case FEAT_SIGN: b = (double)((x[s] > 0) - (x[s] < 0)); break;
+            case FEAT_INPUT: b = u[s]; break;
+            default:
+                if (!stops) { /* unreachable: compiled for models without end-stop features */
+                    b = 0.0;
+                    break;
+                }
+                if (m->kind[sl] == FEAT_CONTACT) {
+                    st = mode ? mode[s] : side(m, x, s);
+                    b = (double)(st != 0);
+                    break;
+                }
+                st = mode ? mode[s] : side(m, x, s); /* FEAT_STOP */
+                b = st ? x[s] - st * m->travel[s] : 0.0;
+            }
+            t = b;
+            for (int p = 1; p < m->f_pow[f]; p++) t *= b;
+            v *= t;
         }
-        row[1] = b;
-        for (p = 2; p <= m->slot_pow[i]; p++) row[p] = row[p - 1] * b;
+        acc += m->nz_coef[j] * v;
     }
-    for (a = 0; a < m->n_act; a++) {
-        int k0 = m->act_ptr[a], k1 = m->act_ptr[a + 1];
-        double v = k0 < k1 ? pw[m->act_off[k0]] : 1.0; /* = 1.0 * first factor, exactly */
-        for (k = k0 + 1; k < k1; k++) v *= pw[m->act_off[k]];
-        val[a] = v;
-    }
-    /* the coefficients are in equation order: each sum accumulates in a register, not through dx[] */
-    for (i = 0, k = 0; i < m->n_states; i++) {
-        double acc = 0.0;
-        for (; k < m->eq_end[i]; k++) acc += m->nz_coef[k] * val[m->nz_act[k]];
-        dx[i] = acc;
-    }
+    return acc;
 }
 
-/* One RK stage of a model without end stops: k = f(xin, u) and xout = x + c k, per equation (kp: below). The same
-   products and sums as rhs() in the same order (a power as repeated products, as its table), so the
-   same numbers; but the values stay in registers from the state read to the next stage's state, where
-   rhs() goes through its power, term and derivative arrays: a free-run step is four such stages in a
-   chain, so these round trips through memory were most of its time. */
+/* dx = f(x, u), all equations (mode: as equation()) */
+static void rhs(const model_t *m, const double *x, const double *u, const int *mode, double *dx) {
+    for (int e = 0; e < m->n_states; e++) dx[e] = equation(m, e, x, u, mode, 1);
+}
+
+/* One RK stage of a model without end stops: k = f(xin, u) and xout = x + c k per equation, each
+   xout[e] straight from its sum; kp (the last stage): xout = x + c (k1 + 2 k2 + 2 k3 + k), c = h/6,
+   and xout may be x. The same operations in the same order as the step written out with rhs(). */
 static inline void stage(const model_t *m, const double *x, const double *xin, const double *u, double c,
                          double *k, double *xout, const double (*kp)[MAX_STATES]) {
-    int e, j = 0, f, p;
-    for (e = 0; e < m->n_states; e++) {
-        double acc = 0.0;
-        for (; j < m->eq_end[e]; j++) {
-            double v = 1.0;
-            for (f = m->nz_fptr[j]; f < m->nz_fptr[j + 1]; f++) {
-                int sl = m->f_slot[f], s = m->src[sl];
-                double b, t;
-                switch (m->kind[sl]) {
-                case FEAT_Q: b = xin[s]; break;
-                case FEAT_ABS: b = fabs(xin[s]); break;
-                case FEAT_SIGN: b = (double)((xin[s] > 0) - (xin[s] < 0)); break;
-                default: b = u[s]; /* FEAT_INPUT: no end-stop features here */
-                }
-                t = b;
-                for (p = 1; p < m->f_pow[f]; p++) t *= b;
-                v *= t;
-            }
-            acc += m->nz_coef[j] * v;
-        }
+    for (int e = 0; e < m->n_states; e++) {
+        double acc = equation(m, e, xin, u, NULL, 0);
         k[e] = acc;
-        /* kp (the last stage): the step's end, x + h/6 (k1 + 2 k2 + 2 k3 + k4), c = h/6; xout may be x */
         xout[e] = kp ? x[e] + c * (kp[0][e] + 2.0 * kp[1][e] + 2.0 * kp[2][e] + acc) : x[e] + c * acc;
     }
 }
@@ -432,64 +397,18 @@ static PyObject *rhs_rows(PyObject *self, PyObject *args) {
         goto done;
     }
     for (i = 0; i < m.n_states; i++) m.travel[i] = has_travel ? ((const double *)b_travel.buf)[i] : HUGE_VAL;
-    /* a block of rows at a time, column by column as rhs() does per row (the same products and sums in
-       the same order, so the same numbers), each inner loop over the block's rows */
-    int n_pw = 0, pw_at[MAX_FEATS];
-    for (i = 0; i < m.n_used; i++) pw_at[i] = n_pw, n_pw += m.slot_pow[i] + 1;
-    double *work = malloc(sizeof(double) * ROWS_BLOCK * (n_pw + 2));
-    if (!work) {
-        PyErr_NoMemory();
-        goto done;
-    }
     {
-        double *out = (double *)b_out.buf, *val = work + ROWS_BLOCK * n_pw, *acc = val + ROWS_BLOCK;
+        double x[MAX_STATES], u[MAX_INPUTS], *out = (double *)b_out.buf;
         Py_BEGIN_ALLOW_THREADS
-        for (Py_ssize_t t0 = 0; t0 < n; t0 += ROWS_BLOCK) {
-            int nb = (int)(n - t0 < ROWS_BLOCK ? n - t0 : ROWS_BLOCK), r, a, k, p;
-            for (i = 0; i < m.n_used; i++) {
-                int s = m.src[i], kind = m.kind[i];
-                const Py_buffer *c = &cols[kind == FEAT_INPUT ? m.n_states + s : s];
-                const char *base = (const char *)c->buf + t0 * c->strides[0];
-                Py_ssize_t st = c->strides[0];
-                double tr = m.travel[s], *row = work + ROWS_BLOCK * (pw_at[i] + 1);
-                if (st == sizeof(double)) /* a contiguous column: no copy for plain values */
-                    memcpy(row, base, sizeof(double) * nb);
-                else
-                    for (r = 0; r < nb; r++) row[r] = *(const double *)(base + r * st);
-                if (kind == FEAT_ABS)
-                    for (r = 0; r < nb; r++) row[r] = fabs(row[r]);
-                else if (kind == FEAT_SIGN)
-                    for (r = 0; r < nb; r++) row[r] = (double)((row[r] > 0) - (row[r] < 0));
-                else if (kind == FEAT_STOP || kind == FEAT_CONTACT)
-                    for (r = 0; r < nb; r++) {
-                        double q = row[r];
-                        int sd = (q > tr) - (q < -tr);
-                        row[r] = kind == FEAT_STOP ? (sd ? q - sd * tr : 0.0) : (double)(sd != 0);
-                    }
-                for (p = 2; p <= m.slot_pow[i]; p++) { /* the power p of the feature, as rhs(): times b */
-                    double *prev = row + ROWS_BLOCK * (p - 2), *cur = prev + ROWS_BLOCK;
-                    for (r = 0; r < nb; r++) cur[r] = prev[r] * row[r];
-                }
+        for (Py_ssize_t t = 0; t < n; t++) {
+            for (i = 0; i < m.n_states + m.n_inputs; i++) {
+                double v = *(const double *)((const char *)cols[i].buf + t * cols[i].strides[0]);
+                if (i < m.n_states) x[i] = v; else u[i - m.n_states] = v;
             }
-            for (r = 0; r < nb; r++) acc[r] = 0.0;
-            for (k = eq ? m.eq_end[eq - 1] : 0; k < m.eq_end[eq]; k++) {
-                a = m.nz_act[k];
-                int k0 = m.act_ptr[a], k1 = m.act_ptr[a + 1];
-                if (k0 == k1)
-                    for (r = 0; r < nb; r++) val[r] = 1.0;
-                else
-                    for (r = 0; r < nb; r++) val[r] = work[ROWS_BLOCK * (pw_at[m.act_off[k0] / MAX_POW] + m.act_off[k0] % MAX_POW) + r];
-                for (int f = k0 + 1; f < k1; f++) {
-                    const double *w = work + ROWS_BLOCK * (pw_at[m.act_off[f] / MAX_POW] + m.act_off[f] % MAX_POW);
-                    for (r = 0; r < nb; r++) val[r] *= w[r];
-                }
-                for (r = 0; r < nb; r++) acc[r] += m.nz_coef[k] * val[r];
-            }
-            for (r = 0; r < nb; r++) out[t0 + r] = acc[r];
+            out[t] = m.has_stops ? equation(&m, eq, x, u, NULL, 1) : equation(&m, eq, x, u, NULL, 0);
         }
         Py_END_ALLOW_THREADS
     }
-    free(work);
     Py_INCREF(Py_None);
     result = Py_None;
 done:
