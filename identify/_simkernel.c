@@ -19,7 +19,8 @@
  *          [, travel])
  *   int32 buffers: term_ptr (n_terms+1), fac_feat, fac_pow; float64 buffers: coef (n_states*n_terms),
  *   x0 (n_states), u_fine ((n_out-1)*2*substeps+1 rows of n_inputs), out (n_out*n_states, writable),
- *   travel (n_states, m; inf = no end stop; omitted = none anywhere).
+ *   travel (n_states, m; inf = no end stop; omitted = none anywhere); optional eq, u_samples (n_out rows of
+ *   n_inputs), dx_out (n_out, writable): dx_out[t] = equation eq at the written sample t and u_samples[t].
  * Returns the number of samples written: n_out, or fewer if a state left [-bound, bound] or went NaN.
  *
  * rhs_rows(term_ptr, fac_feat, fac_pow, coef, columns, eq, out [, travel]): equation eq of the right-hand
@@ -276,12 +277,12 @@ static void stop_substep(const model_t *m, double *x, double h, const double *u0
 }
 
 static PyObject *simulate(PyObject *self, PyObject *args) {
-    Py_buffer b_ptr, b_feat, b_pow, b_coef, b_x0, b_u, b_out, b_travel = {0};
-    int n_inputs, substeps, i;
+    Py_buffer b_ptr, b_feat, b_pow, b_coef, b_x0, b_u, b_out, b_travel = {0}, b_us = {0}, b_dx = {0};
+    int n_inputs, substeps, i, deq = -1;
     Py_ssize_t n_out;
     double dt, bound;
-    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*iniddw*|y*", &b_ptr, &b_feat, &b_pow, &b_coef, &b_x0, &b_u,
-                          &n_inputs, &n_out, &substeps, &dt, &bound, &b_out, &b_travel))
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*iniddw*|y*iy*w*", &b_ptr, &b_feat, &b_pow, &b_coef, &b_x0, &b_u,
+                          &n_inputs, &n_out, &substeps, &dt, &bound, &b_out, &b_travel, &deq, &b_us, &b_dx))
         return NULL;
     model_t m;
     m.ptr = (const int *)b_ptr.buf;
@@ -300,6 +301,8 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
         b_coef.len != (Py_ssize_t)(sizeof(double) * m.n_states * m.n_terms) ||
         b_u.len < (Py_ssize_t)sizeof(double) * need_u ||
         b_out.len < (Py_ssize_t)sizeof(double) * n_out * m.n_states || m.n_terms > MAX_NZ ||
+        (deq >= 0 && (deq >= m.n_states || b_us.len < (Py_ssize_t)sizeof(double) * n_out * n_inputs ||
+                      b_dx.len < (Py_ssize_t)sizeof(double) * n_out)) ||
         !prepare(&m, (const double *)b_coef.buf)) {
         PyErr_SetString(PyExc_ValueError, "simulate: inconsistent buffer sizes or model too large");
         goto done;
@@ -308,7 +311,8 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
     {
         double x[MAX_STATES], xs[MAX_STATES], xt[MAX_STATES], kk[3][MAX_STATES],
             k4[MAX_STATES];
-        double h = dt / substeps;
+        double h = dt / substeps, *dxo = (double *)b_dx.buf;
+        const double *us = (const double *)b_us.buf;
         int s, ni = n_inputs, mode[MAX_STATES];
         Py_ssize_t t, written = 0;
         for (i = 0; i < m.n_states; i++) x[i] = ((const double *)b_x0.buf)[i];
@@ -316,6 +320,7 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
         Py_BEGIN_ALLOW_THREADS
         if (n_out > 0) {
             for (i = 0; i < m.n_states; i++) out[i] = x[i];
+            if (deq >= 0) dxo[0] = equation(&m, deq, x, us, NULL, 1);
             written = 1;
         }
         for (t = 1; t < n_out; t++) {
@@ -338,6 +343,9 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
             }
             if (!ok) break;
             for (i = 0; i < m.n_states; i++) out[t * m.n_states + i] = x[i];
+            /* the derivative at the sample (off the steps' chain of dependencies: next to free) */
+            if (deq >= 0) dxo[t] = m.has_stops ? equation(&m, deq, x, us + t * ni, NULL, 1)
+                                              : equation(&m, deq, x, us + t * ni, NULL, 0);
             written = t + 1;
         }
         Py_END_ALLOW_THREADS
@@ -352,6 +360,8 @@ done:
     PyBuffer_Release(&b_u);
     PyBuffer_Release(&b_out);
     if (has_travel) PyBuffer_Release(&b_travel);
+    if (b_us.buf) PyBuffer_Release(&b_us);
+    if (b_dx.buf) PyBuffer_Release(&b_dx);
     return result;
 }
 

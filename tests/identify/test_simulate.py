@@ -96,3 +96,30 @@ def test_equation_rows_is_the_models_rhs(equations, travel, equation):
     np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-13 * max(np.max(np.abs(want)), 1.0))
     if travel:
         assert np.any(np.abs(x[:, 1]) > 0.02) and np.any(np.abs(x[:, 1]) < 0.02)
+
+
+@pytest.mark.parametrize("travel", [None, {"q2": 0.0175}])
+def test_derivative_in_the_run_is_equation_rows_at_the_simulated_states(travel):
+    """simulate(derivative=(0, u)) (validation's simulated q1_dot) against equation_rows at the states it
+    returns: the same function of the same numbers, so equal exactly; NaN after a divergence."""
+    from identify.simulate import equation_rows
+
+    eqs = {"q1_dot": dict(TABLE1["q1_dot"]), "q2_dot": {"q1": 1.0}}
+    if travel:
+        eqs["q1_dot"].update({"stop(q2)": -4e5, "q1*contact(q2)": -40.0})
+    model = SparseModel(eqs, travel=travel)
+    fs, n = 2048.0, 40_000
+    t = np.arange(n) / fs
+    amplitude = 4e-3 if travel else 1.3e-3  # without the stops 4 mm runs away (q1*q2^2's negative damping)
+    u = (-amplitude * (2 * np.pi * 5) ** 2 * np.sin(2 * np.pi * (3 * t + 0.2 * t**2)))[:, None]
+    res = simulate(model, 1 / fs, [0.0, 0.0], u, substeps=2, derivative=(0, u))
+    assert not res.diverged
+    if travel:
+        assert np.max(np.abs(res.states[:, 1])) > 0.0175  # the run reaches the stops
+    np.testing.assert_array_equal(res.derivative, equation_rows(model, res.states, u, 0))
+    unstable = SparseModel({"q1_dot": {"q1": 50.0, "q2": -100.0, "zdd": 1.0}, "q2_dot": {"q1": 1.0}})
+    res = simulate(unstable, 1e-3, [0.0, 1.0], np.zeros((5000, 1)), substeps=1, bound=1e3,
+                   derivative=(0, np.zeros((5000, 1))))
+    assert res.diverged and np.all(np.isnan(res.derivative[res.n_valid:]))
+    np.testing.assert_array_equal(res.derivative[:res.n_valid],
+                                  equation_rows(unstable, res.states[:res.n_valid], np.zeros((res.n_valid, 1)), 0))
