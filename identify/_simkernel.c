@@ -28,9 +28,9 @@
  *
  * Speed: a free-run step is four dependent right-hand sides, a chain of latencies rather than of
  * arithmetic, so equation() keeps every value in registers, from the state it reads to the next stage's
- * state (stage()), and touches only the terms with a nonzero coefficient:
- * 1e6 samples of the Table 1 model in 0.07 s (was 0.16-0.18 s; a hand-written Duffing RK4, the floor,
- * 0.037 s), the same numbers bit for bit. Loaded 2-core machine, CPU time.
+ * state (stage()), and touches only the terms with a nonzero coefficient: the same numbers bit for bit as
+ * the earlier table-based right-hand side, in about half the time (docs/identification.md, section 6;
+ * benchmarks/identify_speed.py --validation-parts).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
