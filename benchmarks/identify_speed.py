@@ -1,6 +1,6 @@
 """Identification speed end to end, next to its anchors, in one process so the ratios hold on a busy machine.
 
-    python benchmarks/identify_speed.py [--sizes 200000 1000000] [--repeat 3] [--no-simulation]
+    python benchmarks/identify_speed.py [--sizes 200000 1000000] [--repeat 3] [--no-simulation] [--validation-parts]
 
 Recording: the paper's Table 1 rig, a 1-20 Hz sweep at 1.2 mm over n / 2048 Hz - 2 s plus 2 s at rest,
 two accelerometers at 0.5 % noise (sim.synth.run_sweep). At 1.2 mm the slow sweep's resonance peaks at
@@ -10,7 +10,8 @@ For each record length n, timed in rounds (anchor, then each call once per round
   anchor "one pass over the data": the 16-column library (freshly allocated) + A.T@A + one rfft/irfft pair
       at next_fast_len(n) per recorded channel (table and mass acceleration);
   shakeid, the public call: SparseIdentifier(validate=False).fit(recording) and SparseIdentifier().fit
-      (with the free-run validation), and its parts (SparseIdentifier.timings_);
+      (with the free-run validation), and its parts (SparseIdentifier.timings_); both also without the
+      uncertainty step (bias_replicates=0, placements=0), whose cost does not depend on the rest;
   PySINDy end to end from the same recording: the relative acceleration integrated to velocity and
       displacement by cumulative trapezoid with a straight line removed (what a PySINDy user has to hand),
       then SINDy.fit with the same 16 columns (poly degree 4 in q1, q2, plus zdd), STLSQ, and the measured
@@ -140,12 +141,14 @@ def identification_figures(n: int, repeat: int, pysindy: bool = True) -> dict:
     X, U = (sig.q1, sig.q2), sig.input[:, None]
     lib = Library()
     f = {"n": n, "peak_mm": 1e3 * truth["max_abs_q_m"], "contact_samples": truth["contact_samples"]}
-    runs = {"anchor": [], "transforms": [], "fit": [], "fit_validated": [], "fit_no_uncertainty": []}
+    runs = {"anchor": [], "transforms": [], "fit": [], "fit_validated": [], "fit_no_uncertainty": [],
+            "validated_no_uncertainty": []}
     for _ in range(repeat):  # rounds: a load spike on the machine hits anchor and calls alike
         runs["anchor"].append(anchor(rec, lib, X, U))
         runs["transforms"].append(chain_transforms(rec, sig))
         for key, kw in (("fit", dict(validate=False)), ("fit_validated", {}),
-                        ("fit_no_uncertainty", dict(validate=False, bias_replicates=0, placements=0))):
+                        ("fit_no_uncertainty", dict(validate=False, bias_replicates=0, placements=0)),
+                        ("validated_no_uncertainty", dict(bias_replicates=0, placements=0))):
             t, ident = timed(lambda kw=kw: SparseIdentifier(**kw).fit(rec))
             runs[key].append({"total": t, "parts": dict(ident.timings_), "model": ident.model_,
                               "verdict": ident.verdict_["status"]})
@@ -157,6 +160,41 @@ def identification_figures(n: int, repeat: int, pysindy: bool = True) -> dict:
     if pysindy:
         f["pysindy"], _ = best_of(lambda: pysindy_end_to_end(rec), max(1, repeat - 1))
     return f
+
+
+def validation_parts(n: int, repeat: int) -> dict:
+    """What the free-run validation of the fitted (training-only) model spends, CPU seconds, best of
+    `repeat`: validate() as a whole, and its parts done alone: the input on the RK4 half-step grid, the
+    compiled RK4 run on it, the three simulated signals through the chain's band (one batch), the
+    acceleration equation at the simulated states (all rows) and the fit metrics of the seven pairs."""
+    from identify.simulate import fine_grid_input
+    from identify.validation import first_equation, fit_metrics, validate
+
+    rec, _ = sweep_recording(n)
+    ident = SparseIdentifier(validate=False, bias_replicates=0, placements=0).fit(rec)
+    sig, model, rows = ident.states_, ident.training_model_, ident.heldout_rows_
+    v = sig.valid
+    x, u = sig.states[v], sig.input[v][:, None]
+    out, sim, qdot = validate(model, sig, rows)
+    subs = out["substeps"]
+    fine = fine_grid_input(u, subs)
+    res = simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine, substeps=subs, n_samples=u.shape[0], bound=1e3)
+    signals = [res.states[:, 0], res.states[:, 1], qdot]
+
+    def cpu(fn):
+        return best_of(fn, repeat)[0][1]
+
+    return {"rows": u.shape[0], "substeps": subs, "validate": cpu(lambda: validate(model, sig, rows)),
+            "input_grid": cpu(lambda: fine_grid_input(u, subs)),
+            "rk4": cpu(lambda: simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine, substeps=subs,
+                                        n_samples=u.shape[0], bound=1e3)),
+            "band_limit": cpu(lambda: sig.band_limit_many(signals)),
+            "q1_dot": cpu(lambda: first_equation(model, res.states[:, 0], res.states[:, 1], u)),
+            # the run with q1_dot computed in it, as validate now does (None on code without it)
+            "rk4_q1_dot": (cpu(lambda: simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine, substeps=subs,
+                                                n_samples=u.shape[0], bound=1e3, derivative=(0, u)))
+                           if "derivative" in simulate.__code__.co_varnames else None),
+            "metrics": cpu(lambda: [fit_metrics(sig.q1[v], sim[:, 0]) for _ in range(7)])}
 
 
 def padding_lever(n: int, repeat: int) -> dict:
@@ -222,6 +260,8 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--no-pysindy", action="store_true", help="skip the PySINDy anchor")
     p.add_argument("--no-simulation", action="store_true", help="skip the free-run vs solve_ivp figures")
+    p.add_argument("--validation-parts", action="store_true",
+                   help="also time the free-run validation's parts alone (largest size)")
     p.add_argument("--padding-lever", action="store_true",
                    help="also time the chain padded to 2n (the previous rule) against its own padding (largest size)")
     args = p.parse_args(argv)
@@ -251,9 +291,22 @@ def main(argv=None) -> int:
         print(f"          fit without the uncertainty step (bias_replicates=0, placements=0; all-rows refit kept), "
               f"wall/cpu: {core['total'][0]:.3f}/{core['total'][1]:.3f} = {core['total'][1] / a['total'][1]:.2f} x the "
               f"anchor (cpu); PySINDy / it {ps_t[1] / core['total'][1] if ps_t else float('nan'):.1f} (cpu)")
+        core_val = f["validated_no_uncertainty"]
+        print(f"          the same with the free-run validation, wall/cpu: {core_val['total'][0]:.3f}/"
+              f"{core_val['total'][1]:.3f} = {core_val['total'][1] / a['total'][1]:.2f} x the anchor (cpu); validation "
+              f"{core_val['parts']['validation']:.3f} s wall in its fastest run, "
+              f"{core_val['total'][1] - core['total'][1]:.3f} s CPU by difference")
         print(f"          fit+val parts (wall, fastest run): {_parts(val['parts'])} (verdict {val['verdict']})")
         print(f"          peak |q2| {f['peak_mm']:.1f} mm, {f['contact_samples']} samples on the end stops; "
               f"model: {fit['model']!r}", flush=True)
+    if args.validation_parts and args.sizes:
+        vp = validation_parts(max(args.sizes), args.repeat)
+        print(f"\nfree-run validation, {vp['rows']} rows, {vp['substeps']} RK4 substep(s), CPU s (best of "
+              f"{args.repeat}): validate {vp['validate']:.3f}; alone: input on the half-step grid "
+              f"{vp['input_grid']:.3f}, RK4 run {vp['rk4']:.3f}, 3 signals through the band {vp['band_limit']:.3f}, "
+              f"q1_dot at the simulated states {vp['q1_dot']:.3f}, 7 fit metrics (all rows) {vp['metrics']:.3f}"
+              + ("" if vp["rk4_q1_dot"] is None else f"; RK4 run computing q1_dot as it goes {vp['rk4_q1_dot']:.3f}"),
+              flush=True)
     if args.padding_lever and args.sizes:
         lev = padding_lever(max(args.sizes), args.repeat)
         print(f"\npadding, n = {max(args.sizes)}: chain CPU {lev['chain_cpu']:.3f} s padded to 2n, "

@@ -19,12 +19,23 @@
  *          [, travel])
  *   int32 buffers: term_ptr (n_terms+1), fac_feat, fac_pow; float64 buffers: coef (n_states*n_terms),
  *   x0 (n_states), u_fine ((n_out-1)*2*substeps+1 rows of n_inputs), out (n_out*n_states, writable),
- *   travel (n_states, m; inf = no end stop; omitted = none anywhere).
+ *   travel (n_states, m; inf = no end stop; omitted = none anywhere); optional eq, u_samples (n_out rows of
+ *   n_inputs), dx_out (n_out, writable): dx_out[t] = equation eq at the written sample t and u_samples[t].
  * Returns the number of samples written: n_out, or fewer if a state left [-bound, bound] or went NaN.
+ *
+ * rhs_rows(term_ptr, fac_feat, fac_pow, coef, columns, eq, out [, travel]): equation eq of the right-hand
+ *   side at n independent rows (the one-step prediction and the free run's q1_dot, identify.validation).
+ *
+ * Speed: a free-run step is four dependent right-hand sides, a chain of latencies rather than of
+ * arithmetic, so equation() keeps every value in registers, from the state it reads to the next stage's
+ * state (stage()), and touches only the terms with a nonzero coefficient: the same numbers bit for bit as
+ * the earlier table-based right-hand side, in about half the time (docs/identification.md, section 6;
+ * benchmarks/identify_speed.py --validation-parts).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
+#include <string.h>
 
 #define MAX_STATES 8
 #define MAX_INPUTS 8
@@ -41,10 +52,17 @@ typedef struct {
     int used[MAX_FEATS], n_used, max_pow[MAX_FEATS];
     int nz_eq[MAX_NZ], nz_term[MAX_NZ], n_nz;
     double nz_coef[MAX_NZ];
+    /* flattened by prepare(): per used feature (slot) its kind (FEAT_*) and source index; per nonzero
+       coefficient (in equation order, eq_end[e] past equation e's last), its term's factors as
+       (slot, power) pairs */
+    int kind[MAX_FEATS], src[MAX_FEATS], eq_end[MAX_STATES];
+    int nz_fptr[MAX_NZ + 1], f_slot[MAX_NZ * MAX_POW], f_pow[MAX_NZ * MAX_POW];
 } model_t;
 
+enum { FEAT_Q, FEAT_ABS, FEAT_SIGN, FEAT_INPUT, FEAT_STOP, FEAT_CONTACT };
+
 static int prepare(model_t *m, const double *coef) {
-    int j, k, e, f, n_feats = 5 * m->n_states + m->n_inputs;
+    int i, j, k, e, f, n_feats = 5 * m->n_states + m->n_inputs;
     for (f = 0; f < n_feats; f++) m->max_pow[f] = 0;
     for (k = 0; k < m->ptr[m->n_terms]; k++) {
         if (m->feat[k] < 0 || m->feat[k] >= n_feats || m->pow[k] < 1 || m->pow[k] >= MAX_POW) return 0;
@@ -66,6 +84,36 @@ static int prepare(model_t *m, const double *coef) {
                 m->nz_term[m->n_nz] = j;
                 m->nz_coef[m->n_nz++] = coef[e * m->n_terms + j];
             }
+    for (e = 0; e < m->n_states; e++) m->eq_end[e] = 0;
+    for (i = 0; i < m->n_nz; i++) m->eq_end[m->nz_eq[i]] = i + 1;
+    for (e = 1; e < m->n_states; e++)
+        if (m->eq_end[e] < m->eq_end[e - 1]) m->eq_end[e] = m->eq_end[e - 1];
+    int slot_of[MAX_FEATS], n_off;
+    for (i = 0; i < m->n_used; i++) {
+        f = m->used[i];
+        slot_of[f] = i;
+        if (f < 3 * m->n_states) {
+            m->kind[i] = f % 3 == 0 ? FEAT_Q : f % 3 == 1 ? FEAT_ABS : FEAT_SIGN;
+            m->src[i] = f / 3;
+        } else if (f < 3 * m->n_states + m->n_inputs) {
+            m->kind[i] = FEAT_INPUT;
+            m->src[i] = f - 3 * m->n_states;
+        } else {
+            int g = f - 3 * m->n_states - m->n_inputs;
+            m->kind[i] = g % 2 == 0 ? FEAT_STOP : FEAT_CONTACT;
+            m->src[i] = g / 2;
+        }
+    }
+    m->nz_fptr[0] = 0;
+    for (i = 0, n_off = 0; i < m->n_nz; i++) {
+        j = m->nz_term[i];
+        for (k = m->ptr[j]; k < m->ptr[j + 1]; k++, n_off++) {
+            if (n_off >= MAX_NZ * MAX_POW) return 0;
+            m->f_slot[n_off] = slot_of[m->feat[k]];
+            m->f_pow[n_off] = m->pow[k];
+        }
+        m->nz_fptr[i + 1] = n_off;
+    }
     return 1;
 }
 
@@ -74,32 +122,61 @@ static int side(const model_t *m, const double *x, int i) {
     return (x[i] > m->travel[i]) - (x[i] < -m->travel[i]);
 }
 
-/* dx = f(x, u); `mode` (one side per state) holds the end-stop features on that side, NULL: x's own */
-static void rhs(const model_t *m, const double *x, const double *u, const int *mode, double *dx) {
-    double pw[MAX_FEATS][MAX_POW], val[MAX_NZ];
-    int i, j, k, f, p;
-    for (i = 0; i < m->n_used; i++) {
-        f = m->used[i];
-        double b;
-        if (f < 3 * m->n_states) {
-            double q = x[f / 3];
-            b = (f % 3 == 0) ? q : (f % 3 == 1) ? fabs(q) : (double)((q > 0) - (q < 0));
-        } else if (f < 3 * m->n_states + m->n_inputs) {
-            b = u[f - 3 * m->n_states];
-        } else {
-            int g = f - 3 * m->n_states - m->n_inputs, st = mode ? mode[g / 2] : side(m, x, g / 2);
-            b = (g % 2 == 0) ? (st ? x[g / 2] - st * m->travel[g / 2] : 0.0) : (double)(st != 0);
-        }
-        pw[f][1] = b;
-        for (p = 2; p <= m->max_pow[f]; p++) pw[f][p] = pw[f][p - 1] * b;
-    }
-    for (j = 0; j < m->n_terms; j++) {
+/* Equation e of the right-hand side at state x, input u; `mode` (one side per state) holds the end-stop
+   features on that side, NULL: x's own. Only the terms with a nonzero coefficient, each factor's power as
+   repeated products, the products and the sum in a fixed order, all in registers: a free-run step is
+   four right-hand sides in a chain, so round trips through memory (tables of powers and terms) were most
+   of its time. */
+static inline __attribute__((always_inline)) double equation(const model_t *m, int e, const double *x, const double *u, const int *mode,
+                                                                const int stops) {
+    double acc = 0.0;
+    for (int j = e ? m->eq_end[e - 1] : 0; j < m->eq_end[e]; j++) {
         double v = 1.0;
-        for (k = m->ptr[j]; k < m->ptr[j + 1]; k++) v *= pw[m->feat[k]][m->pow[k]];
-        val[j] = v;
+        for (int f = m->nz_fptr[j]; f < m->nz_fptr[j + 1]; f++) {
+            int sl = m->f_slot[f], s = m->src[sl], st;
+            double b, t;
+            switch (m->kind[sl]) {
+            case FEAT_Q: b = x[s]; break;
+            case FEAT_ABS: b = fabs(x[s]); break;
+            case FEAT_SIGN: b = (double)((x[s] > 0) - (x[s] < 0)); break;
+            case FEAT_INPUT: b = u[s]; break;
+            default:
+                if (!stops) { /* unreachable: compiled for models without end-stop features */
+                    b = 0.0;
+                    break;
+                }
+                if (m->kind[sl] == FEAT_CONTACT) {
+                    st = mode ? mode[s] : side(m, x, s);
+                    b = (double)(st != 0);
+                    break;
+                }
+                st = mode ? mode[s] : side(m, x, s); /* FEAT_STOP */
+                b = st ? x[s] - st * m->travel[s] : 0.0;
+            }
+            t = b;
+            for (int p = 1; p < m->f_pow[f]; p++) t *= b;
+            v *= t;
+        }
+        acc += m->nz_coef[j] * v;
     }
-    for (i = 0; i < m->n_states; i++) dx[i] = 0.0;
-    for (i = 0; i < m->n_nz; i++) dx[m->nz_eq[i]] += m->nz_coef[i] * val[m->nz_term[i]];
+    return acc;
+}
+
+/* dx = f(x, u), all equations (mode: as equation()) */
+static void rhs(const model_t *m, const double *x, const double *u, const int *mode, double *dx) {
+    for (int e = 0; e < m->n_states; e++) dx[e] = equation(m, e, x, u, mode, 1);
+}
+
+/* One RK stage of a model without end stops: k = f(xin, u) and xout = x + c k per equation, each
+   xout[e] straight from its sum; kp (the last stage): xout = x + c (k1 + 2 k2 + 2 k3 + k), c = h/6,
+   and xout may be x. The same operations in the same order as the step written out with rhs(). */
+static inline void stage(const model_t *m, const double *x, const double *xin, const double *u, double c,
+                         double *k, double *xout, const double (*kp)[MAX_STATES]) {
+    for (int e = 0; e < m->n_states; e++) {
+        double acc = equation(m, e, xin, u, NULL, 0);
+        k[e] = acc;
+        xout[e] = kp ? x[e] + c * (kp[0][e] + 2.0 * kp[1][e] + 2.0 * kp[2][e] + acc) : x[e] + c * acc;
+    }
 }
 
 /* one RK4 step of size h from x with the sides held (ua, ub, uc: inputs at 0, h/2, h) */
@@ -200,12 +277,12 @@ static void stop_substep(const model_t *m, double *x, double h, const double *u0
 }
 
 static PyObject *simulate(PyObject *self, PyObject *args) {
-    Py_buffer b_ptr, b_feat, b_pow, b_coef, b_x0, b_u, b_out, b_travel = {0};
-    int n_inputs, substeps, i;
+    Py_buffer b_ptr, b_feat, b_pow, b_coef, b_x0, b_u, b_out, b_travel = {0}, b_us = {0}, b_dx = {0};
+    int n_inputs, substeps, i, deq = -1;
     Py_ssize_t n_out;
     double dt, bound;
-    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*iniddw*|y*", &b_ptr, &b_feat, &b_pow, &b_coef, &b_x0, &b_u,
-                          &n_inputs, &n_out, &substeps, &dt, &bound, &b_out, &b_travel))
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*iniddw*|y*iy*w*", &b_ptr, &b_feat, &b_pow, &b_coef, &b_x0, &b_u,
+                          &n_inputs, &n_out, &substeps, &dt, &bound, &b_out, &b_travel, &deq, &b_us, &b_dx))
         return NULL;
     model_t m;
     m.ptr = (const int *)b_ptr.buf;
@@ -224,15 +301,18 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
         b_coef.len != (Py_ssize_t)(sizeof(double) * m.n_states * m.n_terms) ||
         b_u.len < (Py_ssize_t)sizeof(double) * need_u ||
         b_out.len < (Py_ssize_t)sizeof(double) * n_out * m.n_states || m.n_terms > MAX_NZ ||
+        (deq >= 0 && (deq >= m.n_states || b_us.len < (Py_ssize_t)sizeof(double) * n_out * n_inputs ||
+                      b_dx.len < (Py_ssize_t)sizeof(double) * n_out)) ||
         !prepare(&m, (const double *)b_coef.buf)) {
         PyErr_SetString(PyExc_ValueError, "simulate: inconsistent buffer sizes or model too large");
         goto done;
     }
     for (i = 0; i < m.n_states; i++) m.travel[i] = has_travel ? ((const double *)b_travel.buf)[i] : HUGE_VAL;
     {
-        double x[MAX_STATES], xs[MAX_STATES], k1[MAX_STATES], k2[MAX_STATES], k3[MAX_STATES],
+        double x[MAX_STATES], xs[MAX_STATES], xt[MAX_STATES], kk[3][MAX_STATES],
             k4[MAX_STATES];
-        double h = dt / substeps;
+        double h = dt / substeps, *dxo = (double *)b_dx.buf;
+        const double *us = (const double *)b_us.buf;
         int s, ni = n_inputs, mode[MAX_STATES];
         Py_ssize_t t, written = 0;
         for (i = 0; i < m.n_states; i++) x[i] = ((const double *)b_x0.buf)[i];
@@ -240,6 +320,7 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
         Py_BEGIN_ALLOW_THREADS
         if (n_out > 0) {
             for (i = 0; i < m.n_states; i++) out[i] = x[i];
+            if (deq >= 0) dxo[0] = equation(&m, deq, x, us, NULL, 1);
             written = 1;
         }
         for (t = 1; t < n_out; t++) {
@@ -252,20 +333,19 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
                         if (!(fabs(x[i]) <= bound)) ok = 0;
                     continue;
                 }
-                rhs(&m, x, u0, NULL, k1);
-                for (i = 0; i < m.n_states; i++) xs[i] = x[i] + 0.5 * h * k1[i];
-                rhs(&m, xs, u0 + ni, NULL, k2);
-                for (i = 0; i < m.n_states; i++) xs[i] = x[i] + 0.5 * h * k2[i];
-                rhs(&m, xs, u0 + ni, NULL, k3);
-                for (i = 0; i < m.n_states; i++) xs[i] = x[i] + h * k3[i];
-                rhs(&m, xs, u0 + 2 * ni, NULL, k4);
-                for (i = 0; i < m.n_states; i++) {
-                    x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+                /* xs = x + h/2 k1, xt = x + h/2 k2, xs = x + h k3 (as (0.5 * h) * k, the same numbers) */
+                stage(&m, x, x, u0, 0.5 * h, kk[0], xs, NULL);
+                stage(&m, x, xs, u0 + ni, 0.5 * h, kk[1], xt, NULL);
+                stage(&m, x, xt, u0 + ni, h, kk[2], xs, NULL);
+                stage(&m, x, xs, u0 + 2 * ni, h / 6.0, k4, x, (const double (*)[MAX_STATES])kk);
+                for (i = 0; i < m.n_states; i++)
                     if (!(fabs(x[i]) <= bound)) ok = 0; /* also catches NaN */
-                }
             }
             if (!ok) break;
             for (i = 0; i < m.n_states; i++) out[t * m.n_states + i] = x[i];
+            /* the derivative at the sample (off the steps' chain of dependencies: next to free) */
+            if (deq >= 0) dxo[t] = m.has_stops ? equation(&m, deq, x, us + t * ni, NULL, 1)
+                                              : equation(&m, deq, x, us + t * ni, NULL, 0);
             written = t + 1;
         }
         Py_END_ALLOW_THREADS
@@ -280,11 +360,81 @@ done:
     PyBuffer_Release(&b_u);
     PyBuffer_Release(&b_out);
     if (has_travel) PyBuffer_Release(&b_travel);
+    if (b_us.buf) PyBuffer_Release(&b_us);
+    if (b_dx.buf) PyBuffer_Release(&b_dx);
+    return result;
+}
+
+/* rhs_rows(term_ptr, fac_feat, fac_pow, coef, columns, eq, out [, travel]): out[t] = f_eq(x_t, u_t), the
+   model's right-hand side of equation `eq` at n independent rows (the one-step prediction, the free run's
+   q1_dot), with each row's own contact sides. `columns`: a tuple of n_states + n_inputs 1-D float64
+   buffers (strided views allowed), the states then the inputs; out: n doubles, writable. Rows are
+   independent, so unlike the free run this is not one long chain of dependent operations. */
+static PyObject *rhs_rows(PyObject *self, PyObject *args) {
+    Py_buffer b_ptr, b_feat, b_pow, b_coef, b_out, b_travel = {0}, cols[MAX_STATES + MAX_INPUTS];
+    PyObject *columns, *result = NULL;
+    int eq, n_cols = 0, i, ok = 1;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*O!iw*|y*", &b_ptr, &b_feat, &b_pow, &b_coef, &PyTuple_Type, &columns,
+                          &eq, &b_out, &b_travel))
+        return NULL;
+    model_t m;
+    int has_travel = b_travel.buf != NULL;
+    Py_ssize_t n = b_out.len / (Py_ssize_t)sizeof(double);
+    m.ptr = (const int *)b_ptr.buf;
+    m.feat = (const int *)b_feat.buf;
+    m.pow = (const int *)b_pow.buf;
+    m.n_terms = (int)(b_ptr.len / sizeof(int)) - 1;
+    m.n_states = b_coef.len / (Py_ssize_t)sizeof(double) / (m.n_terms > 0 ? m.n_terms : 1);
+    m.n_inputs = (int)PyTuple_GET_SIZE(columns) - m.n_states;
+    if (m.n_terms < 1 || m.n_terms > MAX_NZ || m.n_states < 1 || m.n_states > MAX_STATES || m.n_inputs < 0 ||
+        m.n_inputs > MAX_INPUTS || eq < 0 || eq >= m.n_states ||
+        b_coef.len != (Py_ssize_t)(sizeof(double) * m.n_states * m.n_terms) ||
+        (has_travel && b_travel.len != (Py_ssize_t)sizeof(double) * m.n_states) ||
+        !prepare(&m, (const double *)b_coef.buf))
+        ok = 0;
+    for (i = 0; ok && i < m.n_states + m.n_inputs; i++) {
+        if (PyObject_GetBuffer(PyTuple_GET_ITEM(columns, i), &cols[i], PyBUF_RECORDS_RO) < 0) {
+            ok = -1;
+            break;
+        }
+        n_cols++;
+        if (cols[i].ndim != 1 || cols[i].itemsize != sizeof(double) || strcmp(cols[i].format, "d") != 0 ||
+            cols[i].shape[0] < n)
+            ok = 0;
+    }
+    if (ok <= 0) {
+        if (ok == 0) PyErr_SetString(PyExc_ValueError, "rhs_rows: inconsistent buffer sizes or model too large");
+        goto done;
+    }
+    for (i = 0; i < m.n_states; i++) m.travel[i] = has_travel ? ((const double *)b_travel.buf)[i] : HUGE_VAL;
+    {
+        double x[MAX_STATES], u[MAX_INPUTS], *out = (double *)b_out.buf;
+        Py_BEGIN_ALLOW_THREADS
+        for (Py_ssize_t t = 0; t < n; t++) {
+            for (i = 0; i < m.n_states + m.n_inputs; i++) {
+                double v = *(const double *)((const char *)cols[i].buf + t * cols[i].strides[0]);
+                if (i < m.n_states) x[i] = v; else u[i - m.n_states] = v;
+            }
+            out[t] = m.has_stops ? equation(&m, eq, x, u, NULL, 1) : equation(&m, eq, x, u, NULL, 0);
+        }
+        Py_END_ALLOW_THREADS
+    }
+    Py_INCREF(Py_None);
+    result = Py_None;
+done:
+    for (i = 0; i < n_cols; i++) PyBuffer_Release(&cols[i]);
+    PyBuffer_Release(&b_ptr);
+    PyBuffer_Release(&b_feat);
+    PyBuffer_Release(&b_pow);
+    PyBuffer_Release(&b_coef);
+    PyBuffer_Release(&b_out);
+    if (has_travel) PyBuffer_Release(&b_travel);
     return result;
 }
 
 static PyMethodDef methods[] = {
     {"simulate", simulate, METH_VARARGS, "Fixed-step RK4 free run of a sparse term model."},
+    {"rhs_rows", rhs_rows, METH_VARARGS, "One equation of a sparse term model's right-hand side at independent rows."},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_simkernel",

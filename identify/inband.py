@@ -32,6 +32,7 @@ from .gram import BlockGram
 from .library import evaluate_terms
 from .model import SparseModel
 from .optimizers.base import least_squares
+from .simulate import equation_rows
 
 #: Newton steps per update of the slow displacement (the stiffness is taken once: 3 right-hand sides and
 #: 2 band operations, then 1 and 1 per step);
@@ -83,11 +84,11 @@ def has_even_force(model: SparseModel, sig: StateSignals, equation: str = "q1_do
     the band. An odd force implies next to none (Table 1 rig: 8 um rms, from the sweep's start in the
     band's lower roll-off, against 0.4-0.5 mm for 2-3e4 N/m^2), and carrying that invites the
     full-library fit to pair it with a spurious q2^2 (z = 19 on the Table 1 sweep)."""
-    rows = np.arange(sig.valid.start, sig.valid.stop, 7)
-    x, u = sig.states[rows], sig.input[rows][:, None]
+    rows = slice(sig.valid.start, sig.valid.stop, 7)
+    x, u = sig.state_columns(rows), sig.input[rows][:, None]
     e = list(model.equations).index(equation)
-    f = model.rhs(x, u)[:, e]
-    even = f + model.rhs(-x, -u)[:, e]
+    f = equation_rows(model, x, u, e)  # compiled: the record's every 7th row, twice
+    even = f + equation_rows(model, [-c for c in x], -u, e)
     return bool(np.max(np.abs(even), initial=0.0) > 1e-9 * np.max(np.abs(f), initial=0.0))
 
 

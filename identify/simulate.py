@@ -29,6 +29,9 @@ class SimulationResult:
     states: np.ndarray
     n_valid: int
     substeps: int
+    #: simulate(derivative=(e, u)): equation e of the model at each simulated sample and u's row (NaN after
+    #: a divergence), else None
+    derivative: np.ndarray | None = None
 
     @property
     def diverged(self) -> bool:
@@ -54,6 +57,8 @@ def fine_grid_input(inputs: np.ndarray, substeps: int, interpolation: str = "ban
         # resample_poly keeps the original samples' positions (output[k*up] ~= input[k]) and handles
         # non-periodic records without wrap-around; mean removed so its zero-padded edges do not ring.
         mean = inputs.mean(axis=0)
+        if inputs.shape[1] == 1:  # one channel as a 1-D signal: the same numbers, without the strided axis
+            return (resample_poly(inputs[:, 0] - mean[0], up, 1)[:n_fine] + mean[0])[:, None]
         fine = resample_poly(inputs - mean, up, 1, axis=0)[:n_fine] + mean
         return np.ascontiguousarray(fine)
     raise ValueError(f"unknown interpolation {interpolation!r} (bandlimited, cubic, linear)")
@@ -83,14 +88,46 @@ def choose_substeps(model: SparseModel, dt: float, state_scale) -> int:
     return int(np.clip(np.ceil(omega * dt / STEP_OMEGA), 1, MAX_SUBSTEPS))
 
 
+def equation_rows(model: SparseModel, states, inputs, equation: int = 0) -> np.ndarray:
+    """model.rhs(states, inputs)[:, equation] (the equation's derivative, e.g. q1_dot in m/s^2) at n
+    independent rows, in the compiled kernel: one pass, none of the library's intermediate columns.
+
+    states : sequence of n_states 1-D arrays (n,) (strided views are fine), or an (n, n_states) array;
+    inputs : (n, n_inputs) array, a sequence of columns, or one column (n,). End-stop features take each
+    row's own side."""
+    def columns(a):
+        if isinstance(a, np.ndarray):
+            return list(a.T) if a.ndim == 2 else [a]
+        return list(a)
+
+    cols = columns(states) + columns(inputs)
+    cols = [np.asarray(c, dtype=float) for c in cols]
+    n = cols[0].shape[0] if cols else 0
+    if len(cols) != len(model.states) + len(model.inputs):
+        raise ValueError(f"{len(cols)} columns; model has states {model.states} and inputs {model.inputs}")
+    coef = np.zeros_like(model.coef_)
+    coef[equation] = model.coef_[equation]  # the other equations' terms are not evaluated at all
+    out = np.empty(n)
+    if n == 0 or not np.any(coef):
+        out[:] = 0.0
+        return out
+    ptr, feat, powr = model.space.encode(model.terms)
+    _simkernel.rhs_rows(np.asarray(ptr, dtype=np.int32).tobytes(), np.asarray(feat, dtype=np.int32).tobytes(),
+                        np.asarray(powr, dtype=np.int32).tobytes(), coef.tobytes(), tuple(cols), int(equation),
+                        out, np.array([model.travel.get(s, np.inf) for s in model.states]).tobytes())
+    return out
+
+
 def simulate(model: SparseModel, dt: float, x0, inputs=None, *, inputs_fine=None, substeps: int | None = None,
              interpolation: str = "bandlimited", state_scale=None, n_samples: int | None = None,
-             bound: float | None = None) -> SimulationResult:
+             bound: float | None = None, derivative=None) -> SimulationResult:
     """Free-run `model` from state `x0` over the input's samples (spacing `dt` seconds).
 
     Give either `inputs` (n, n_inputs) sampled at dt, or `inputs_fine` already on the h/2 grid (then
     `substeps` and `n_samples` are required). `state_scale` (typical |state| per state) sets the
     substeps automatically; `bound` stops the run when a state leaves [-bound, bound] (divergence).
+    `derivative` = (e, u_samples (n, n_inputs)): also equation e at each simulated sample with that sample's
+    input (validation's simulated q1_dot), computed in the run, as equation_rows would: the same numbers.
     """
     x0 = np.ascontiguousarray(np.asarray(x0, dtype=float).ravel())
     if x0.size != len(model.states):
@@ -114,11 +151,21 @@ def simulate(model: SparseModel, dt: float, x0, inputs=None, *, inputs_fine=None
         bound = 1e6 if state_scale is None else 1e3 * float(np.max(state_scale))
     ptr, feat, powr = model.space.encode(model.terms)
     out = np.full((n_samples, x0.size), np.nan)
+    extra = ()
+    if derivative is not None:
+        eq, u_s = derivative
+        u_s = np.ascontiguousarray(np.asarray(u_s, dtype=float).reshape(n_samples, -1))
+        if u_s.shape[1] != len(model.inputs):
+            raise ValueError(f"derivative input has {u_s.shape[1]} channels; model expects {model.inputs}")
+        dx = np.full(n_samples, np.nan)
+        extra = (int(eq), u_s.reshape(-1), dx)
     n_valid = _simkernel.simulate(
         np.asarray(ptr, dtype=np.int32).tobytes(), np.asarray(feat, dtype=np.int32).tobytes(),
         np.asarray(powr, dtype=np.int32).tobytes(), np.ascontiguousarray(model.coef_).tobytes(),
         x0.tobytes(), u.reshape(-1), u.shape[1], int(n_samples), int(substeps), float(dt), float(bound),
-        out.reshape(-1), np.array([model.travel.get(s, np.inf) for s in model.states]).tobytes())
+        out.reshape(-1), np.array([model.travel.get(s, np.inf) for s in model.states]).tobytes(), *extra)
     if n_valid < n_samples:
         out[n_valid:] = np.nan
-    return SimulationResult(out, int(n_valid), int(substeps))
+        if extra:
+            dx[n_valid:] = np.nan
+    return SimulationResult(out, int(n_valid), int(substeps), dx if extra else None)

@@ -66,3 +66,60 @@ def test_fine_grid_input_keeps_samples_and_interpolates(method):
     inner = slice(600, fine.size - 600)  # away from the record's edges
     tol = {"bandlimited": 1e-3, "cubic": 1e-6, "linear": 2e-3}[method]
     assert np.max(np.abs(fine[inner] - np.sin(2 * np.pi * 7 * tf[inner]))) < tol
+
+
+@pytest.mark.parametrize("equations, travel", [
+    (TABLE1, None),
+    # constant, |q|, sign, products across states and input, a term shared by both equations
+    ({"q1_dot": {"1": 0.3, "sign(q1)": -0.2, "q1*|q1|": 4.0, "q2^2": 3e4, "q2^3*|q2|": 7.0,
+                 "q1^2*q2^2*zdd": 2.0, "zdd": -1.0},
+      "q2_dot": {"q1": 1.0, "q2^2": 5.0}}, None),
+    # end stops: the penetration and the contact indicator on each row's own side
+    ({"q1_dot": {"q2": -900.0, "stop(q2)": -5e5, "q1*contact(q2)": -30.0, "zdd": -1.0},
+      "q2_dot": {"q1": 1.0}}, {"q2": 0.02}),
+    ({"q1_dot": {}, "q2_dot": {"q1": 1.0}}, None),  # an empty equation is zero
+])
+@pytest.mark.parametrize("equation", [0, 1])
+def test_equation_rows_is_the_models_rhs(equations, travel, equation):
+    """The compiled one-equation evaluation against SparseModel.rhs (numpy, the library's columns), on
+    strided state columns and an input column: the same sums, so equal to rounding."""
+    from identify.simulate import equation_rows
+
+    rng = np.random.default_rng(3)
+    model = SparseModel(equations, travel=travel)
+    n = 3001  # not a multiple of the kernel's block of rows
+    x = rng.standard_normal((n, 2)) * [0.3, 0.025]  # q2 on both sides of the 0.02 m travel
+    u = rng.standard_normal((n, 1))
+    got = equation_rows(model, (x[:, 0], x[:, 1]), u, equation)
+    want = model.rhs(x, u)[:, equation]
+    assert got.shape == (n,)
+    np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-13 * max(np.max(np.abs(want)), 1.0))
+    if travel:
+        assert np.any(np.abs(x[:, 1]) > 0.02) and np.any(np.abs(x[:, 1]) < 0.02)
+
+
+@pytest.mark.parametrize("travel", [None, {"q2": 0.0175}])
+def test_derivative_in_the_run_is_equation_rows_at_the_simulated_states(travel):
+    """simulate(derivative=(0, u)) (validation's simulated q1_dot) against equation_rows at the states it
+    returns: the same function of the same numbers, so equal exactly; NaN after a divergence."""
+    from identify.simulate import equation_rows
+
+    eqs = {"q1_dot": dict(TABLE1["q1_dot"]), "q2_dot": {"q1": 1.0}}
+    if travel:
+        eqs["q1_dot"].update({"stop(q2)": -4e5, "q1*contact(q2)": -40.0})
+    model = SparseModel(eqs, travel=travel)
+    fs, n = 2048.0, 40_000
+    t = np.arange(n) / fs
+    amplitude = 4e-3 if travel else 1.3e-3  # without the stops 4 mm runs away (q1*q2^2's negative damping)
+    u = (-amplitude * (2 * np.pi * 5) ** 2 * np.sin(2 * np.pi * (3 * t + 0.2 * t**2)))[:, None]
+    res = simulate(model, 1 / fs, [0.0, 0.0], u, substeps=2, derivative=(0, u))
+    assert not res.diverged
+    if travel:
+        assert np.max(np.abs(res.states[:, 1])) > 0.0175  # the run reaches the stops
+    np.testing.assert_array_equal(res.derivative, equation_rows(model, res.states, u, 0))
+    unstable = SparseModel({"q1_dot": {"q1": 50.0, "q2": -100.0, "zdd": 1.0}, "q2_dot": {"q1": 1.0}})
+    res = simulate(unstable, 1e-3, [0.0, 1.0], np.zeros((5000, 1)), substeps=1, bound=1e3,
+                   derivative=(0, np.zeros((5000, 1))))
+    assert res.diverged and np.all(np.isnan(res.derivative[res.n_valid:]))
+    np.testing.assert_array_equal(res.derivative[:res.n_valid],
+                                  equation_rows(unstable, res.states[:res.n_valid], np.zeros((res.n_valid, 1)), 0))
