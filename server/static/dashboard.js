@@ -285,6 +285,11 @@ async function refreshHome(rig) {
   showRecordings(recs); showCampaigns(cs);
   await refreshHistory(recs);
 }
-planHint();
-setInterval(refresh, 1000);
-if (tok()) signIn(); else { $("login").hidden = false; }
+// start once every script has run: recording.js and history.js load after this file, and an early refresh
+// (a timer or a quick sign-in while they were still loading) read their names before they existed
+// ("openRecording is not defined", seen under load in tests/server/test_dashboard.py)
+window.addEventListener("DOMContentLoaded", () => {
+  planHint();
+  setInterval(refresh, 1000);
+  if (tok()) signIn(); else { $("login").hidden = false; }
+});
