@@ -103,6 +103,21 @@ def test_chain_bias_is_measured_and_removed():
     assert np.all(np.abs(after) < 1.5 * se_mean), (after, se_mean)
 
 
+def _closed_form_and_simex(recording):
+    """The default fit of `recording` (no validation, no placements), its all-rows coefficients, and its
+    chain bias both ways on the same fit: closed form and SIMEX with 256 replicates."""
+    from identify import uncertainty as unc
+
+    ident = SparseIdentifier(validate=False, placements=0).fit(recording)
+    sig = ident.states_
+    gram = ident._gram(sig, holdout_blocks(sig)[0])
+    sups = {e: s.support for e, s in enumerate(ident.selections_.values())}
+    coefs = {e: unc.refit_all_rows(gram, sups[e], e, covariance=False)[0] for e in sups}
+    closed = unc.analytic_chain_bias(recording, sig, gram, ident.library_, sups, coefs)
+    simex = unc.chain_bias(recording, sig, sups, coefs, lambda s2, cols: ident._gram(s2, gram.edges, cols), 256)
+    return ident, sups, coefs, closed, simex
+
+
 def test_closed_form_bias_matches_a_large_simex():
     """The corrected-score bias (identify.corrected, the default) against SIMEX with 256 replicates on
     the same fit: Table 1 rig, 60 s, 5 % noise. SIMEX is a Monte Carlo (mc_var: its variance) and
@@ -113,14 +128,8 @@ def test_closed_form_bias_matches_a_large_simex():
     from identify import uncertainty as unc
 
     run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 60, 1.3), seed=0, **_sensors(0.05))
-    ident = SparseIdentifier(validate=False, placements=0).fit(run.recording)
+    ident, sups, coefs, closed, simex = _closed_form_and_simex(run.recording)
     assert ident.result()["uncertainty"]["chain_bias"]["method"] == unc.ANALYTIC
-    sig = ident.states_
-    gram = ident._gram(sig, holdout_blocks(sig)[0])
-    sups = {e: s.support for e, s in enumerate(ident.selections_.values())}
-    coefs = {e: unc.refit_all_rows(gram, sups[e], e, covariance=False)[0] for e in sups}
-    closed = unc.analytic_chain_bias(run.recording, sig, gram, ident.library_, sups, coefs)
-    simex = unc.chain_bias(run.recording, sig, sups, coefs, lambda s2, cols: ident._gram(s2, gram.edges, cols), 256)
     assert closed["method"] == unc.ANALYTIC and simex["replicates"] == 256
     names = ident.library_.names
     for j in np.flatnonzero(sups[0]):
@@ -140,16 +149,8 @@ def test_closed_form_noise_spread_matches_the_replicates_spread():
     to well below that (at 5 % their antithetic halves carry third-order terms: 5-20 % apart). Table 1
     rig at 1.2 mm, 60 s. Measured 0.1-7 % apart; asked within 20 % (3 Monte Carlo sigma) for every kept
     q1_dot term, and the weak term's share must be what sets its standard error when it is the larger."""
-    from identify import uncertainty as unc
-
     run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 60, 1.2), seed=2, **_sensors(0.005))
-    ident = SparseIdentifier(validate=False, placements=0).fit(run.recording)
-    sig = ident.states_
-    gram = ident._gram(sig, holdout_blocks(sig)[0])
-    sups = {e: s.support for e, s in enumerate(ident.selections_.values())}
-    coefs = {e: unc.refit_all_rows(gram, sups[e], e, covariance=False)[0] for e in sups}
-    closed = unc.analytic_chain_bias(run.recording, sig, gram, ident.library_, sups, coefs)
-    simex = unc.chain_bias(run.recording, sig, sups, coefs, lambda s2, cols: ident._gram(s2, gram.edges, cols), 256)
+    ident, sups, coefs, closed, simex = _closed_form_and_simex(run.recording)
     names = ident.library_.names
     assert {names[j] for j in np.flatnonzero(sups[0])} == set(run.truth["model"]["q1_dot"])
     for j in np.flatnonzero(sups[0]):
