@@ -37,8 +37,8 @@ def term_exponents(term, input_name: str) -> tuple | None:
     """Exponents of a library term over SIGNALS (the constant: all 0), or None when it is not a
     monomial of them (|q1|, sign(q1), stop(q2), contact(q2), another input)."""
     exps = [0, 0, 0, 0]
+    names = {"q1": 0, "q2": 1, input_name: 3}
     for feature, power in term.factors:
-        names = {"q1": 0, "q2": 1, input_name: 3}
         if feature not in names:
             return None
         exps[names[feature]] += power
@@ -84,13 +84,13 @@ class CorrectedSums:
     monomial the Gram lacks, from the signals), corrected with its noise covariance."""
 
     def __init__(self, cov: np.ndarray, raw: dict, signals):
-        """raw : {exponents: sum over the fitted rows}; signals : () -> (q1, q2, q1_dot, input) on those
-        rows, called only when a moment is missing from raw."""
+        """raw : {exponents: sum over the fitted rows}; signals : (q1, q2, q1_dot, input) on those rows,
+        summed only for a moment missing from raw."""
         self.mu, self.raw, self._signals, self._poly = GaussianMoments(cov), dict(raw), signals, {}
 
     def raw_sum(self, k: tuple) -> float:
         if k not in self.raw:
-            y = self._signals()
+            y = self._signals
             col = np.ones_like(y[0])
             for v, p in enumerate(k):
                 if p:
@@ -151,10 +151,9 @@ def corrected_refits(parts, supports: dict, col_exps: list, target_exps: list) -
     return out
 
 
-def analytic_bias(parts, supports: dict, coefs: dict, col_exps: list, target_exps: list) -> dict | None:
-    """{equation: (m,) bias} = the raw all-rows refit (coefs) less the corrected one; None when a kept
-    term is not a monomial (the caller uses SIMEX)."""
-    if any(col_exps[j] is None for sup in supports.values() for j in np.flatnonzero(sup)):
-        return None
+def analytic_bias(parts, supports: dict, coefs: dict, col_exps: list, target_exps: list) -> dict:
+    """{equation: (m,) bias} = the raw all-rows refit (coefs) less the corrected one. Every kept term must
+    be a monomial (col_exps not None: uncertainty.analytic_chain_bias checks it before it reads the
+    noise floors, and uses SIMEX otherwise)."""
     fixed = corrected_refits(parts, supports, col_exps, target_exps)
     return {e: np.where(supports[e], coefs[e] - fixed[e], 0.0) for e in supports}

@@ -207,11 +207,10 @@ class SparseIdentifier:
         self.training_model_ = SparseModel(coefs, ("q1", "q2"), (sig.input_name,))
         bias_of = None
         if self.bias_replicates != 0 and getattr(self, "recording_", None) is not None:
-            def bias_of(sups, coefs):  # in closed form where the terms allow it, else SIMEX
-                return ((self.bias_method == "auto"
-                         and unc.analytic_chain_bias(self.recording_, sig, gram, self.library_, sups, coefs))
-                        or unc.chain_bias(self.recording_, sig, sups, coefs,
-                                          lambda s2, cols: self._gram(s2, gram.edges, cols), self.bias_replicates))
+            def bias_of(sups, coefs):
+                return unc.estimate_chain_bias(self.bias_method, self.recording_, sig, gram, self.library_, sups,
+                                               coefs, lambda s2, cols: self._gram(s2, gram.edges, cols),
+                                               self.bias_replicates)
         reported, self.standard_errors_, self.uncertainty_ = self._trust(gram, held, effective_samples(sig), bias_of)
         timings["refit_uncertainty"] = time.perf_counter() - t0
         self.model_ = SparseModel(reported, ("q1", "q2"), (sig.input_name,), self.standard_errors_)

@@ -112,10 +112,9 @@ def fit_joint(ident, recordings: list):
         def gram_of(noisy, columns):
             return BlockGram.concatenate([ident._gram(s, e, columns) for s, (e, _) in zip(noisy, parts)])
 
-        def bias_of(sups, coefs):  # in closed form where the terms allow it, else SIMEX
-            return ((ident.bias_method == "auto"
-                     and unc.analytic_chain_bias(list(recordings), sigs, gram, ident.library_, sups, coefs))
-                    or unc.chain_bias(list(recordings), sigs, sups, coefs, gram_of, ident.bias_replicates))
+        def bias_of(sups, coefs):
+            return unc.estimate_chain_bias(ident.bias_method, list(recordings), sigs, gram, ident.library_, sups,
+                                           coefs, gram_of, ident.bias_replicates)
     reported, ident.standard_errors_, ident.uncertainty_ = ident._trust(gram, held, n_eff, bias_of)
     timings["refit_uncertainty"] = time.perf_counter() - t0
     ident.model_ = SparseModel(reported, ("q1", "q2"), (sigs[0].input_name,), ident.standard_errors_)

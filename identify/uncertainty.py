@@ -221,7 +221,7 @@ def analytic_chain_bias(recording, sig, gram: BlockGram, library, supports: dict
         C = (gram.part(i) if several else gram).C.sum(0)
         v = s.valid
         signals = (s.q1[v], s.q2[v], s.q1_dot[v], s.input[v])
-        parts.append(CorrectedSums(covs[-1], gram_moments(C, col_exps + TARGET_EXPONENTS[:gram.p]), lambda y=signals: y))
+        parts.append(CorrectedSums(covs[-1], gram_moments(C, col_exps + TARGET_EXPONENTS[:gram.p]), signals))
         spread_parts.append((signals, noise, floor))
     bias = analytic_bias(parts, supports, coefs, col_exps, TARGET_EXPONENTS)
     G = gram.equations(np.ones(gram.n_blocks, dtype=bool)).G
@@ -229,6 +229,14 @@ def analytic_chain_bias(recording, sig, gram: BlockGram, library, supports: dict
     zero = {e: np.zeros(sup.size) for e, sup in supports.items()}
     return {"noise_std": floors if several else floors[0], "bias": bias, "spread_var": spread, "mc_var": zero,
             "replicates": 0, "method": ANALYTIC, "noise_cov": covs if several else covs[0]}
+
+
+def estimate_chain_bias(method: str, recording, sig, gram: BlockGram, library, supports: dict, coefs: dict,
+                        gram_of, n_replicates: int | None = N_REPLICATES) -> dict | None:
+    """The chain's bias as `method` asks ("auto": in closed form where it applies, analytic_chain_bias;
+    SIMEX, chain_bias, otherwise or for "simex"). Arguments as those two take them."""
+    return ((method == "auto" and analytic_chain_bias(recording, sig, gram, library, supports, coefs))
+            or chain_bias(recording, sig, supports, coefs, gram_of, n_replicates))
 
 
 #: The noise floors are read from at most this many stretches of FLOOR_STRETCH Welch segments, spread

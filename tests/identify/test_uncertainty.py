@@ -372,7 +372,7 @@ def test_corrected_sums_are_unbiased_for_the_noise_free_moments():
     for _ in range(200):
         d = noise.draw(s_in, s_out, rng)
         y = [xv + dv[v] for xv, dv in zip(x, d)]
-        sums = CorrectedSums(cov, {}, lambda y=y: y)
+        sums = CorrectedSums(cov, {}, y)
         raw.append([sums.raw_sum(k) for k in monomials])
         fixed.append([sums(k) for k in monomials])
     raw, fixed = np.array(raw), np.array(fixed)
