@@ -42,8 +42,12 @@ def wald_p(fit: Fit, terms) -> tuple[float, float]:
     if not pos:
         return 0.0, 1.0
     theta = np.array([fit.coef[fit.names[i]] for i in pos])
-    w = float(theta @ scaled_pinv(fit.cov[np.ix_(pos, pos)]) @ theta)
-    return w, float(stats.chi2.sf(w, len(pos)))
+    cov = fit.cov[np.ix_(pos, pos)]
+    w = float(theta @ scaled_pinv(cov) @ theta)
+    # degrees of freedom: the free coefficients among `terms` (a one-sided stop's tied terms follow others)
+    d = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    dof = int(np.linalg.matrix_rank(cov / np.outer(d, d), tol=1e-9)) if np.all(d > 0) else len(pos)
+    return w, float(stats.chi2.sf(w, max(dof, 1)))
 
 
 def propose(fitter: Fitter, cur: Structure, name: str, effect: Effect) -> dict | None:
@@ -56,7 +60,6 @@ def propose(fitter: Fitter, cur: Structure, name: str, effect: Effect) -> dict |
     if effect.kind == "measurement":
         return _fault(fitter, cur, name) if fitter.chain is not None else None
     sig = fitter.signals(cur)
-    qmax = float(np.max(np.abs(sig.q2[sig.valid])))
     if name == "end_stop":
         if cur.travel:
             return None
@@ -65,6 +68,7 @@ def propose(fitter: Fitter, cur: Structure, name: str, effect: Effect) -> dict |
         if name == "hysteresis":
             if cur.hyst is not None:
                 return None
+            qmax = float(np.max(np.abs(sig.q2[sig.valid])))
             tries = [cur.adding(name, effect.terms, hyst=((1 - share) / (sat * qmax), share / (sat * qmax)))
                      for sat in HYST_SATURATION for share in HYST_GAMMA_SHARE]
         else:
@@ -116,9 +120,9 @@ def _end_stop(fitter: Fitter, cur: Structure, effect: Effect, sig):
         costs = [attempt(f * peak)[3] for f in fr]
         i = int(np.argmin(costs))
         lo, hi = fr[max(i - 1, 0)] * peak, (fr[i + 1] if i + 1 < fr.size else 1.0) * peak
-        res = minimize_scalar(lambda d: attempt(d)[3], bounds=(lo, hi), method="bounded",
-                              options={"xatol": 2e-3 * peak, "maxiter": 12})
-        variants.append(min((attempt(fr[i] * peak), attempt(float(res.x))), key=lambda v: v[3]))
+        minimize_scalar(lambda d: attempt(d)[3], bounds=(lo, hi), method="bounded",
+                        options={"xatol": 2e-3 * peak, "maxiter": 12})
+        variants.append(min(memo.values(), key=lambda v: v[3]))  # every travel tried, the search's included
 
     st, fit, _, _ = min(variants, key=lambda v: v[3])
     return st, fit

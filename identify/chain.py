@@ -67,8 +67,7 @@ class StateSignals:
         """The states a model is written in: q1, and q2 plus the displacement below the band when it
         is known (accelerometers miss the static offset an even force produces; the terms of a rig's
         force are those of the true displacement)."""
-        q2 = self.q2 if self.q2_offset is None else self.q2 + self.q2_offset
-        return np.column_stack([self.q1, q2])
+        return np.column_stack(self.state_columns())
 
     def state_columns(self, rows=slice(None)) -> tuple[np.ndarray, np.ndarray]:
         """(q1, q2 [+ q2_offset]) on `rows`: the states' columns, without building the (n, 2) array."""

@@ -1,5 +1,6 @@
 """Admissibility rules and one-sided end stops' tied coefficients, on hand-made coefficients."""
 import numpy as np
+import pytest
 
 from identify.admissibility import check
 from identify.structure import Fitter, Structure
@@ -39,3 +40,24 @@ def test_one_sided_stop_ties_its_asymmetry_terms():
         assert full["q1*sign(q2)*contact(q2)"] == side * full["q1*contact(q2)"] == side * 6.0
         assert check("end_stop", {t: -abs(v) * (side if "sign(q2)" in t else 1) for t, v in full.items()}, {}, {}) == ""
     assert Fitter.tie_matrix(Structure(terms, travel=1e-3), list(terms)).shape == (8, 8)
+
+
+def test_wald_test_of_a_one_sided_stop_counts_its_free_coefficients():
+    """A one-sided stop has four terms but two free coefficients (the other two follow them): its Wald
+    statistic is chi-square with 2 degrees of freedom, not 4 (a p-value 4-8x too large near 1e-3)."""
+    from scipy import stats
+
+    from identify.candidates import wald_p
+    from identify.structure import Fit
+
+    terms = ("q1", "q2") + STOP
+    T = Fitter.tie_matrix(Structure(terms, travel=1e-3, side=1), list(terms))
+    free_cov = np.diag([1e-4, 1e-2, 4.0, 1e-2])  # q1, q2, stop(q2), q1*contact(q2)
+    cov = T @ free_cov @ T.T
+    coef = dict(zip(terms, T @ np.array([-3.0, -900.0, -5.0, -0.25])))
+    fit = Fit(coef, {}, cov, list(terms), 0.0)
+    w, p = wald_p(fit, STOP)
+    assert w == pytest.approx(5.0**2 / 4.0 + 0.25**2 / 1e-2, rel=1e-9)  # the free pair's own statistic
+    assert p == pytest.approx(stats.chi2.sf(w, 2), rel=1e-9)
+    two_sided = Fit(coef, {}, np.diag([1e-4, 1e-2, 4.0, 4.0, 1e-2, 1e-2]), list(terms), 0.0)
+    assert wald_p(two_sided, STOP)[1] == pytest.approx(stats.chi2.sf(wald_p(two_sided, STOP)[0], 4), rel=1e-9)
