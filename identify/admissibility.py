@@ -5,6 +5,11 @@ it fits.
    dq1/dt of the sign that opposes the motion (negative); a positive one injects energy (seen: a 1 ms
    channel delay fitted as quadratic damping with a positive coefficient, confidence 0.89). End stops
    and hysteresis must restore (pull back), on each side.
+   An end stop is a contact stiffer than the spring it stops: its stiffer side's contact stiffness must
+   exceed the rig's own linear stiffness -coef(q2) (both per kg). A softer one is a stiffness change
+   beyond the travel, which the stiffness effects describe (seen: after a 5 % stiffness drift was named,
+   a one-sided `end_stop` of 6.4 N/m per kg on a rig of 1894 took 38 % of a gap at 1.2x the noise floor,
+   confidence 0.95; the suite's stops, sim.scenarios, are 2-10x the secant stiffness).
 2. A fix must not flip the sign of a well-determined baseline coefficient (|value| > SIGN_Z standard
    errors of the baseline's own fit): a term that only fits by turning the hardening spring into a
    softening one (seen: q2^3 = +1.16e6 against the truth's -2.18e6 after adding Coulomb friction) is
@@ -36,6 +41,10 @@ def check(name: str, coef: dict, baseline_coef: dict, baseline_se: dict) -> str:
             d1, d2 = coef.get("q1*contact(q2)", 0.0), coef.get("q1*sign(q2)*contact(q2)", 0.0)
             if d1 + d2 > SIGN_TOL * (abs(d1) + abs(d2)) or d1 - d2 > SIGN_TOL * (abs(d1) + abs(d2)):
                 return "the end stop's contact damping injects energy on one side instead of dissipating it"
+            k, contact = -coef.get("q2", 0.0), max(-(c1 + c2), -(c1 - c2))
+            if k > 0 and contact < k:
+                return (f"its contact ({contact:.4g} N/m per kg on its stiffer side) is softer than the rig's own "
+                        f"spring ({k:.4g}): a stiffness change beyond the travel, not a stop")
         if name == "hysteresis" and coef.get("z", 0.0) > 0:
             return "the hysteretic force pushes along the displacement instead of restoring"
     for t, c0 in baseline_coef.items():

@@ -19,6 +19,17 @@ def test_end_stop_must_push_back_and_dissipate_on_both_sides():
     assert "injects energy" in check("end_stop", injecting, {}, {})
 
 
+def test_end_stop_must_be_stiffer_than_the_rigs_spring():
+    # the case that motivated it: a 6.4 N/m per kg one-sided "stop" on a rig of 1894 N/m per kg
+    soft = dict(zip(STOP, (-3.18, -3.18, -0.001, -0.001)), q2=-1894.0)
+    assert "softer than the rig's own spring" in check("end_stop", soft, {}, {})
+    # a one-sided contact at 2x the spring (the suite's softest) is a stop; the stiffer side counts
+    stiff = dict(zip(STOP, (-1894.0, 1894.0, -0.5, 0.5)), q2=-1894.0)   # lower side: 3788
+    assert check("end_stop", stiff, {}, {}) == ""
+    just_below = dict(stiff, **{"stop(q2)": -940.0, "sign(q2)*stop(q2)": 940.0})  # lower side 1880 < 1894
+    assert "softer" in check("end_stop", just_below, {}, {})
+
+
 def test_dissipative_terms_and_sign_flips_are_refused():
     assert "injects energy" in check("quadratic_damping", {"q1*|q1|": 0.3}, {}, {})
     assert check("quadratic_damping", {"q1*|q1|": -0.3}, {}, {}) == ""
