@@ -15,10 +15,21 @@ noise of per-sample covariance c. Its variance is therefore exact and needs no d
 
 Phi_v the transform of G^-1 g_v on the band's bins (identify.spectral.lowband_rfft). The noise is
 correlated over time (q2's near the band's bottom for seconds), so, unlike the chain bias
-(identify.corrected), this is not a Gram quantity: it costs transforms of the record, two per kept term
-in the base layout (the integrated signals' contributions are combined in time by running integrals,
-_row_spectra), four in the force layout. Against SIMEX's replicate spread (256 replicates, ~6 %
-Monte Carlo error) on the Table 1 rig: within 1-7 % at 0.5 % noise, 5-20 % at 5 % (where the
+(identify.corrected), this is not a Gram quantity: it costs transforms of the record. Two things keep
+them few and short: where a signal's slope and Jacobian are constants (the target's own signal, whose
+g_v is theta; a linear input column, -beta theta + r), g_v is a combination of the transforms of theta
+and of the residual, made once for all signals (a base-layout fit of the Table 1 model: 16 transforms,
+3 per term plus the residual's); and every signal here is band-limited, so a product of them is
+transformed on every D-th sample (decimation: exact while its images miss the band; D = 2 for the
+degree-5 g_v of the Table 1 model with its band to 133 Hz at 2048 Hz, 8 for the linear q2_dot
+equation). Against the formula evaluated term by term at full rate (tests/identify/test_noise_spread.py,
+30 s records): 2e-11 without decimation, 1e-7 - 9e-6 with it (the fitted rows' two ends leak); on the
+million-sample record of benchmarks/identify_speed.py the variances moved by < 4e-8 and this step's
+CPU time went from 0.40 s to 0.13 s (--uncertainty-parts). It had combined the integrated signals in
+time by running trapezoidal integrals; now their exact responses (j w)^p multiply on the bins, as the
+chain's and the noise draws' do, which moved the variances by < 1e-4 (standard errors < 5e-5; five
+sweeps, benchmarks/uncertainty_numbers.py). Against SIMEX's replicate
+spread (256 replicates, ~6 % Monte Carlo error) on the Table 1 rig: within 1-7 % at 0.5 % noise, 5-20 % at 5 % (where the
 replicates' antithetic halves carry third-order terms too). Why it is worth it: for a weak term the
 block estimates of the variance (sandwich, jackknife) are noisy because its information sits in a
 few blocks, while this one is not (docs/identification.md section 5). Monomial terms only (their
@@ -33,6 +44,8 @@ from .spectral import lowband_rfft
 
 #: Rows transformed together: a padded million-sample record's polyphase buffers stay ~70 MB.
 BATCH = 8
+#: Largest sampling step of the score's transforms (decimation).
+MAX_STEP = 8
 
 
 class _Monomials:
@@ -61,48 +74,86 @@ class _Monomials:
         return k[v] * self(tuple(lower))
 
 
-def _integrate(x: np.ndarray, dt: float) -> np.ndarray:
-    """Trapezoidal running integral along the last axis of rows x (nfft long, periodic once their mean
-    is removed; x is overwritten), up to a constant (the band has no DC): on bin k it multiplies by
-    dt/2 (1 + z) / (1 - z), z = exp(-2 pi i k / nfft), which is 1/(j w) times (a/2) / tan(a/2),
-    a = w dt: 0.986 at 133 Hz and 2048 Hz, 1 - 1e-5 at 2 Hz."""
-    x -= x.mean(axis=-1, keepdims=True)
-    out = np.cumsum(x, axis=-1)
-    out -= 0.5 * x
-    out *= dt
+def _degree(k) -> int:
+    return 0 if k is None else sum(k)
+
+
+def decimation(noise, degree: int) -> int:
+    """Sampling step for the score's transforms: the largest D <= MAX_STEP dividing nfft for which a
+    signal made of products of `degree` band-limited factors has, on D-times coarser sampling, no image
+    on the band's bins. Every signal the score is built of (q1, q2, q1_dot, input on the fitted rows)
+    is the chain's band-limited output, zero above the band's top bin f_top, so a product of `degree`
+    of them is zero above degree f_top; sampled every D samples, the band's bin k receives, beside
+    itself, the bins at fs/D - f_k and beyond, none of which carry any of it while
+    fs/D - f_top >= degree f_top. The transform on nfft/D points (times D) then gives the same bins:
+    the only leak is that of the fitted rows' two ends (measured: tests/identify/test_noise_spread.py).
+    1 when no D qualifies."""
+    kk = noise.responses[0].size
+    f_top = (kk - 1) * noise.fs_hz / noise.nfft
+    for d in range(MAX_STEP, 1, -1):
+        if noise.nfft % d == 0 and noise.fs_hz / d - f_top >= max(degree, 1) * f_top:
+            return d
+    return 1
+
+
+def _spectra(rows, nfft: int, kk: int, step: int) -> np.ndarray:
+    """(k, kk) rfft on the band's bins of rows (k, n / step) sampled every `step` samples of an
+    nfft-point frame: step x the transform on nfft / step points (decimation says when that is exact)."""
+    x = np.asarray(rows, dtype=float)
+    length = nfft // step
+    out = np.concatenate([lowband_rfft(x[a:a + BATCH], length, kk - 1) for a in range(0, x.shape[0], BATCH)])
+    if step > 1:
+        out *= step
     return out
 
 
-def _transform(x: np.ndarray, nfft: int, kk: int) -> np.ndarray:
-    return np.concatenate([lowband_rfft(x[a:a + BATCH], nfft, kk - 1) for a in range(0, x.shape[0], BATCH)])
+def _scalar(d) -> bool:
+    return np.isscalar(d)
 
 
-def _score_spectra(noise, g_of, n: int, n_terms: int) -> np.ndarray:
-    """(2, |S|, band bins) sum over the signals v of row i of conj(H_v) times the transform of g_of(v)
-    ((|S|, n) rows, or None: v does not move the score). In the base layout with the band above DC the
-    signals of one row are combined before the transform: power p < 0 (q1, q2: integrated) by the
-    adjoint of p running integrals in time, (-1)^p I^-p, power 0 as it is, and the sum filtered by the
-    band gain: g_q1_dot - I(g_q1) + I(I(g_q2)) = g_q1_dot + I(I(g_q2) - g_q1), one transform per row
-    and term (2 per term instead of 4). Otherwise each signal by its own transform and exact response."""
-    kk, nfft, dt = noise.responses[0].size, noise.nfft, 1.0 / noise.fs_hz
+def _score_spectra(noise, theta: list, resid: np.ndarray, slopes_of, n: int, step: int) -> np.ndarray:
+    """(2, |S|, band bins) U_i = sum over the signals v of row i of conj(H_v) times the transform of
+    g_v = dtheta/dy_v r + theta slope_v (rows of |S| terms). slopes_of(v) -> (jacobians, slope): per-term
+    dtheta_a/dy_v and the scalar-or-array slope_v. Where both are constants (the target's own signal:
+    g = theta; a linear input column: g = -beta theta + r), g_v is a combination of theta's and r's
+    transforms, each computed once for all signals; otherwise g_v is transformed. Exact responses
+    H_v = gain (j w)^p (chain.BandLimitedNoise), as the chain and the noise draws have them."""
+    kk, nfft = noise.responses[0].size, noise.nfft
+    n_terms = len(theta)
     U = np.zeros((2, n_terms, kk), dtype=complex)
-    combine = noise.band[0] > 0 and all(power <= 0 for _, power in noise.requests)
-    by_power: dict = {}
-    for v, (row, power) in enumerate(noise.requests):
-        g = g_of(v)
-        if g is None:
-            continue
-        if combine:
-            by_power.setdefault(row, {})[power] = g
+    cache: dict = {}
+
+    def theta_spec():
+        if "theta" not in cache:
+            cache["theta"] = _spectra([np.broadcast_to(t, (n,)) for t in theta], nfft, kk, step)
+        return cache["theta"]
+
+    def resid_spec():
+        if "resid" not in cache:
+            cache["resid"] = _spectra([resid], nfft, kk, step)[0]
+        return cache["resid"]
+
+    for v, (row, _) in enumerate(noise.requests):
+        jac, slope = slopes_of(v)
+        if all(_scalar(d) and d == 0.0 for d in jac) and _scalar(slope) and slope == 0.0:
+            continue  # v does not move the score
+        if all(_scalar(d) for d in jac) and _scalar(slope):
+            F = np.zeros((n_terms, kk), dtype=complex)
+            if slope != 0.0:
+                F += slope * theta_spec()
+            for a, d in enumerate(jac):
+                if d != 0.0:
+                    F[a] += d * resid_spec()
         else:
-            U[row] += np.conj(noise.responses[v]) * _transform(g, nfft, kk)
-    for row, gs in by_power.items():
-        x = np.zeros((n_terms, nfft))
-        for power in sorted(gs):  # -2, -1, 0: x <- I(x) - g_q1, then I(x) + g_q1_dot
-            x[:, :n] += gs[power] if power % 2 == 0 else -gs[power]
-            if power < 0:
-                x = _integrate(x, dt)
-        U[row] += np.conj(noise.gain) * _transform(x, nfft, kk)
+            g = np.empty((n_terms, n))
+            for a, (d, th) in enumerate(zip(jac, theta)):
+                g[a] = th * slope
+                if not (_scalar(d) and d == 0.0):
+                    g[a] += d * resid
+            F = _spectra(g, nfft, kk, step)
+            del g
+        F *= np.conj(noise.responses[v])
+        U[row] += F
     return U
 
 
@@ -123,26 +174,25 @@ def noise_variance(parts, supports: dict, coefs: dict, G: np.ndarray, col_exps: 
         ginv = scaled_pinv(G[np.ix_(S, S)])
         V = np.zeros((S.size, S.size))
         beta = coefs[e][S]
+        # g_v's degree: a column's (theta) plus the residual's less one, or the reverse (dtheta/dy r)
+        cols = max(_degree(col_exps[j]) for j in S)
+        degree = cols + max(cols, _degree(target_exps[e])) - 1
         for y, noise, (s_in, s_out) in parts:
+            step = decimation(noise, degree)
+            if step > 1:
+                y = tuple(np.ascontiguousarray(s[::step]) for s in y)
             n = y[0].size
             mono = _Monomials(y)
             theta = [mono(col_exps[j]) for j in S]
             resid = mono(target_exps[e]) - sum(b * t for b, t in zip(beta, theta))
 
-            def g_of(v):
-                """g_v (|S|, n): the score's derivative by signal v; None where it is 0."""
+            def slopes_of(v):
+                """(dtheta_a/dy_v per term, slope_v = dtarget/dy_v - sum_j beta_j dtheta_j/dy_v)."""
                 jac = [mono.derivative(col_exps[j], v) for j in S]
                 slope = mono.derivative(target_exps[e], v) - sum(b * d for b, d in zip(beta, jac) if b)
-                if all(np.isscalar(d) and d == 0.0 for d in jac) and np.isscalar(slope) and slope == 0.0:
-                    return None
-                g = np.empty((S.size, n))
-                for a, (d, th) in enumerate(zip(jac, theta)):
-                    g[a] = th * slope
-                    if not (np.isscalar(d) and d == 0.0):
-                        g[a] += d * resid
-                return g
+                return jac, slope
 
-            U = _score_spectra(noise, g_of, n, S.size)
+            U = _score_spectra(noise, theta, resid, slopes_of, n, step)
             U = np.einsum("ab,ibk->iak", ginv, U)  # G^-1 applied on the band's bins, not the rows
             c = noise.white_covariance(s_in, s_out)
             w = noise.bin_weights()
