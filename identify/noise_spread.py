@@ -13,27 +13,27 @@ noise of per-sample covariance c. Its variance is therefore exact and needs no d
 
     V = G^-1 [sum_ij c_ij / nfft sum_k w_k Re(U_i(k) U_j(k)^H)] G^-1,   U_i(k) = sum_{v of row i} conj(H_v(k)) Phi_v(k),
 
-Phi_v the transform of G^-1 g_v on the band's bins (identify.spectral.lowband_rfft). The noise is
-correlated over time (q2's near the band's bottom for seconds), so, unlike the chain bias
-(identify.corrected), this is not a Gram quantity: it costs transforms of the record. Two things keep
-them few and short: where a signal's slope and Jacobian are constants (the target's own signal, whose
-g_v is theta; a linear input column, -beta theta + r), g_v is a combination of the transforms of theta
-and of the residual, made once for all signals (a base-layout fit of the Table 1 model: 16 transforms,
-3 per term plus the residual's); and every signal here is band-limited, so a product of them is
-transformed on every D-th sample (decimation: exact while its images miss the band; D = 2 for the
-degree-5 g_v of the Table 1 model with its band to 133 Hz at 2048 Hz, 8 for the linear q2_dot
-equation). Against the formula evaluated term by term at full rate (tests/identify/test_noise_spread.py,
-30 s records): 2e-11 without decimation, 1e-7 - 9e-6 with it (the fitted rows' two ends leak); on the
-million-sample record of benchmarks/identify_speed.py the variances moved by < 4e-8 and this step's
-CPU time went from 0.40 s to 0.13 s (--uncertainty-parts). It had combined the integrated signals in
-time by running trapezoidal integrals; now their exact responses (j w)^p multiply on the bins, as the
-chain's and the noise draws' do, which moved the variances by < 1e-4 (standard errors < 5e-5; five
-sweeps, benchmarks/uncertainty_numbers.py). Against SIMEX's replicate
-spread (256 replicates, ~6 % Monte Carlo error) on the Table 1 rig: within 1-7 % at 0.5 % noise, 5-20 % at 5 % (where the
-replicates' antithetic halves carry third-order terms too). Why it is worth it: for a weak term the
-block estimates of the variance (sandwich, jackknife) are noisy because its information sits in a
-few blocks, while this one is not (docs/identification.md section 5). Monomial terms only (their
-derivatives are monomials); the caller falls back to SIMEX otherwise.
+Phi_v the transform of g_v on the band's bins (identify.spectral.lowband_rfft; G^-1 is applied once, to
+the |S| x |S| sum). The noise is correlated over time (q2's near the band's bottom for seconds), so,
+unlike the chain bias (identify.corrected), this is not a Gram quantity: it costs transforms of the
+record, kept few and short in two ways. Where a signal's slope and Jacobian are constants (the target's
+own signal, whose g_v is theta; a linear input column, -beta theta + r), g_v is a combination of the
+transforms of theta and of the residual, each made once (the Table 1 model, base layout: 16 transforms,
+3 per term plus the residual's). And every signal here is the chain's band-limited output, so a product
+of them is transformed on every D-th sample, D by its degree (decimation: exact while its images miss
+the band; at 2048 Hz with the band to 133 Hz, D = 2 for degree 5, the cubic terms' g_v, 3 for degree 3,
+6 for a linear column; a constant column, only its ends on the band, is the boxcar in closed form).
+Against the formula evaluated term by term at full rate (tests/identify/test_noise_spread.py, 30 s
+records): 2e-11 without decimation, 5e-6 - 1.6e-5 with it (the fitted rows' two ends leak). It had
+combined the integrated signals in time by running trapezoidal integrals (one transform per signal row
+and term); the exact responses (j w)^p now multiply on the bins, as the chain's and the noise draws' do
+(the variances moved by < 1e-4). A million-sample fit spends ~0.1 s here, a third of what it did
+(docs/identification.md section 5). Against SIMEX's replicate spread (256 replicates, ~6 % Monte Carlo
+error) on the Table 1 rig: within 1-7 % at 0.5 % noise, 5-20 % at 5 % (where the replicates' antithetic
+halves carry third-order terms too). Why it is worth it: for a weak term the block estimates of the
+variance (sandwich, jackknife) are noisy because its information sits in a few blocks, while this one is
+not (docs/identification.md section 5). Monomial terms only (their derivatives are monomials); the caller
+falls back to SIMEX otherwise.
 """
 from __future__ import annotations
 
@@ -78,6 +78,11 @@ def _degree(k) -> int:
     return 0 if k is None else sum(k)
 
 
+def _derivative_degree(k: tuple, v: int):
+    """Degree of d y^k / d y_v (None: it is 0)."""
+    return sum(k) - 1 if k[v] else None
+
+
 def decimation(noise, degree: int) -> int:
     """Sampling step for the score's transforms: the largest D <= MAX_STEP dividing nfft for which a
     signal made of products of `degree` band-limited factors has, on D-times coarser sampling, no image
@@ -107,54 +112,108 @@ def _spectra(rows, nfft: int, kk: int, step: int) -> np.ndarray:
     return out
 
 
-def _scalar(d) -> bool:
-    return np.isscalar(d)
+def boxcar_spectrum(n: int, nfft: int, kk: int) -> np.ndarray:
+    """rfft(ones(n), nfft)[:kk] in closed form, (1 - z^n) / (1 - z) with z = exp(-2 pi i k / nfft) (n at
+    DC): a constant column is no band-limited signal (its ends are all it has on the band), so it is
+    neither decimated nor transformed."""
+    k = np.arange(kk)
+    z = np.exp(-2j * np.pi * k / nfft)
+    zn = np.exp(-2j * np.pi * ((k * n) % nfft) / nfft)
+    out = np.empty(kk, dtype=complex)
+    out[0] = n
+    out[1:] = (1 - zn[1:]) / (1 - z[1:])
+    return out
 
 
-def _score_spectra(noise, theta: list, resid: np.ndarray, slopes_of, n: int, step: int) -> np.ndarray:
-    """(2, |S|, band bins) U_i = sum over the signals v of row i of conj(H_v) times the transform of
-    g_v = dtheta/dy_v r + theta slope_v (rows of |S| terms). slopes_of(v) -> (jacobians, slope): per-term
-    dtheta_a/dy_v and the scalar-or-array slope_v. Where both are constants (the target's own signal:
-    g = theta; a linear input column: g = -beta theta + r), g_v is a combination of theta's and r's
-    transforms, each computed once for all signals; otherwise g_v is transformed. Exact responses
-    H_v = gain (j w)^p (chain.BandLimitedNoise), as the chain and the noise draws have them."""
-    kk, nfft = noise.responses[0].size, noise.nfft
-    n_terms = len(theta)
-    U = np.zeros((2, n_terms, kk), dtype=complex)
-    cache: dict = {}
+class _Score:
+    """The score's pieces for one equation and recording, each at the sampling step its degree allows:
+    theta (kept columns) and the residual r on the fitted rows, their transforms on the band's bins
+    (each made once), and the Jacobians and slopes of the signals."""
 
-    def theta_spec():
-        if "theta" not in cache:
-            cache["theta"] = _spectra([np.broadcast_to(t, (n,)) for t in theta], nfft, kk, step)
-        return cache["theta"]
+    def __init__(self, y, noise, cols: list, target: tuple, beta: np.ndarray):
+        self.y, self.noise, self.cols, self.target, self.beta = y, noise, cols, target, beta
+        self.kk, self.nfft = noise.responses[0].size, noise.nfft
+        self.r_degree = max([_degree(k) for k in cols] + [_degree(target)])
+        self._mono, self._resid, self._theta_spec, self._resid_spec = {}, {}, {}, None
 
-    def resid_spec():
-        if "resid" not in cache:
-            cache["resid"] = _spectra([resid], nfft, kk, step)[0]
-        return cache["resid"]
+    def mono(self, step: int) -> _Monomials:
+        if step not in self._mono:
+            y = self.y if step == 1 else tuple(np.ascontiguousarray(s[::step]) for s in self.y)
+            self._mono[step] = _Monomials(y)
+        return self._mono[step]
 
-    for v, (row, _) in enumerate(noise.requests):
-        jac, slope = slopes_of(v)
-        if all(_scalar(d) and d == 0.0 for d in jac) and _scalar(slope) and slope == 0.0:
-            continue  # v does not move the score
-        if all(_scalar(d) for d in jac) and _scalar(slope):
-            F = np.zeros((n_terms, kk), dtype=complex)
-            if slope != 0.0:
-                F += slope * theta_spec()
+    def resid(self, step: int) -> np.ndarray:
+        if step not in self._resid:
+            mono = self.mono(step)
+            self._resid[step] = mono(self.target) - sum(b * mono(k) for b, k in zip(self.beta, self.cols))
+        return self._resid[step]
+
+    def theta_spec(self, a: int) -> np.ndarray:
+        """Transform of kept column a on the band's bins (all columns of its step made together)."""
+        if a not in self._theta_spec:
+            n = self.y[0].size
+            by_step: dict = {}
+            for b, k in enumerate(self.cols):
+                if not any(k):
+                    self._theta_spec[b] = boxcar_spectrum(n, self.nfft, self.kk)
+                else:
+                    by_step.setdefault(decimation(self.noise, _degree(k)), []).append(b)
+            for step, idx in by_step.items():
+                mono = self.mono(step)
+                for b, spec in zip(idx, _spectra([mono(self.cols[b]) for b in idx], self.nfft, self.kk, step)):
+                    self._theta_spec[b] = spec
+        return self._theta_spec[a]
+
+    def resid_spec(self) -> np.ndarray:
+        if self._resid_spec is None:
+            step = decimation(self.noise, self.r_degree)
+            self._resid_spec = _spectra([self.resid(step)], self.nfft, self.kk, step)[0]
+        return self._resid_spec
+
+    def slopes(self, v: int, step: int):
+        """(dtheta_a/dy_v per term, slope_v = dtarget/dy_v - sum_j beta_j dtheta_j/dy_v), on rows of `step`."""
+        mono = self.mono(step)
+        jac = [mono.derivative(k, v) for k in self.cols]
+        slope = mono.derivative(self.target, v) - sum(b * d for b, d in zip(self.beta, jac) if b)
+        return jac, slope
+
+    def spectra(self, v: int) -> np.ndarray | None:
+        """(|S|, kk) transform of g_v = dtheta/dy_v r + theta slope_v per term; None where v does not move
+        the score. Constant slope and Jacobians (the target's own signal: g = theta; a linear input
+        column: -beta theta + r) combine theta's and r's transforms; otherwise each term's g_v is
+        transformed at the step of its degree (theta's plus the slope's, or the Jacobian's plus r's)."""
+        jac_deg = [_derivative_degree(k, v) for k in self.cols]
+        slope_terms = [_derivative_degree(self.target, v)] + [_derivative_degree(k, v)
+                                                              for k, b in zip(self.cols, self.beta) if b]
+        slope_deg = max((d for d in slope_terms if d is not None), default=None)
+        if slope_deg is None and all(d is None for d in jac_deg):
+            return None
+        n_terms = len(self.cols)
+        F = np.zeros((n_terms, self.kk), dtype=complex)
+        if (slope_deg is None or slope_deg == 0) and all(d is None or d == 0 for d in jac_deg):
+            jac, slope = self.slopes(v, 1)  # constants: the same on every step
             for a, d in enumerate(jac):
+                if slope != 0.0:
+                    F[a] += slope * self.theta_spec(a)
                 if d != 0.0:
-                    F[a] += d * resid_spec()
-        else:
-            g = np.empty((n_terms, n))
-            for a, (d, th) in enumerate(zip(jac, theta)):
-                g[a] = th * slope
-                if not (_scalar(d) and d == 0.0):
-                    g[a] += d * resid
-            F = _spectra(g, nfft, kk, step)
-            del g
-        F *= np.conj(noise.responses[v])
-        U[row] += F
-    return U
+                    F[a] += d * self.resid_spec()
+            return F
+        by_step: dict = {}
+        for a, k in enumerate(self.cols):
+            deg = max(_degree(k) + (slope_deg if slope_deg is not None else -1),
+                      jac_deg[a] + self.r_degree if jac_deg[a] is not None else -1)
+            by_step.setdefault(decimation(self.noise, deg), []).append(a)
+        for step, idx in by_step.items():
+            mono = self.mono(step)
+            jac, slope = self.slopes(v, step)
+            resid, n = self.resid(step), mono.y[0].size
+            g = np.empty((len(idx), n))
+            for row, a in enumerate(idx):
+                g[row] = mono(self.cols[a]) * slope
+                if not (np.isscalar(jac[a]) and jac[a] == 0.0):
+                    g[row] += jac[a] * resid
+            F[idx] = _spectra(g, self.nfft, self.kk, step)
+        return F
 
 
 def noise_variance(parts, supports: dict, coefs: dict, G: np.ndarray, col_exps: list, target_exps: list) -> dict:
@@ -163,7 +222,8 @@ def noise_variance(parts, supports: dict, coefs: dict, G: np.ndarray, col_exps: 
     parts : per recording (signals, noise, (std_in, std_out)): signals the (q1, q2, q1_dot, input) rows
     the Gram was summed over, noise its chain.BandLimitedNoise; G : the all-rows normal matrix (all
     recordings); coefs : {equation: (m,) all-rows coefficients}; col_exps, target_exps : monomial
-    exponents of the columns and of each equation's target (identify.corrected)."""
+    exponents of the columns and of each equation's target (identify.corrected). Exact responses
+    H_v = gain (j w)^p on the bins (chain.BandLimitedNoise), as the chain and the noise draws have them."""
     out = {}
     for e, sup in supports.items():
         S = np.flatnonzero(sup)
@@ -173,33 +233,20 @@ def noise_variance(parts, supports: dict, coefs: dict, G: np.ndarray, col_exps: 
             continue
         ginv = scaled_pinv(G[np.ix_(S, S)])
         V = np.zeros((S.size, S.size))
-        beta = coefs[e][S]
-        # g_v's degree: a column's (theta) plus the residual's less one, or the reverse (dtheta/dy r)
-        cols = max(_degree(col_exps[j]) for j in S)
-        degree = cols + max(cols, _degree(target_exps[e])) - 1
         for y, noise, (s_in, s_out) in parts:
-            step = decimation(noise, degree)
-            if step > 1:
-                y = tuple(np.ascontiguousarray(s[::step]) for s in y)
-            n = y[0].size
-            mono = _Monomials(y)
-            theta = [mono(col_exps[j]) for j in S]
-            resid = mono(target_exps[e]) - sum(b * t for b, t in zip(beta, theta))
-
-            def slopes_of(v):
-                """(dtheta_a/dy_v per term, slope_v = dtarget/dy_v - sum_j beta_j dtheta_j/dy_v)."""
-                jac = [mono.derivative(col_exps[j], v) for j in S]
-                slope = mono.derivative(target_exps[e], v) - sum(b * d for b, d in zip(beta, jac) if b)
-                return jac, slope
-
-            U = _score_spectra(noise, theta, resid, slopes_of, n, step)
-            U = np.einsum("ab,ibk->iak", ginv, U)  # G^-1 applied on the band's bins, not the rows
+            score = _Score(y, noise, [col_exps[j] for j in S], target_exps[e], coefs[e][S])
+            U = np.zeros((2, S.size, noise.responses[0].size), dtype=complex)
+            for v, (row, _) in enumerate(noise.requests):
+                F = score.spectra(v)
+                if F is not None:
+                    F *= np.conj(noise.responses[v])
+                    U[row] += F
+            # sum_ij c_ij / nfft sum_k w_k Re(U_i U_j^H): every (i, j) block of one (2|S|, 2|S|) product
+            U = U.reshape(2 * S.size, -1)
+            P = ((U * noise.bin_weights()) @ U.conj().T).real.reshape(2, S.size, 2, S.size)
             c = noise.white_covariance(s_in, s_out)
-            w = noise.bin_weights()
-            for i in range(2):
-                for j in range(2):
-                    if c[i, j]:
-                        V += c[i, j] * ((U[i] * w) @ U[j].conj().T).real / noise.nfft
+            V += np.einsum("ij,iajb->ab", c, P) / noise.nfft
+        V = ginv @ V @ ginv  # G^-1 applied once to the |S| x |S| sum, not to every bin
         var[S] = np.maximum(np.diag(V), 0.0)
         out[e] = var
     return out

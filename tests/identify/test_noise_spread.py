@@ -10,7 +10,7 @@ from identify.chain import BandLimitedNoise
 from identify.corrected import term_exponents
 from identify.gram import scaled_pinv
 from identify.identifier import SparseIdentifier, holdout_blocks
-from identify.noise_spread import _spectra, decimation, noise_variance
+from identify.noise_spread import _spectra, boxcar_spectrum, decimation, noise_variance
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep
@@ -53,6 +53,14 @@ def test_decimated_transform_is_exact_while_products_have_no_image_on_the_band()
     assert checked == [3, 5]
     # degree 5 with a band to 133 Hz at 2048 Hz: 2048 / D - 133 >= 5 x 133 allows D = 2 only
     assert decimation(noise, 5) == 2
+
+
+def test_a_constant_columns_transform_is_the_boxcars():
+    """A constant column is no band-limited signal (only its ends are on the band), so it is not decimated:
+    its transform is the boxcar's in closed form, against rfft of the ones."""
+    for n, nfft in ((1000, 1536), (61_440, 67_500), (999, 1000)):
+        kk = 200
+        np.testing.assert_allclose(boxcar_spectrum(n, nfft, kk), rfft(np.ones(n), nfft)[:kk], rtol=1e-9, atol=1e-9 * n)
 
 
 def _direct(parts, supports, coefs, G, col_exps, target_exps) -> dict:
@@ -99,8 +107,9 @@ def test_noise_variance_is_the_formula_evaluated_directly(noise_fraction, monkey
     """On a 30 s sweep of the Table 1 rig (1.2 mm), the kept q1_dot terms' noise variance against the
     direct evaluation (numerical derivatives, every signal transformed at full rate). Without decimation
     (MAX_STEP = 1) the shared transforms must give the same numbers: measured within 2e-11, asked 1e-9.
-    Decimated (the default): the fitted rows' two ends leak; measured 1e-7 - 9e-6 (0.5 and 5 % noise),
-    asked 1e-4, a standard error moved by 5e-5 of itself at most (4e-8 on a million samples)."""
+    Decimated (the default, each term at the step its degree allows): the fitted rows' two ends leak;
+    measured 5e-6 and 1.6e-5 (0.5 and 5 % noise), asked 1e-4, a standard error moved by 5e-5 of itself
+    at most."""
     sensors = {k: Accelerometer(noise_fraction=noise_fraction) for k in ("table_sensor", "mass_sensor")}
     run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 30, 1.2), fs_hz=FS, seed=5, **sensors)
     ident = SparseIdentifier(validate=False, placements=0, bias_replicates=0).fit(run.recording)
