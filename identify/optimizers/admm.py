@@ -9,8 +9,9 @@ z-update soft-thresholds, u accumulates x - z. The m x m system is diagonalised 
 x0 = (G + rho I)^-1 b and M = rho (G + rho I)^-1, one small matrix product per iteration for the whole
 path. Several problems (the inclusion probabilities' 24 held-out placements, identify.uncertainty) run
 as one batch (fit_paths), each leaving it at the iteration where it would have stopped alone: the same
-paths, at half the CPU time of one by one (0.057 s against 0.128 s for 24 placements of a 60 s record;
-tests/identify/test_admm.py checks that they are the same). rho = sqrt(d_min d_max) (Ghadimi et al. 2015) and over-relaxation
+paths (tests/identify/test_admm.py): the 24 placements of a million-sample fit take 0.048 s of CPU
+against 0.17-0.19 s one by one with two products per iteration (benchmarks/identify_speed.py
+--uncertainty-parts). rho = sqrt(d_min d_max) (Ghadimi et al. 2015) and over-relaxation
 1.6 make the linear rate depend on sqrt(cond G). Stops when every column's primal and dual residuals are
 below `tol` (scaled units), tight enough to reproduce a reference solver's support at every lambda
 (tests/identify/test_admm.py).
