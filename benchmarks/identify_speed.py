@@ -1,6 +1,7 @@
 """Identification speed end to end, next to its anchors, in one process so the ratios hold on a busy machine.
 
     python benchmarks/identify_speed.py [--sizes 200000 1000000] [--repeat 3] [--no-simulation] [--validation-parts]
+        [--uncertainty-parts]
 
 Recording: the paper's Table 1 rig, a 1-20 Hz sweep at 1.2 mm over n / 2048 Hz - 2 s plus 2 s at rest,
 two accelerometers at 0.5 % noise (sim.synth.run_sweep). At 1.2 mm the slow sweep's resonance peaks at
@@ -49,6 +50,7 @@ from identify.identifier import SparseIdentifier  # noqa: E402
 from identify.library import Library  # noqa: E402
 from identify.model import SparseModel  # noqa: E402
 from identify.simulate import simulate  # noqa: E402
+from identify.uncertainty import N_PLACEMENTS  # noqa: E402
 from sim.rig import RigParameters  # noqa: E402
 from sim.sweep import SineSweep  # noqa: E402
 from sim.synth import run_sweep  # noqa: E402
@@ -196,6 +198,55 @@ def validation_parts(n: int, repeat: int) -> dict:
             "metrics": cpu(lambda: [fit_metrics(sig.q1[v], sim[:, 0]) for _ in range(7)])}
 
 
+def uncertainty_parts(n: int, repeat: int) -> dict:
+    """What the uncertainty step (identify.uncertainty.assess, as SparseIdentifier runs it) spends on the
+    default fit, CPU seconds, best of `repeat`, its parts done alone: the all-rows refits with their
+    block-robust covariances, the noise floors (Welch), the closed-form chain bias as a whole
+    (analytic_chain_bias: floors, corrected sums and the noise's share of the variance), the noise's
+    share alone (identify.noise_spread), and the inclusion probabilities (24 held-out placements: ADMM
+    paths and the selection rule) with, of them, the ADMM paths alone."""
+    from identify import uncertainty as unc
+    from identify.chain import BandLimitedNoise
+    from identify.corrected import term_exponents
+    from identify.identifier import effective_samples, holdout_blocks
+    from identify.noise_spread import noise_variance
+
+    rec, _ = sweep_recording(n)
+    ident = SparseIdentifier(validate=False, bias_replicates=0, placements=0).fit(rec)
+    sig, lib = ident.states_, ident.library_
+    edges, held = holdout_blocks(sig)
+    gram = ident._gram(sig, edges)
+    sups = {e: s.support for e, s in enumerate(ident.selections_.values())}
+    coefs = {e: unc.refit_all_rows(gram, sups[e], e, covariance=False)[0] for e in sups}
+    v = sig.valid
+    noise = BandLimitedNoise(rec.input.size, sig.fs_hz, sig.band_hz, rec.layout)
+    parts = [((sig.q1[v], sig.q2[v], sig.q1_dot[v], sig.input[v]), noise, unc.noise_floors(rec, sig.band_hz))]
+    G = gram.equations(np.ones(gram.n_blocks, dtype=bool)).G
+    col_exps = [term_exponents(t, sig.input_name) for t in lib.terms]
+    opt, n_eff = ident._optimizer(), effective_samples(sig)
+    masks = unc.placements(held, unc.N_PLACEMENTS)
+    trains = [gram.equations(~m) for m in masks]
+
+    def fit_and_select(trains, heldouts):
+        if not isinstance(trains, list):  # one placement at a time (the code before the batched paths)
+            return [s.support for s in ident._select(opt.fit_path(trains), trains, heldouts, n_eff).values()]
+        return [[s.support for s in ident._select(path, tr, ho, n_eff).values()]
+                for path, tr, ho in zip(opt.fit_paths(trains), trains, heldouts)]
+
+    def paths():
+        return opt.fit_paths(trains) if hasattr(opt, "fit_paths") else [opt.fit_path(t) for t in trains]
+
+    def cpu(fn):
+        return best_of(fn, repeat)[0][1]
+
+    return {"refits": cpu(lambda: [unc.refit_all_rows(gram, sups[e], e) for e in sups]),
+            "floors": cpu(lambda: unc.noise_floors(rec, sig.band_hz)),
+            "closed_form": cpu(lambda: unc.analytic_chain_bias(rec, sig, gram, lib, sups, coefs)),
+            "noise_share": cpu(lambda: noise_variance(parts, sups, coefs, G, col_exps, unc.TARGET_EXPONENTS)),
+            "inclusion": cpu(lambda: unc.inclusion_probabilities(gram, held, fit_and_select)),
+            "paths": cpu(paths)}
+
+
 def padding_lever(n: int, repeat: int) -> dict:
     """What the chain's zero padding costs: the chain as it is (PAD_PERIODS periods of f_lo, at most the
     record's length) against the previous rule (always the record's length, 2n in all), CPU time and how
@@ -261,6 +312,8 @@ def main(argv=None) -> int:
     p.add_argument("--no-simulation", action="store_true", help="skip the free-run vs solve_ivp figures")
     p.add_argument("--validation-parts", action="store_true",
                    help="also time the free-run validation's parts alone (largest size)")
+    p.add_argument("--uncertainty-parts", action="store_true",
+                   help="also time the uncertainty step's parts alone (largest size)")
     p.add_argument("--padding-lever", action="store_true",
                    help="also time the chain padded to 2n (the previous rule) against its own padding (largest size)")
     args = p.parse_args(argv)
@@ -305,6 +358,13 @@ def main(argv=None) -> int:
               f"{vp['input_grid']:.3f}, RK4 run {vp['rk4']:.3f}, 3 signals through the band {vp['band_limit']:.3f}, "
               f"q1_dot at the simulated states {vp['q1_dot']:.3f}, 7 fit metrics (all rows) {vp['metrics']:.3f}; "
               f"RK4 run computing q1_dot as it goes {vp['rk4_q1_dot']:.3f}", flush=True)
+    if args.uncertainty_parts and args.sizes:
+        up = uncertainty_parts(max(args.sizes), args.repeat)
+        print(f"\nuncertainty step, n = {max(args.sizes)}, CPU s (best of {args.repeat}), parts alone: all-rows refits "
+              f"and covariances {up['refits']:.3f}, closed-form chain bias {up['closed_form']:.3f} (of which noise "
+              f"floors {up['floors']:.3f}, the noise's share of the variance {up['noise_share']:.3f}), inclusion "
+              f"probabilities ({N_PLACEMENTS} placements) {up['inclusion']:.3f} (of which ADMM paths "
+              f"{up['paths']:.3f})", flush=True)
     if args.padding_lever and args.sizes:
         lev = padding_lever(max(args.sizes), args.repeat)
         print(f"\npadding, n = {max(args.sizes)}: chain CPU {lev['chain_cpu']:.3f} s padded to 2n, "

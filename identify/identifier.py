@@ -307,8 +307,9 @@ class SparseIdentifier:
         sups = {e: s.support for e, s in enumerate(self.selections_.values())}
         optimizer = self._optimizer()
 
-        def fit_and_select(train, heldout):
-            return [s.support for s in self._select(optimizer.fit_path(train), train, heldout, n_eff).values()]
+        def fit_and_select(trains, heldouts):
+            return [[s.support for s in self._select(path, train, heldout, n_eff).values()]
+                    for path, train, heldout in zip(optimizer.fit_paths(trains), trains, heldouts)]
 
         coefs, var, info = unc.assess(gram, held, sups, bias_of, fit_and_select, self.placements)
         named = {eqs[e]: {names[j]: j for j in np.flatnonzero(sups[e])} for e in sups}

@@ -278,13 +278,16 @@ def inclusion_probabilities(gram: BlockGram, held: np.ndarray, fit_and_select, n
                             seed: int = 0) -> np.ndarray | None:
     """(p, m) fraction of `n` random held-out placements for which the selection keeps each term.
 
-    fit_and_select(train, heldout) -> sequence of (m,) supports, one per equation (the identifier's own
-    path and rule, so the probability is that of the decision actually made). None without held-out blocks."""
+    fit_and_select(trains, heldouts) -> per placement a sequence of (m,) supports, one per equation,
+    from lists of the placements' training and held-out normal equations (the identifier's own path and
+    rule, so the probability is that of the decision actually made; given all placements at once, the
+    paths run as one batch, ADMMLasso.fit_paths). None without held-out blocks."""
     if not held.any() or held.all():
         return None
+    masks = placements(held, n, seed)
     counts = np.zeros((gram.p, gram.m))
-    for mask in placements(held, n, seed):
-        for e, support in enumerate(fit_and_select(gram.equations(~mask), gram.equations(mask))):
+    for supports in fit_and_select([gram.equations(~m) for m in masks], [gram.equations(m) for m in masks]):
+        for e, support in enumerate(supports):
             counts[e] += support
     return counts / n
 

@@ -35,6 +35,18 @@ class PathOptimizer:
     param_name = "param"
 
     def fit_path(self, ne: NormalEquations) -> SparsePath:
+        G, B, scale = self._scaled(ne)
+        return self._unscaled(*self._path(G, B), scale)
+
+    def fit_paths(self, nes) -> list[SparsePath]:
+        """fit_path of each of several normal equations (of the same library): one loop here; an
+        optimizer that can run them together overrides it (ADMMLasso: the inclusion probabilities' 24
+        placements in one batch)."""
+        return [self.fit_path(ne) for ne in nes]
+
+    @staticmethod
+    def _scaled(ne: NormalEquations):
+        """(G, B) on unit-RMS columns and targets, and the scales to map coefficients back."""
         n = max(ne.n, 1)
         col_rms = np.sqrt(np.maximum(np.diag(ne.G), 0) / n)
         y_rms = np.sqrt(np.maximum(ne.yy, 0) / n)
@@ -47,7 +59,10 @@ class PathOptimizer:
         G[:, ~live] = 0
         G[~live, ~live] = 1.0  # dead (all-zero) columns: decoupled, and B = 0 keeps them at zero
         B[~live] = 0
-        coefs, params, iters = self._path(G, B)
+        return G, B, (s, ys, live)
+
+    def _unscaled(self, coefs, params, iters, scale) -> SparsePath:
+        s, ys, live = scale
         coefs = coefs / s[None, :, None] * ys[None, None, :]
         coefs[:, ~live, :] = 0.0
         return SparsePath(coefs, params, self.param_name, iters)

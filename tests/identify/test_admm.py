@@ -86,3 +86,25 @@ def test_all_zero_column_stays_zero(bad_column):
     ne = BlockGram(np.column_stack([A, y]), 1, [0, 300]).equations([0])
     path = ADMMLasso(n_lambdas=20).fit_path(ne)
     assert np.all(path.coefs[:, 2, 0] == 0) and np.all(np.isfinite(path.coefs))
+
+
+def test_batched_paths_are_the_paths_one_by_one(table1_run):
+    """fit_paths (the inclusion probabilities' placements in one batch) against fit_path on each set of
+    normal equations: the same supports and iteration counts at every lambda, coefficients to rounding.
+    Problems of different conditioning (10 blocks of 50 left out in turn, and the first 60 %) make
+    them stop at different iterations, which a batch must respect."""
+    A, Y = _scaled_problem(table1_run)
+    n = A.shape[0]
+    gram = BlockGram(np.column_stack([A, Y]), 2, np.linspace(0, n, 51).round().astype(int))
+    rng = np.random.default_rng(3)
+    masks = [rng.permutation(50) >= 10 for _ in range(5)] + [np.arange(50) < 30]
+    nes = [gram.equations(m) for m in masks]
+    opt = ADMMLasso(n_lambdas=100)
+    batch = opt.fit_paths(nes)
+    alone = [opt.fit_path(ne) for ne in nes]
+    assert len({int(p.iterations.max()) for p in alone}) > 1  # they do stop at different iterations
+    for b, a in zip(batch, alone):
+        np.testing.assert_array_equal(b.coefs != 0, a.coefs != 0)
+        np.testing.assert_array_equal(b.iterations, a.iterations)
+        np.testing.assert_array_equal(b.params, a.params)
+        np.testing.assert_allclose(b.coefs, a.coefs, rtol=1e-9, atol=1e-12 * np.abs(a.coefs).max())
