@@ -125,6 +125,7 @@ class Recorder:
         self.flags = q.create_dataset("flags", (0,), maxshape=(None,), dtype=FLAG_DTYPE, chunks=(64,))
         self._write_quality(final=False)
         self.next_index: int | None = None
+        self.first_index: int | None = None  # sample index of the first sample recorded
         self.n = 0
         self.last_flush = time.monotonic()
         self.f.flush()  # the file and its "running" status exist on disk from the start
@@ -142,6 +143,8 @@ class Recorder:
             self.gaps.resize((g + 1, 2))
             self.gaps[g] = (self.next_index, first_index - self.next_index)
         m = block.shape[0]
+        if self.first_index is None:
+            self.first_index = first_index
         self.time.resize((self.n + m,))
         self.time[self.n:] = (first_index + np.arange(m)) / self.fs_hz
         columns = np.ascontiguousarray(block.T)  # one transpose: h5py and the detectors read it contiguous
