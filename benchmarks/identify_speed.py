@@ -228,13 +228,7 @@ def uncertainty_parts(n: int, repeat: int) -> dict:
     trains = [gram.equations(~m) for m in masks]
 
     def fit_and_select(trains, heldouts):
-        if not isinstance(trains, list):  # one placement at a time (the code before the batched paths)
-            return [s.support for s in ident._select(opt.fit_path(trains), trains, heldouts, n_eff).values()]
-        return [[s.support for s in ident._select(path, tr, ho, n_eff).values()]
-                for path, tr, ho in zip(opt.fit_paths(trains), trains, heldouts)]
-
-    def paths():
-        return opt.fit_paths(trains) if hasattr(opt, "fit_paths") else [opt.fit_path(t) for t in trains]
+        return ident._placement_supports(trains, heldouts, n_eff)
 
     def cpu(fn):
         return best_of(fn, repeat)[0][1]
@@ -244,7 +238,7 @@ def uncertainty_parts(n: int, repeat: int) -> dict:
             "closed_form": cpu(lambda: unc.analytic_chain_bias(rec, sig, gram, lib, sups, coefs)),
             "noise_share": cpu(lambda: noise_variance(parts, sups, coefs, G, col_exps, unc.TARGET_EXPONENTS)),
             "inclusion": cpu(lambda: unc.inclusion_probabilities(gram, held, fit_and_select)),
-            "paths": cpu(paths)}
+            "paths": cpu(lambda: opt.fit_paths(trains))}
 
 
 def padding_lever(n: int, repeat: int) -> dict:

@@ -300,16 +300,21 @@ class SparseIdentifier:
         return {eq: {lib.names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)}
                 for eq, s in self.selections_.items()}
 
+    def _placement_supports(self, trains, heldouts, n_eff: float) -> list:
+        """Per held-out placement, the supports (one per equation) this identifier's path and rule
+        choose on its training and held-out normal equations; the paths run as one batch."""
+        paths = self._optimizer().fit_paths(trains)
+        return [[s.support for s in self._select(path, train, heldout, n_eff).values()]
+                for path, train, heldout in zip(paths, trains, heldouts)]
+
     def _trust(self, gram: BlockGram, held, n_eff: float, bias_of) -> tuple[dict, dict, dict]:
         """Reported coefficients, standard errors and inclusion probabilities (identify.uncertainty);
         bias_of(supports, coefs) -> unc.chain_bias(...) or None."""
         names, eqs = self.library_.names, list(self.selections_)
         sups = {e: s.support for e, s in enumerate(self.selections_.values())}
-        optimizer = self._optimizer()
 
         def fit_and_select(trains, heldouts):
-            return [[s.support for s in self._select(path, train, heldout, n_eff).values()]
-                    for path, train, heldout in zip(optimizer.fit_paths(trains), trains, heldouts)]
+            return self._placement_supports(trains, heldouts, n_eff)
 
         coefs, var, info = unc.assess(gram, held, sups, bias_of, fit_and_select, self.placements)
         named = {eqs[e]: {names[j]: j for j in np.flatnonzero(sups[e])} for e in sups}
