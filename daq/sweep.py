@@ -167,7 +167,9 @@ class SweepRunner:
                         # and the sweep lasted duration_s: a reader still behind without knowing it (a CAN
                         # relay under load reports no backlog; CI under load saw a 1 + 8 s recording come
                         # out 128 samples short, with no frame lost) does not end the settle early.
-                        # Recording starts before START, so this is never after the sweep's true end.
+                        # Recording starts before START, so the first sample recorded is at or before
+                        # the sweep's start (if the link dropped the first frames, the settle runs that
+                        # much longer, never shorter).
                         if rec.first_index is not None:
                             done_index = max(done_index, rec.first_index + int(round(req.duration_s * self.source.fs_hz)))
                 if done_index is not None and (rec.next_index or 0) - done_index >= req.settle_s * self.source.fs_hz:
