@@ -134,6 +134,9 @@ class SweepRunner:
         self._beating = True
         done_index = None
         try:
+            # where the reader is at START: the sweep cannot end before duration_s of samples after it
+            self._drain(rec)
+            start_index = rec.next_index
             with self._lock:
                 self.plc.configure(req.f_start_hz, req.f_end_hz, req.duration_s, req.amplitude_mm)
                 self.plc.command(Command.START)
@@ -158,20 +161,17 @@ class SweepRunner:
                         break
                     if st.state == State.DONE and done_index is None:
                         # the settle counts from where the sweep ended, not from where a lagging reader
-                        # happens to be: first read what the link already holds (while reads come back
-                        # full; bounded, since a reader slower than the sensors never catches up)
-                        drain_end = time.monotonic() + 2.0
-                        while self.source.backlog and time.monotonic() < drain_end:
-                            self._pump(rec)
+                        # happens to be: first read what the link already holds
+                        self._drain(rec)
                         done_index = rec.next_index or 0
-                        # and the sweep lasted duration_s: a reader still behind without knowing it (a CAN
-                        # relay under load reports no backlog; CI under load saw a 1 + 8 s recording come
-                        # out 128 samples short, with no frame lost) does not end the settle early.
-                        # Recording starts before START, so the first sample recorded is at or before
-                        # the sweep's start (if the link dropped the first frames, the settle runs that
-                        # much longer, never shorter).
-                        if rec.first_index is not None:
-                            done_index = max(done_index, rec.first_index + int(round(req.duration_s * self.source.fs_hz)))
+                        # and the sweep lasted duration_s from where the reader was at START: a reader
+                        # that fell behind during the sweep without knowing it (a CAN relay under load
+                        # reports no backlog; CI under load saw a 1 + 8 s recording come out 128 samples
+                        # short, no frame lost) does not end the settle early. A lag it already had at
+                        # START is not seen: the PLC reports no clock in the sensors' time base.
+                        start = start_index if start_index is not None else rec.first_index
+                        if start is not None:
+                            done_index = max(done_index, start + int(round(req.duration_s * self.source.fs_hz)))
                 if done_index is not None and (rec.next_index or 0) - done_index >= req.settle_s * self.source.fs_hz:
                     break
                 if self.abort_requested.is_set():
@@ -196,6 +196,14 @@ class SweepRunner:
                 "quality": quality,
                 **self.heartbeat_stats(),
                 **{f"link_{k}": v for k, v in self.source.stats.items()}}
+
+    def _drain(self, rec: Recorder, limit_s: float = 2.0) -> None:
+        """Read what the link already holds (while reads come back full; bounded, since a reader slower
+        than the sensors never catches up)."""
+        self._pump(rec)
+        end = time.monotonic() + limit_s
+        while self.source.backlog and time.monotonic() < end:
+            self._pump(rec)
 
     def _pump(self, rec: Recorder) -> None:
         """Read what the source has, record it, feed the live view."""

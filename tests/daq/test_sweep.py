@@ -245,3 +245,47 @@ def test_disk_reaching_its_reserve_mid_sweep_stops_the_table_and_keeps_the_file_
     while not rig.call(lambda: rig.plc._table_at_rest()):
         assert time.monotonic() < end, "the table kept moving"
         time.sleep(0.05)
+
+
+class _FallingBehindSource(SerialSource):
+    """A real socket:// reader that falls behind the sensors without knowing it, as a relay in between
+    does under load (the CAN remote, where CI saw a recording end 128 samples short): from its first
+    read on, it hands over frames at `rate` of the pace they are sensed, never reports a backlog, and
+    loses none (every frame comes, in order, later)."""
+
+    def __init__(self, url: str, fs_hz: float, rate: float):
+        super().__init__(url, fs_hz)
+        self.rate, self._held, self._joined_at = rate, [], None
+
+    def read(self):
+        self._held += super().read()
+        self.backlog = False
+        if not self._held:
+            return []
+        newest = self._held[-1][0] + len(self._held[-1][1])
+        if self._joined_at is None:
+            self._joined_at = newest
+        upto = self._joined_at + self.rate * (newest - self._joined_at)
+        out = []
+        while self._held and self._held[0][0] + len(self._held[0][1]) <= upto:
+            out.append(self._held.pop(0))
+        return out
+
+
+def test_a_reader_falling_behind_without_knowing_it_still_records_the_whole_settle(rig, tmp_path):
+    """The settle after the sweep is recorded in full when the reader falls behind during the sweep
+    and cannot tell (delivering at 70 % of the sensors' pace, ~2 s behind by the end of a 6 s sweep):
+    the table is at rest for settle_s in the file after its last motion. Before, the settle counted
+    from where the reader was when the PLC said DONE, and the file ended with the table still moving;
+    now it counts from no earlier than duration_s after where the reader was at START."""
+    fs, settle = 2048.0, 1.0
+    runner = SweepRunner(ModbusPLC(*rig.endpoints["modbus"]), _FallingBehindSource(rig.endpoints["stream"], fs, 0.7),
+                         Limits(), SENSITIVITY)
+    out = tmp_path / "behind.h5"
+    result = runner.run(SweepRequest(2.0, 10.0, 6.0, 1.0, settle_s=settle, operator="test"), out)
+    assert result["status"] == "complete" and result["gaps"] == 0, result
+    rec = read_h5_recording(out)
+    table = np.abs(rec.input)
+    moving = np.flatnonzero(table > 0.1 * table.max())
+    after = (rec.n_samples - 1 - moving[-1]) / fs  # s of the file after the table's last motion
+    assert after >= settle - 0.05, f"{after:.3f} s recorded after the sweep, settle {settle} s"
