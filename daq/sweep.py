@@ -134,12 +134,13 @@ class SweepRunner:
         self._beating = True
         done_index = None
         try:
-            # where the reader is at START: the sweep cannot end before duration_s of samples after it
-            self._drain(rec)
-            start_index = rec.next_index
             with self._lock:
                 self.plc.configure(req.f_start_hz, req.f_end_hz, req.duration_s, req.amplitude_mm)
                 self.plc.command(Command.START)
+            # where the reader is once START is acknowledged: the sweep cannot end before duration_s of
+            # samples after it (a reader without lag is then at or past the sweep's first sample)
+            self._drain(rec)
+            start_index = rec.next_index
             beat.start()
             last_poll = 0.0
             while True:
@@ -168,7 +169,7 @@ class SweepRunner:
                         # that fell behind during the sweep without knowing it (a CAN relay under load
                         # reports no backlog; CI under load saw a 1 + 8 s recording come out 128 samples
                         # short, no frame lost) does not end the settle early. A lag it already had at
-                        # START is not seen: the PLC reports no clock in the sensors' time base.
+                        # START shortens it still: the PLC reports no clock in the sensors' time base.
                         start = start_index if start_index is not None else rec.first_index
                         if start is not None:
                             done_index = max(done_index, start + int(round(req.duration_s * self.source.fs_hz)))

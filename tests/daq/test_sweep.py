@@ -7,7 +7,7 @@ from daq.sources import SerialSource
 from daq.recorder import describe, read_h5_recording
 from daq.sweep import SweepRefused, SweepRequest, SweepRunner
 from identify.identifier import SparseIdentifier
-from sim.plc import Limits, PLCConfig
+from sim.plc import Limits, PLCConfig, State
 from sim.server import SENSITIVITY, SimulatedRig
 
 SPEED = 10.0
@@ -248,14 +248,14 @@ def test_disk_reaching_its_reserve_mid_sweep_stops_the_table_and_keeps_the_file_
 
 
 class _FallingBehindSource(SerialSource):
-    """A real socket:// reader that falls behind the sensors without knowing it, as a relay in between
-    does under load (the CAN remote, where CI saw a recording end 128 samples short): from its first
-    read on, it hands over frames at `rate` of the pace they are sensed, never reports a backlog, and
-    loses none (every frame comes, in order, later)."""
+    """A real socket:// reader that falls behind the sensors without knowing it once the sweep runs, as
+    a relay in between does under the sweep's load (the CAN remote, where CI saw a recording end 128
+    samples short): caught up while `running()` is false, then it hands over frames at `rate` of the
+    pace they are sensed, never reports a backlog, and loses none (every frame comes, in order, later)."""
 
-    def __init__(self, url: str, fs_hz: float, rate: float):
+    def __init__(self, url: str, fs_hz: float, rate: float, running):
         super().__init__(url, fs_hz)
-        self.rate, self._held, self._joined_at = rate, [], None
+        self.rate, self.running, self._held, self._since = rate, running, [], None
 
     def read(self):
         self._held += super().read()
@@ -263,9 +263,9 @@ class _FallingBehindSource(SerialSource):
         if not self._held:
             return []
         newest = self._held[-1][0] + len(self._held[-1][1])
-        if self._joined_at is None:
-            self._joined_at = newest
-        upto = self._joined_at + self.rate * (newest - self._joined_at)
+        if self._since is None or not self.running():
+            self._since = newest  # caught up: everything held is handed over
+        upto = self._since + self.rate * (newest - self._since)
         out = []
         while self._held and self._held[0][0] + len(self._held[0][1]) <= upto:
             out.append(self._held.pop(0))
@@ -274,13 +274,14 @@ class _FallingBehindSource(SerialSource):
 
 def test_a_reader_falling_behind_without_knowing_it_still_records_the_whole_settle(rig, tmp_path):
     """The settle after the sweep is recorded in full when the reader falls behind during the sweep
-    and cannot tell (delivering at 70 % of the sensors' pace, ~2 s behind by the end of a 6 s sweep):
+    and cannot tell (delivering at 70 % of the sensors' pace from START, ~2 s behind by its end):
     the table is at rest for settle_s in the file after its last motion. Before, the settle counted
     from where the reader was when the PLC said DONE, and the file ended with the table still moving;
-    now it counts from no earlier than duration_s after where the reader was at START."""
+    now it counts from no earlier than duration_s after where the reader was once START was acknowledged."""
     fs, settle = 2048.0, 1.0
-    runner = SweepRunner(ModbusPLC(*rig.endpoints["modbus"]), _FallingBehindSource(rig.endpoints["stream"], fs, 0.7),
-                         Limits(), SENSITIVITY)
+    source = _FallingBehindSource(rig.endpoints["stream"], fs, 0.7,
+                                  running=lambda: rig.call(lambda: rig.plc.state) != State.IDLE)
+    runner = SweepRunner(ModbusPLC(*rig.endpoints["modbus"]), source, Limits(), SENSITIVITY)
     out = tmp_path / "behind.h5"
     result = runner.run(SweepRequest(2.0, 10.0, 6.0, 1.0, settle_s=settle, operator="test"), out)
     assert result["status"] == "complete" and result["gaps"] == 0, result
