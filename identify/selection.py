@@ -27,7 +27,7 @@ import numpy as np
 
 from .errors import IdentificationError
 from .gram import NormalEquations
-from .optimizers.base import SparsePath, least_squares
+from .optimizers.base import SparsePath, distinct_rows, least_squares_many
 
 RULES = ("heldout", "paper", "bic")
 DEFAULT_TOLERANCE = {"paper": 0.25, "heldout": 0.003, "bic": 0.0}
@@ -62,13 +62,8 @@ def select(path: SparsePath, eq: int, train: NormalEquations, heldout: NormalEqu
     nnz = supports.sum(1)
     path_mse = train.mse(X.T, eq)
     b = train.B[:, eq]
-    refits: dict[bytes, np.ndarray] = {}
-    coef_k = np.empty_like(X)
-    for k in range(X.shape[0]):
-        key = supports[k].tobytes()
-        if key not in refits:
-            refits[key] = least_squares(train.G, b, supports[k])
-        coef_k[k] = refits[key]
+    first, which = distinct_rows(supports)                   # each support refit once
+    coef_k = least_squares_many(train.G, b, supports[first])[which]
     floor = 1e-13 * train.yy[eq] / max(train.n, 1)  # numerical zero for exactly-fitting equations
     if rule == "paper":
         score = path_mse
@@ -102,24 +97,24 @@ def _backward_eliminate(support, coef, train, heldout, eq, rule, thr, current, n
     b = train.B[:, eq]
     floor = 1e-13 * train.yy[eq] / max(train.n, 1)
 
-    def crit(x, k):
+    def crit(X, k):
+        """The rule's criterion of coefficient rows X (t, m) with k (t,) terms each."""
         if rule in ("heldout", "paper") and heldout is not None and heldout.n:
-            return float(heldout.mse(x[:, None], eq)[0])
+            return heldout.mse(X.T, eq)
         if rule == "paper":
-            return float(train.mse(x[:, None], eq)[0])
-        return float(n_eff * np.log(max(train.mse(x[:, None], eq)[0], floor)) + k * np.log(n_eff))
+            return train.mse(X.T, eq)
+        return n_eff * np.log(np.maximum(train.mse(X.T, eq), floor)) + k * np.log(n_eff)
 
     while support.any():
-        trials = []
-        for j in np.flatnonzero(support):
-            s2 = support.copy()
-            s2[j] = False
-            x2 = least_squares(train.G, b, s2)
-            trials.append((crit(x2, s2.sum()), j, s2, x2))
-        best = min(trials, key=lambda t: t[0])
+        dropped = np.flatnonzero(support)
+        s2 = np.repeat(support[None], dropped.size, axis=0)
+        s2[np.arange(dropped.size), dropped] = False          # row i: support without its i-th term
+        x2 = least_squares_many(train.G, b, s2)
+        score = crit(x2, s2.sum(1))
+        i = int(np.argmin(score))                               # the first of equal scores, as before
         over_budget = max_terms is not None and support.sum() > max_terms
-        if over_budget or (rule == "heldout" and best[0] <= thr) or (rule == "bic" and best[0] < current):
-            current, _, support, coef = best
+        if over_budget or (rule == "heldout" and score[i] <= thr) or (rule == "bic" and score[i] < current):
+            current, support, coef = float(score[i]), s2[i], x2[i]
         else:
             break
     return support, coef
