@@ -76,13 +76,23 @@ def lowband_rfft(x: np.ndarray, nfft: int, k_max: int) -> np.ndarray:
     phases = np.zeros((k, m, length))
     for r in range(min(m, n)):
         phases[:, r, :len(range(r, n, m))] = x[:, r::m]
+    return polyphase_rfft(phases, nfft, k_max)
+
+
+def polyphase_rfft(phases: np.ndarray, nfft: int, k_max: int) -> np.ndarray:
+    """lowband_rfft of rows already split into their polyphase components, phases[i, r, j] = x[i, j M + r]
+    (zero from n on), shape (k, M, nfft / M) with M = polyphase_factor(nfft, k_max): for a caller that
+    builds its rows in that order (identify.noise_spread), which spares the split's copy. `phases` is
+    overwritten."""
+    m = phases.shape[1]
     parts = rfft(phases, axis=-1, overwrite_x=True)
-    del phases
     out = parts[:, 0, :k_max + 1].copy()
     if m > 1:
         tw = _twiddles(nfft, m, k_max)
         for r in range(1, m):
-            out += parts[:, r, :k_max + 1] * tw[r]
+            term = parts[:, r, :k_max + 1]
+            term *= tw[r]  # in place: parts is ours
+            out += term
     return out
 
 
