@@ -238,7 +238,7 @@ def uncertainty_parts(n: int, repeat: int) -> dict:
             "closed_form": cpu(lambda: unc.analytic_chain_bias(rec, sig, gram, lib, sups, coefs)),
             "noise_share": cpu(lambda: noise_variance(parts, sups, coefs, G, col_exps, unc.TARGET_EXPONENTS)),
             "inclusion": cpu(lambda: unc.inclusion_probabilities(gram, held, fit_and_select)),
-            "paths": cpu(lambda: opt.fit_paths(trains))}
+            "paths": cpu(lambda: opt.fit_paths(trains, start=ident.path_))}
 
 
 def padding_lever(n: int, repeat: int) -> dict:

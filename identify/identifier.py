@@ -302,8 +302,9 @@ class SparseIdentifier:
 
     def _placement_supports(self, trains, heldouts, n_eff: float) -> list:
         """Per held-out placement, the supports (one per equation) this identifier's path and rule
-        choose on its training and held-out normal equations; the paths run as one batch."""
-        paths = self._optimizer().fit_paths(trains)
+        choose on its training and held-out normal equations; the paths run as one batch, started from
+        the fit's own path (a placement moves a few blocks: its solutions are near the fit's)."""
+        paths = self._optimizer().fit_paths(trains, start=self.path_)
         return [[s.support for s in self._select(path, train, heldout, n_eff).values()]
                 for path, train, heldout in zip(paths, trains, heldouts)]
 

@@ -38,10 +38,10 @@ class PathOptimizer:
         G, B, scale = self._scaled(ne)
         return self._unscaled(*self._path(G, B), scale)
 
-    def fit_paths(self, nes) -> list[SparsePath]:
+    def fit_paths(self, nes, start: SparsePath | None = None) -> list[SparsePath]:
         """fit_path of each of several normal equations (of the same library): one loop here; an
         optimizer that can run them together overrides it (ADMMLasso: the inclusion probabilities' 24
-        placements in one batch)."""
+        placements in one batch, started from `start`, the fit's own path; ignored here)."""
         return [self.fit_path(ne) for ne in nes]
 
     @staticmethod

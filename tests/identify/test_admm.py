@@ -142,3 +142,25 @@ def test_polished_path_is_the_exact_minimiser_at_every_lambda(table1_run):
     # q2_dot = q1 exactly: the LASSO solution is 1 - lambda, now to rounding
     lams = polished.params[:, 1]
     np.testing.assert_allclose(polished.coefs[:, 1, 1] * s[1] / ys[1], np.maximum(1 - lams, 0), atol=1e-13)
+
+
+def test_a_warm_start_changes_where_the_iterates_start_not_where_they_end(table1_run):
+    """The inclusion probabilities start each held-out placement's path from the fit's own path
+    (fit_paths(start=...)): the paths must be those of a cold start (same supports at every lambda,
+    coefficients to 1e-9 of the largest: both are certified minimisers or within ADMM's tolerance), and
+    the start must actually be used (fewer iterations), alone or in a batch."""
+    A, Y = _scaled_problem(table1_run)
+    n = A.shape[0]
+    gram = BlockGram(np.column_stack([A, Y]), 2, np.linspace(0, n, 51).round().astype(int))
+    rng = np.random.default_rng(5)
+    fit_path = ADMMLasso().fit_path(gram.equations(np.arange(50) % 5 != 0))  # the fit: every 5th block held out
+    nes = [gram.equations(rng.permutation(50) >= 10) for _ in range(6)]      # six other placements
+    opt = ADMMLasso()
+    cold = opt.fit_paths(nes)
+    warm = opt.fit_paths(nes, start=fit_path)
+    for c, w, ne in zip(cold, warm, nes):
+        np.testing.assert_array_equal(c.coefs != 0, w.coefs != 0)
+        np.testing.assert_allclose(w.coefs, c.coefs, rtol=0, atol=1e-9 * np.abs(c.coefs).max())
+        alone = opt.fit_paths([ne], start=fit_path)[0]
+        np.testing.assert_array_equal(alone.iterations, w.iterations)
+    assert max(w.iterations.max() for w in warm) < max(c.iterations.max() for c in cold)
