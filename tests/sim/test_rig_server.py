@@ -390,3 +390,20 @@ def test_can_across_processes_through_python_can_remote(tmp_path, can_relay):
     counters = np.array([can_frames.decode(m.data)[0] for m in msgs])
     assert counters.size > 1000  # ~2048 per second of rig time
     assert np.all(np.diff(counters) % 65536 == 1)
+
+
+def test_free_port_draws_below_the_ephemeral_range():
+    """free_port's ports are ones the kernel never gives an outgoing connection (below
+    ip_local_port_range), so no client socket can take one between the check and a server's bind;
+    each is bindable when returned."""
+    import socket
+
+    from sim.server import PORT_RANGE, free_port
+    with open("/proc/sys/net/ipv4/ip_local_port_range") as f:
+        low = int(f.read().split()[0])
+    ports = [free_port() for _ in range(30)]
+    assert all(PORT_RANGE[0] <= p < low for p in ports), ports
+    assert len(set(ports)) > 20  # drawn at random, not one fixed port
+    for p in ports[:5]:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", p))
