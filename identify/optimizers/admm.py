@@ -102,23 +102,25 @@ class ADMMLasso(PathOptimizer):
             rho[i] = float(np.sqrt(pos.min() * pos.max()))
         inv = 1.0 / (d + rho[:, None])                       # (P, m)
         VT = V.transpose(0, 2, 1)
+        Bcols = np.repeat(B, K, axis=2)                      # (P, m, p K): columns ordered (target, lambda)
+        lam_cols = lam.transpose(0, 2, 1).reshape(P, -1)     # (P, p K), the same order
         # x = (G + rho I)^-1 (b + rho (z - u)) = x0 + M (z - u): one small product per iteration
-        x0 = V @ (inv[:, :, None] * (VT @ np.repeat(B, K, axis=2)))  # columns ordered (target, lambda)
+        x0 = V @ (inv[:, :, None] * (VT @ Bcols))
         M = (V * (rho[:, None] * inv)[:, None, :]) @ VT
-        thr = (lam.transpose(0, 2, 1).reshape(P, -1) / rho[:, None])[:, None, :]  # matching order
+        thr = (lam_cols / rho[:, None])[:, None, :]
         a = self.relaxation
         if z0 is None:
             z = np.zeros((P, m, p * K))
             u = np.zeros_like(z)
         else:  # the dual that makes z0 a fixed point of the x-update: G z + rho (z - z + u) = b
             z = np.array(z0, dtype=float)
-            u = (np.repeat(B, K, axis=2) - G @ z) / rho[:, None, None]
+            u = (Bcols - G @ z) / rho[:, None, None]
         iters = np.full((P, p * K), self.max_iter)
         result = np.zeros_like(z)
         run = np.arange(P)                                   # problems still iterating
         active = np.ones((P, p * K), dtype=bool)             # their columns not yet converged
         rho_run = rho[:, None]
-        polish = _Polisher(G, np.repeat(B, K, axis=2), lam.transpose(0, 2, 1).reshape(P, -1), K)
+        polish = _Polisher(G, Bcols, lam_cols, K)
         polish_every = self.polish_every if m <= _Polisher.MAX_COLUMNS else 0
         certified = np.zeros((P, p * K), dtype=bool)
         for it in range(1, self.max_iter + 1):
@@ -197,7 +199,8 @@ class _Polisher:
         A = np.where(S[:, :, None] & S[:, None, :], Gp, 0.0)
         diag = np.arange(m)
         A[:, diag, diag] = np.where(S, A[:, diag, diag], 1.0)
-        b = self.Bcols[prob[first], :, ci[first]] * S
+        b_full = self.Bcols[prob[first], :, ci[first]]
+        b = b_full * S
         try:
             sol = np.linalg.solve(A, np.stack([b, sign], axis=2))  # (U, m, 2)
         except np.linalg.LinAlgError:  # an exactly singular G_SS among them: leave these to the tolerance
@@ -206,7 +209,7 @@ class _Polisher:
         xb, xs = sol[..., 0] * S, sol[..., 1] * S
         lam = self.lam[prob, ci]
         x = xb[inv] - lam[:, None] * xs[inv]                   # (N, m)
-        gb = (self.Bcols[prob[first], :, ci[first]] - np.einsum("uij,uj->ui", Gp, xb))[inv]
+        gb = (b_full - np.einsum("uij,uj->ui", Gp, xb))[inv]
         gs = np.einsum("uij,uj->ui", Gp, xs)[inv]
         grad = gb + lam[:, None] * gs                          # b - G x
         Sc = S[inv]
