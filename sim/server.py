@@ -38,22 +38,22 @@ def _ephemeral_low() -> int:
 
 
 def free_port(host: str = "127.0.0.1") -> int:
-    """A TCP port nothing listens on now, for a server another process will bind (a test's service).
+    """A TCP port nothing listens on now, for a server bound a moment later (SimulatedRig's Modbus and
+    stream servers, started in their own thread; a test's service process).
 
     Drawn at random below the kernel's ephemeral range: a port the kernel hands out for port 0 is one it
     also gives to outgoing connections, and under a busy test run one of those took it between this
     check and the server's bind (a service failed to start with "address already in use"). Falls back
     to the kernel's choice when no port below the range is free."""
-    rng = np.random.default_rng()
     top = min(PORT_RANGE[1], _ephemeral_low() - 1)
-    for _ in range(200):
-        port = int(rng.integers(PORT_RANGE[0], top + 1)) if top > PORT_RANGE[0] else 0
-        with socket.socket() as s:
-            try:
-                s.bind((host, port))
-            except OSError:
-                continue
-            return s.getsockname()[1]
+    if top > PORT_RANGE[0]:
+        for port in np.random.default_rng().integers(PORT_RANGE[0], top + 1, size=200):
+            with socket.socket() as s:
+                try:
+                    s.bind((host, int(port)))
+                except OSError:
+                    continue
+                return int(port)
     with socket.socket() as s:
         s.bind((host, 0))
         return s.getsockname()[1]

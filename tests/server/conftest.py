@@ -25,32 +25,24 @@ class Service:
         self.proc: subprocess.Popen | None = None
         self.port = 0
 
-    def start(self, attempts: int = 3) -> "Service":
-        """Start the service on a free port and wait for /api/health. A port taken between free_port's
-        check and the server's bind (another process's socket) is retried on a new port, up to
-        `attempts` times; any other exit is a failure."""
-        for attempt in range(attempts):
-            self.port = free_port()
-            env = {**os.environ, "SHAKEID_TOKENS": f"{OPERATOR}:operator,{VIEWER}:viewer", **self.extra_env}
-            self.log = open(self.data_dir.parent / f"serve-{self.port}.log", "w")
-            self.proc = subprocess.Popen([SHAKEID, "serve", "--data-dir", str(self.data_dir), "--port",
-                                          str(self.port), "--sim-speed", str(self.speed), *self.args],
-                                         stdout=self.log, stderr=subprocess.STDOUT, env=env)
-            end = time.monotonic() + 60
-            while True:
-                try:
-                    if httpx.get(self.url + "/api/health", timeout=1).status_code == 200:
-                        return self
-                except httpx.HTTPError:
-                    pass
-                if self.proc.poll() is not None:
-                    break
-                assert time.monotonic() < end, "service did not start: " + self.output()
-                time.sleep(0.1)
-            if "address already in use" not in self.output() or attempt == attempts - 1:
-                raise AssertionError(self.output())
-            self.log.close()
-        raise AssertionError("unreachable")
+    def start(self) -> "Service":
+        self.port = free_port()  # below the ephemeral range: no client socket can take it before the bind
+        env = {**os.environ, "SHAKEID_TOKENS": f"{OPERATOR}:operator,{VIEWER}:viewer", **self.extra_env}
+        self.log = open(self.data_dir.parent / f"serve-{self.port}.log", "w")
+        self.proc = subprocess.Popen([SHAKEID, "serve", "--data-dir", str(self.data_dir), "--port", str(self.port),
+                                      "--sim-speed", str(self.speed), *self.args], stdout=self.log,
+                                     stderr=subprocess.STDOUT,
+                                     env=env)
+        end = time.monotonic() + 60
+        while True:
+            try:
+                if httpx.get(self.url + "/api/health", timeout=1).status_code == 200:
+                    return self
+            except httpx.HTTPError:
+                pass
+            assert self.proc.poll() is None, self.output()
+            assert time.monotonic() < end, "service did not start: " + self.output()
+            time.sleep(0.1)
 
     @property
     def url(self) -> str:
