@@ -50,6 +50,12 @@ from .spectral import polyphase_factor, polyphase_rfft
 BATCH = 8
 #: Largest sampling step of the score's transforms (decimation).
 MAX_STEP = 8
+#: Precision of the score's rows and their transforms. A variance that sets a standard error needs a
+#: few digits; single precision moves it by < 1e-7 of itself (7-8e-8 against double on the 30 s records
+#: of tests/identify/test_noise_spread.py, 6-8e-8 on a million samples), and halves the memory the rows
+#: are built in and the time pocketfft takes on them. The sums over the band's bins (U, and the product
+#: that squares it) and the filters H_v are in double precision (H_v's rounding alone would move 9e-8).
+DTYPE = np.float32
 
 
 def _degree(k) -> int:
@@ -95,8 +101,9 @@ def boxcar_spectrum(n: int, nfft: int, kk: int) -> np.ndarray:
 def _combination(terms, scratch) -> np.ndarray | float:
     """sum of c x over the (c, x) pairs, x an array or the constant monomial's 1.0, into one new array
     (each product made in `scratch`): no temporary per term."""
-    const = sum(c for c, x in terms if not isinstance(x, np.ndarray))
-    arrays = [(c, x) for c, x in terms if isinstance(x, np.ndarray)]
+    const = float(sum(c for c, x in terms if not isinstance(x, np.ndarray)))
+    # python floats: a numpy float64 coefficient would widen single-precision rows to double
+    arrays = [(float(c), x) for c, x in terms if isinstance(x, np.ndarray)]
     if not arrays:
         return const
     out = np.multiply(arrays[0][1], arrays[0][0])
@@ -117,9 +124,9 @@ class _Strided:
         self.y, self._rows, self._read = y, {}, set()
 
     def __call__(self, v: int, stride: int, offsets) -> np.ndarray:
-        y = np.asarray(self.y[v], dtype=float)
+        y = self.y[v]
         if (v, stride) not in self._rows:
-            self._rows[v, stride] = np.zeros((stride, -(-y.size // stride)))
+            self._rows[v, stride] = np.zeros((stride, -(-y.size // stride)), dtype=DTYPE)
         rows = self._rows[v, stride]
         for c in offsets:
             if (v, stride, c) not in self._read:
@@ -147,12 +154,12 @@ class _Signals:
         # components whose last column is past the record's end: zeroed in every row transformed
         self.short = [r for r in range(self.m) if (self.width - 1) * self.m + r >= self.n]
         self._mono = {}
-        self.scratch = np.empty((self.m, self.width))
+        self.scratch = np.empty((self.m, self.width), dtype=DTYPE)
 
     def signal(self, v: int) -> np.ndarray:
         """(M, width) y_v: component r is y_v[r step::M step], row r step of the recording's stride M step."""
         if self.m == 1 and self.step == 1:
-            return np.asarray(self.strided.y[v], dtype=float).reshape(1, -1)
+            return np.asarray(self.strided.y[v], dtype=DTYPE).reshape(1, -1)
         p = self.m * self.step
         return self.strided(v, p, range(0, p, self.step))[::self.step]
 
@@ -265,8 +272,8 @@ class _Score:
 
     def accumulate(self, U: np.ndarray):
         """U[row of v] += conj(H_v) Phi_v for every signal v, Phi_v the (|S|, kk) transform of
-        g_v = dtheta/dy_v r + theta slope_v per term; U (2, |S|, kk). The transforms are ours: each is
-        multiplied in place, term by term, with no (|S|, kk) copy per signal."""
+        g_v = dtheta/dy_v r + theta slope_v per term; U (2, |S|, kk), in double precision, the transforms
+        in DTYPE's: multiplied term by term, with no (|S|, kk) copy per signal."""
         for v, (row, _) in enumerate(self.noise.requests):
             plan, h = self.plans[v], np.conj(self.noise.responses[v])
             if isinstance(plan, tuple):  # constants: combined from theta's and r's transforms
@@ -276,13 +283,10 @@ class _Score:
                             ([d * self.spec[("resid",)]] if d != 0.0 else [])
                     if terms:
                         phi = terms[0] if len(terms) == 1 else np.add(*terms, out=terms[0])
-                        phi *= h
-                        U[row, a] += phi
+                        U[row, a] += phi * h  # in double: h's rounding would show (single: 9e-8)
             elif plan is not None:
                 for a in plan:
-                    phi = self.spec.pop((v, a))
-                    phi *= h
-                    U[row, a] += phi
+                    U[row, a] += self.spec.pop((v, a)) * h
 
 
 def _steps(y, noise):
@@ -311,7 +315,7 @@ def _transform(scores, at):
         sig = at(step)
         for first in range(0, len(todo), BATCH * step):
             chunk = todo[first:first + BATCH * step]
-            buf = np.empty((len(chunk), sig.m, sig.length // sig.m))
+            buf = np.empty((len(chunk), sig.m, sig.length // sig.m), dtype=DTYPE)
             for i, (score, job) in enumerate(chunk):
                 score.fill(sig, job, buf[i, :, :sig.width])
             buf[:, :, sig.width:] = 0.0  # the zero padding to nfft / step points

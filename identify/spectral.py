@@ -53,11 +53,12 @@ def polyphase_factor(nfft: int, k_max: int, largest: int = 8) -> int:
 
 
 @lru_cache(maxsize=8)
-def _twiddles(nfft: int, m: int, k_max: int) -> np.ndarray:
-    """exp(-2 pi i k r / nfft) for r < m, k <= k_max, shape (m, k_max + 1); k r reduced mod nfft first.
-    Cached: the chain's forward and inverse transforms of one record share them (read-only)."""
+def _twiddles(nfft: int, m: int, k_max: int, dtype=np.complex128) -> np.ndarray:
+    """exp(-2 pi i k r / nfft) for r < m, k <= k_max, shape (m, k_max + 1); k r reduced mod nfft first;
+    in the precision of the spectra they multiply (complex64 for identify.noise_spread's). Cached: the
+    chain's forward and inverse transforms of one record share them (read-only)."""
     kr = np.outer(np.arange(m), np.arange(k_max + 1)) % nfft
-    tw = np.exp(-2j * np.pi * kr / nfft)
+    tw = np.exp(-2j * np.pi * kr / nfft).astype(dtype, copy=False)
     tw.flags.writeable = False
     return tw
 
@@ -85,10 +86,10 @@ def polyphase_rfft(phases: np.ndarray, nfft: int, k_max: int) -> np.ndarray:
     builds its rows in that order (identify.noise_spread), which spares the split's copy. `phases` is
     overwritten."""
     m = phases.shape[1]
-    parts = rfft(phases, axis=-1, overwrite_x=True)
+    parts = rfft(phases, axis=-1, overwrite_x=True)  # single precision in, single out
     out = parts[:, 0, :k_max + 1].copy()
     if m > 1:
-        tw = _twiddles(nfft, m, k_max)
+        tw = _twiddles(nfft, m, k_max, parts.dtype)
         for r in range(1, m):
             term = parts[:, r, :k_max + 1]
             term *= tw[r]  # in place: parts is ours
