@@ -51,9 +51,10 @@ BATCH = 8
 #: Largest sampling step of the score's transforms (decimation).
 MAX_STEP = 8
 #: Precision of the score's rows and their transforms. A variance that sets a standard error needs a
-#: few digits; single precision moves it by < 1e-7 of itself (7-8e-8 against double on the 30 s records
-#: of tests/identify/test_noise_spread.py, 6-8e-8 on a million samples), and halves the memory the rows
-#: are built in and the time pocketfft takes on them. The sums over the band's bins (U, and the product
+#: few digits; single precision moves it by a few 1e-7 of itself at most (against double: 7-8e-8 on the
+#: 30 s records of tests/identify/test_noise_spread.py, 7.5e-8 on a million samples, <= 2.5e-7 on the
+#: five sweeps of benchmarks/uncertainty_numbers.py), and halves the memory the rows are built in and the
+#: time pocketfft takes on them. The sums over the band's bins (U, and the product
 #: that squares it) and the filters H_v are in double precision (H_v's rounding alone would move 9e-8).
 DTYPE = np.float32
 
