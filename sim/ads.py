@@ -20,7 +20,8 @@ executed once and reset to 0, status symbols are refreshed.
                                          (m/s^2), fMinFreq, fMaxFreq (Hz), fMaxDuration, fWatchdog (s)
 
 Every symbol is registered up front: pyads' test server kills the connection on an unknown name.
-The ADS client always dials TCP 48898, so a second server needs another loopback address (127.0.0.5).
+The ADS client always dials TCP 48898, so a second server needs another loopback address (127.0.0.5;
+sim.server.free_ads_address draws a free one, as the tests do).
 """
 from __future__ import annotations
 

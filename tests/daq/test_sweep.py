@@ -8,14 +8,14 @@ from daq.recorder import describe, read_h5_recording
 from daq.sweep import SweepRefused, SweepRequest, SweepRunner
 from identify.identifier import SparseIdentifier
 from sim.plc import Limits, PLCConfig, State
-from sim.server import SENSITIVITY, SimulatedRig
+from sim.server import SENSITIVITY, SimulatedRig, free_ads_address
 
 SPEED = 10.0
 
 
 @pytest.fixture
 def rig():
-    r = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=3.0)), speed=SPEED, ads_address="127.0.0.5").start()
+    r = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=3.0)), speed=SPEED, ads_address=free_ads_address()).start()
     yield r
     r.stop()
 

@@ -11,7 +11,7 @@ from identify.identifier import SparseIdentifier
 from identify.recording import Recording
 from sim.frames import FrameDecoder
 from sim.plc import Fault, Limits, PLCConfig, State
-from sim.server import SimulatedRig
+from sim.server import SimulatedRig, free_ads_address
 
 SPEED = 10.0  # rig seconds per wall second
 
@@ -249,7 +249,7 @@ def test_same_plc_over_ads():
     """pyads client against the rig's AdsTestServer: configure, start, status, e-stop, refusal."""
     import pyads
 
-    rig = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=3.0)), speed=SPEED, ads_address="127.0.0.5").start()
+    rig = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=3.0)), speed=SPEED, ads_address=free_ads_address()).start()
     try:
         net_id, ams_port, ip = rig.endpoints["ads"]
         plc = pyads.Connection(net_id, ams_port, ip)
@@ -407,3 +407,24 @@ def test_free_port_draws_below_the_ephemeral_range():
     for p in ports[:5]:
         with socket.socket() as s:
             s.bind(("127.0.0.1", p))
+
+
+def test_free_ads_address_is_a_random_loopback_address_free_on_the_ads_port():
+    """ADS servers on one machine share port 48898, so each simulated rig's takes its own loopback
+    address: drawn at random over 127/8 (two test runs at once no longer both take 127.0.0.5), each
+    bindable when returned, and one where a server listens is not free (the check binds as
+    AdsTestServer does, with SO_REUSEADDR, which a listener still blocks)."""
+    import ipaddress
+    import socket
+
+    from sim.server import ADS_TCP_PORT
+    hosts = [free_ads_address() for _ in range(30)]
+    assert all(ipaddress.ip_address(h).is_loopback and not h.startswith("127.0.0.") for h in hosts), hosts
+    assert len(set(hosts)) > 20
+    with socket.socket() as listener:
+        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        listener.bind((hosts[0], ADS_TCP_PORT))
+        listener.listen()
+        with socket.socket() as probe, pytest.raises(OSError):
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            probe.bind((hosts[0], ADS_TCP_PORT))
