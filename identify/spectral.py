@@ -52,11 +52,16 @@ def polyphase_factor(nfft: int, k_max: int, largest: int = 8) -> int:
     return 1
 
 
-@lru_cache(maxsize=8)
 def _twiddles(nfft: int, m: int, k_max: int, dtype=np.complex128) -> np.ndarray:
     """exp(-2 pi i k r / nfft) for r < m, k <= k_max, shape (m, k_max + 1); k r reduced mod nfft first;
-    in the precision of the spectra they multiply (complex64 for identify.noise_spread's). Cached: the
-    chain's forward and inverse transforms of one record share them (read-only)."""
+    in the precision of the spectra they multiply (complex64 for identify.noise_spread's). Cached, one
+    entry per precision whatever the argument's spelling: the chain's forward and inverse transforms of
+    one record share them (read-only)."""
+    return _cached_twiddles(nfft, m, k_max, np.dtype(dtype).name)
+
+
+@lru_cache(maxsize=8)
+def _cached_twiddles(nfft: int, m: int, k_max: int, dtype: str) -> np.ndarray:
     kr = np.outer(np.arange(m), np.arange(k_max + 1)) % nfft
     tw = np.exp(-2j * np.pi * kr / nfft).astype(dtype, copy=False)
     tw.flags.writeable = False
@@ -86,7 +91,7 @@ def polyphase_rfft(phases: np.ndarray, nfft: int, k_max: int) -> np.ndarray:
     builds its rows in that order (identify.noise_spread), which spares the split's copy. `phases` is
     overwritten."""
     m = phases.shape[1]
-    parts = rfft(phases, axis=-1, overwrite_x=True)  # single precision in, single out
+    parts = rfft(phases, axis=-1, overwrite_x=True)  # in the rows' precision (single: noise_spread)
     out = parts[:, 0, :k_max + 1].copy()
     if m > 1:
         tw = _twiddles(nfft, m, k_max, parts.dtype)

@@ -188,3 +188,21 @@ def test_lowband_transforms_are_the_band_bins_of_the_full_ones(n, band_share):
     y = lowband_irfft(ref[:, :k_max + 1], nfft, n)
     assert y.shape == (2, n) and _close(y, irfft(low, nfft, axis=-1)[:, :n], 1e-14)
     assert (polyphase_factor(nfft, k_max) > 1) == (band_share < 0.5)
+
+
+def test_forward_and_inverse_transforms_share_their_twiddles():
+    """The chain's forward (lowband_rfft, which passes its spectra's dtype) and inverse (lowband_irfft,
+    the default) transforms of one record compute the twiddles once: one cache entry per precision,
+    however the precision is spelled (a numpy dtype and the scalar type hash differently, and once made
+    the chain compute them twice); single precision gets its own, rounded."""
+    from identify.spectral import _cached_twiddles, _twiddles, lowband_irfft, lowband_rfft
+    n, nfft, k_max = 5000, 12000, 1000
+    _cached_twiddles.cache_clear()
+    spec = lowband_rfft(np.vstack([_signal(n, 5)]), nfft, k_max)
+    lowband_irfft(spec, nfft, n)
+    info = _cached_twiddles.cache_info()
+    assert (info.misses, info.hits) == (1, 1), info
+    assert _twiddles(nfft, 6, k_max) is _twiddles(nfft, 6, k_max, np.dtype(np.complex128))
+    single = _twiddles(nfft, 6, k_max, np.complex64)
+    assert single.dtype == np.complex64 and single is _twiddles(nfft, 6, k_max, np.dtype("complex64"))
+    np.testing.assert_allclose(single, _twiddles(nfft, 6, k_max), atol=1e-7)
