@@ -37,6 +37,18 @@ def _ephemeral_low() -> int:
         return PORT_RANGE[1] + 1
 
 
+def _bindable(host: str, port: int, reuse_address: bool = False) -> bool:
+    """Whether a TCP socket can bind (host, port) now (with SO_REUSEADDR: a listener still blocks it)."""
+    with socket.socket() as s:
+        if reuse_address:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((host, port))
+        except OSError:
+            return False
+        return True
+
+
 def free_port(host: str = "127.0.0.1") -> int:
     """A TCP port nothing listens on now, for a server bound a moment later (SimulatedRig's Modbus and
     stream servers, started in their own thread; a test's service process).
@@ -48,11 +60,7 @@ def free_port(host: str = "127.0.0.1") -> int:
     top = min(PORT_RANGE[1], _ephemeral_low() - 1)
     if top > PORT_RANGE[0]:
         for port in np.random.default_rng().integers(PORT_RANGE[0], top + 1, size=200):
-            with socket.socket() as s:
-                try:
-                    s.bind((host, int(port)))
-                except OSError:
-                    continue
+            if _bindable(host, int(port)):
                 return int(port)
     with socket.socket() as s:
         s.bind((host, 0))
@@ -70,12 +78,7 @@ def free_ads_address() -> str:
     the later one's rigs failed to start with "address already in use"."""
     for a, b, c in np.random.default_rng().integers(1, 255, size=(200, 3)):
         host = f"127.{a}.{b}.{c}"
-        with socket.socket() as s:
-            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as AdsTestServer binds
-            try:
-                s.bind((host, ADS_TCP_PORT))
-            except OSError:
-                continue
+        if _bindable(host, ADS_TCP_PORT, reuse_address=True):  # as AdsTestServer binds
             return host
     raise RuntimeError(f"no loopback address with TCP {ADS_TCP_PORT} free (200 tried)")
 
