@@ -20,7 +20,10 @@ For each record length n, timed in rounds (anchor, then each call once per round
 Targets (issue 11): fit <= 2x the anchor, fit with validation <= 3x, PySINDy end to end / fit >= 10x.
 Everything runs on one thread (BLAS limited to one unless OPENBLAS_NUM_THREADS / OMP_NUM_THREADS are set;
 scipy.fft uses one worker by default), and each figure is given as wall time and as the process's CPU
-time: on a shared machine the CPU-time ratios are the ones a load spike does not move.
+time: on a shared machine the CPU-time ratios are the ones a load spike does not move. Every timed call
+starts with shakeid's twiddle cache empty (identify.spectral), so a repeat of the same record pays what a
+user's first call on a new recording does (about 0.02-0.03 s of a million-sample fit); scipy's own FFT
+plan cache, which cannot be cleared, is warm for the anchor and the calls alike.
 
 Then free-run simulation of a 60 s sweep against scipy solve_ivp (RK45, rtol 1e-8) at equal accuracy:
 both integrate the same cubic-spline input; the error of each is measured against DOP853 at rtol 1e-12,
@@ -50,6 +53,7 @@ from identify.identifier import SparseIdentifier  # noqa: E402
 from identify.library import Library  # noqa: E402
 from identify.model import SparseModel  # noqa: E402
 from identify.simulate import simulate  # noqa: E402
+from identify.spectral import _cached_twiddles  # noqa: E402
 from identify.uncertainty import N_PLACEMENTS  # noqa: E402
 from sim.rig import RigParameters  # noqa: E402
 from sim.sweep import SineSweep  # noqa: E402
@@ -62,7 +66,9 @@ PARTS = ("chain", "library_gram", "path", "selection_refit", "offset", "refit_un
 
 
 def timed(fn):
-    """(wall seconds, CPU seconds of this process), result."""
+    """(wall seconds, CPU seconds of this process), result; shakeid's twiddle cache emptied first (a
+    repeat on the same record would otherwise skip work a new recording needs)."""
+    _cached_twiddles.cache_clear()
     gc.collect()
     t0, c0 = time.perf_counter(), time.process_time()
     out = fn()
