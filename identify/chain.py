@@ -80,14 +80,16 @@ class StateSignals:
         what lies outside the band (e.g. the static offset an asymmetric spring produces)."""
         return spectral_op(x, self.fs_hz, self.band_hz, 0, self.taper_n)
 
-    def band_limit_many(self, xs) -> list[np.ndarray]:
+    def band_limit_many(self, xs, dtype=np.float64) -> list[np.ndarray]:
         """band_limit of several equally long signals, their transforms batched (a few at a time, so a
-        long record's padded spectra stay within a few hundred MB)."""
+        long record's padded spectra stay within a few hundred MB); dtype: the transforms' precision
+        (np.float32: within ~1e-7 of the signals' scale, for signals that are only scored, not fitted)."""
         xs = list(xs)
         out = []
         for a in range(0, len(xs), 4):
             group = xs[a:a + 4]
-            out += spectral_ops(group, self.fs_hz, self.band_hz, [(i, 0) for i in range(len(group))], self.taper_n)
+            out += spectral_ops(group, self.fs_hz, self.band_hz, [(i, 0) for i in range(len(group))], self.taper_n,
+                                dtype)
         return out
 
 
@@ -196,9 +198,9 @@ def band_bins(nfft: int, fs_hz: float, band: tuple[float, float]) -> tuple[np.nd
     return f[:k_max + 1], g[:k_max + 1]
 
 
-def band_filter(pairs, f: np.ndarray, g: np.ndarray, band: tuple[float, float]) -> np.ndarray:
-    """(len(pairs), f.size) spectra: each (spectrum, power) pair times the band-limited (j w)^power."""
-    out = np.empty((len(pairs), f.size), dtype=complex)
+def band_filter(pairs, f: np.ndarray, g: np.ndarray, band: tuple[float, float], dtype=complex) -> np.ndarray:
+    """(len(pairs), f.size) spectra of `dtype`: each (spectrum, power) pair times the band-limited (j w)^power."""
+    out = np.empty((len(pairs), f.size), dtype=dtype)
     for k, (spectrum, power) in enumerate(pairs):
         np.multiply(spectrum, _band_response(f, g, band, power), out=out[k])
     return out
@@ -209,10 +211,12 @@ def spectral_op(x: np.ndarray, fs_hz: float, band: tuple[float, float], power: i
     return spectral_ops([x], fs_hz, band, [(0, power)], taper_n)[0]
 
 
-def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, taper_n: int) -> list[np.ndarray]:
+def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, taper_n: int,
+                 dtype=np.float64) -> list[np.ndarray]:
     """spectral_op for several (signal index, power) `requests` on equally long `signals`, with each
     detrended signal transformed once: integrals of one signal share its spectrum, and all forward
-    and all inverse transforms go through one batched rfft / irfft each, of the band's bins only."""
+    and all inverse transforms go through one batched rfft / irfft each, of the band's bins only.
+    dtype : the transforms' precision (the detrending and the results are double whatever it is)."""
     signals = [np.asarray(x, dtype=float) for x in signals]
     n = signals[0].size
     # integrating: only the mean goes. A line removed from an acceleration is a cubic removed from
@@ -242,9 +246,10 @@ def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, tap
             xd[r, n - taper_n:] *= ramp[::-1]
     nfft = padded_length(n, fs_hz, band)  # zero-padded: no circular wrap-around of the integrals
     f, g = band_bins(nfft, fs_hz, band)
-    spectra = lowband_rfft(xd, nfft, f.size - 1)
+    spectra = lowband_rfft(xd, nfft, f.size - 1, dtype)
     del xd
-    out = band_filter([(spectra[rows.index((i, power < 0))], power) for i, power in requests], f, g, band)
+    out = band_filter([(spectra[rows.index((i, power < 0))], power) for i, power in requests], f, g, band,
+                      spectra.dtype)
     del spectra
     y = lowband_irfft(out, nfft, n)
     results = []

@@ -76,8 +76,9 @@ def _cached_twiddles(nfft: int, m: int, k_max: int, dtype: str) -> np.ndarray:
     return tw
 
 
-def lowband_rfft(x: np.ndarray, nfft: int, k_max: int) -> np.ndarray:
-    """rfft(x, nfft, axis=-1)[..., :k_max + 1] for real rows x (k, n <= nfft), zero-padded to nfft.
+def lowband_rfft(x: np.ndarray, nfft: int, k_max: int, dtype=np.float64) -> np.ndarray:
+    """rfft(x, nfft, axis=-1)[..., :k_max + 1] for real rows x (k, n <= nfft), zero-padded to nfft, the
+    transforms in `dtype`'s precision (complex64 spectra for float32).
 
     Only the bins up to k_max are needed (the band's), so the transform splits into M polyphase
     components x[r::M], each an rfft of nfft / M points, recombined as X[k] = sum_r w^(k r) X_r[k]
@@ -87,9 +88,15 @@ def lowband_rfft(x: np.ndarray, nfft: int, k_max: int) -> np.ndarray:
     k, n = x.shape
     m = polyphase_factor(nfft, k_max)
     length = nfft // m
-    phases = np.zeros((k, m, length))
-    for r in range(min(m, n)):
-        phases[:, r, :len(range(r, n, m))] = x[:, r::m]
+    phases = np.empty((k, m, length), dtype=dtype)
+    # the whole columns j < n // M as one transposing copy ((k, j, r) -> (k, r, j)): half the time of M
+    # strided copies x[:, r::M] (4.4 against 10.2 ms for 3 rows of a million samples), then the last,
+    # partial column and the zero padding
+    whole = n // m
+    phases[:, :, :whole] = x[:, :whole * m].reshape(k, whole, m).transpose(0, 2, 1)
+    phases[:, :, whole:] = 0.0
+    if n > whole * m:
+        phases[:, :n - whole * m, whole] = x[:, whole * m:]
     return polyphase_rfft(phases, nfft, k_max)
 
 
@@ -112,7 +119,8 @@ def polyphase_rfft(phases: np.ndarray, nfft: int, k_max: int) -> np.ndarray:
 
 def lowband_irfft(spec: np.ndarray, nfft: int, n_out: int) -> np.ndarray:
     """irfft(Y, nfft, axis=-1)[..., :n_out] for spectra Y (k, k_max + 1) that are zero above bin k_max,
-    as one C-contiguous (k, n_out) array.
+    as one C-contiguous (k, n_out) array of doubles; the transforms in Y's precision (single for
+    complex64 spectra).
 
     The output's polyphase components y[r::M] are each an irfft of nfft / M points of Y[k] w^(-k r) / M
     (no two bins alias while k_max < nfft / (2 M))."""
@@ -121,14 +129,16 @@ def lowband_irfft(spec: np.ndarray, nfft: int, n_out: int) -> np.ndarray:
     m = polyphase_factor(nfft, k_max)
     length = nfft // m
     rows = -(-n_out // m)  # output rows j < ceil(n_out / M) hold the samples t = M j + r < n_out
-    z = np.zeros((k, m, length // 2 + 1), dtype=complex)
+    z = np.zeros((k, m, length // 2 + 1), dtype=np.result_type(spec.dtype, np.complex64))
     if m == 1:
         z[:, 0, :kk] = spec
     else:
-        tw = _twiddles(nfft, m, k_max)
+        tw = _twiddles(nfft, m, k_max, z.dtype)
         for r in range(m):
             np.multiply(spec, np.conj(tw[r]) / m, out=z[:, r, :kk])
     y = irfft(z, length, axis=-1, overwrite_x=True)
     del z
-    # y[:, r, j] is the sample M j + r
-    return np.ascontiguousarray(y[:, :, :rows].transpose(0, 2, 1)).reshape(k, rows * m)[:, :n_out]
+    # y[:, r, j] is the sample M j + r; one transposing copy into time order, in double precision
+    out = np.empty((k, rows, m))
+    out[...] = y[:, :, :rows].transpose(0, 2, 1)
+    return out.reshape(k, rows * m)[:, :n_out]

@@ -169,20 +169,26 @@ def test_band_limit_many_is_band_limit_of_each(table1_run):
     sig = reconstruct_states(table1_run.recording)
     v = sig.valid
     xs = [sig.q1[v] ** k * sig.q2[v] for k in range(6)]
-    for x, y in zip(xs, sig.band_limit_many(xs)):
+    for x, y, y32 in zip(xs, sig.band_limit_many(xs), sig.band_limit_many(xs, np.float32)):
         assert _close(y, sig.band_limit(x))
+        # single-precision transforms (validation's scored signals): double results, within 1e-6 of the scale
+        assert y32.dtype == np.float64 and _close(y32, y, 1e-6) and not _close(y32, y, 1e-12)
 
 
-@pytest.mark.parametrize("n", [997, 30_011])
+@pytest.mark.parametrize("n, nfft", [(997, next_fast_len(2 * 997, real=True)),
+                                     (30_011, next_fast_len(2 * 30_011, real=True)),
+                                     (30_000, 30_000)])  # no padding: every polyphase column whole
 @pytest.mark.parametrize("band_share", [1.0, 0.4, 0.13, 0.01])
-def test_lowband_transforms_are_the_band_bins_of_the_full_ones(n, band_share):
-    """Polyphase split (M = 1, 2, 6, 8 here) against scipy's full-length transforms."""
+def test_lowband_transforms_are_the_band_bins_of_the_full_ones(n, nfft, band_share):
+    """Polyphase split (M = 1, 2, 6, 8 here) against scipy's full-length transforms, in double precision
+    and, forward, in single."""
     from identify.spectral import lowband_irfft, lowband_rfft, polyphase_factor
-    nfft = next_fast_len(2 * n, real=True)
     k_max = min(int(band_share * nfft / 2), nfft // 2)
     x = np.vstack([_signal(n, 5), _signal(n, 6) ** 2])
     ref = rfft(x, nfft, axis=-1)
     assert _close(lowband_rfft(x, nfft, k_max), ref[:, :k_max + 1], 1e-14)
+    single = lowband_rfft(x, nfft, k_max, np.float32)
+    assert single.dtype == np.complex64 and _close(single, ref[:, :k_max + 1], 1e-6)
     low = np.zeros_like(ref)
     low[:, :k_max + 1] = ref[:, :k_max + 1]
     y = lowband_irfft(ref[:, :k_max + 1], nfft, n)
