@@ -172,10 +172,10 @@ def identification_figures(n: int, repeat: int, pysindy: bool = True) -> dict:
 
 def validation_parts(n: int, repeat: int) -> dict:
     """What the free-run validation of the fitted (training-only) model spends, CPU seconds, best of
-    `repeat`: validate() as a whole, and its parts done alone: the input on the RK4 half-step grid, the
-    compiled RK4 run on it, the three simulated signals through the chain's band (one batch), the
+    `repeat`: validate() as a whole, and its parts done alone: the input on the RK4 half-step grid (from
+    the chain's spectrum, StateSignals.input_fine), the compiled RK4 run on it, the three simulated signals
+    through the chain's band (one batch, single-precision transforms, as validate does them), the
     acceleration equation at the simulated states (all rows) and the fit metrics of the seven pairs."""
-    from identify.simulate import fine_grid_input
     from identify.validation import first_equation, fit_metrics, validate
 
     rec, _ = sweep_recording(n)
@@ -185,7 +185,7 @@ def validation_parts(n: int, repeat: int) -> dict:
     x, u = sig.states[v], sig.input[v][:, None]
     out, sim, qdot = validate(model, sig, rows)
     subs = out["substeps"]
-    fine = fine_grid_input(u, subs)
+    fine = sig.input_fine(subs)
     res = simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine, substeps=subs, n_samples=u.shape[0], bound=1e3)
     signals = [res.states[:, 0], res.states[:, 1], qdot]
 
@@ -193,10 +193,10 @@ def validation_parts(n: int, repeat: int) -> dict:
         return best_of(fn, repeat)[0][1]
 
     return {"rows": u.shape[0], "substeps": subs, "validate": cpu(lambda: validate(model, sig, rows)),
-            "input_grid": cpu(lambda: fine_grid_input(u, subs)),
+            "input_grid": cpu(lambda: sig.input_fine(subs)),
             "rk4": cpu(lambda: simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine, substeps=subs,
                                         n_samples=u.shape[0], bound=1e3)),
-            "band_limit": cpu(lambda: sig.band_limit_many(signals)),
+            "band_limit": cpu(lambda: sig.band_limit_many(signals, np.float32)),
             "q1_dot": cpu(lambda: first_equation(model, res.states[:, 0], res.states[:, 1], u)),
             # the run with q1_dot computed in it, as validate does
             "rk4_q1_dot": cpu(lambda: simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine, substeps=subs,

@@ -29,7 +29,8 @@ from scipy.stats import chi2
 
 from .errors import IdentificationError
 from .recording import Recording
-from .spectral import lowband_irfft, lowband_rfft, welch_psd
+from .simulate import fine_grid_input
+from .spectral import BandLimitedSignal, lowband_irfft, lowband_rfft, welch_psd
 
 #: Band edge roll-off as a fraction of the edge frequency (lower: down to f_lo/2; upper: up to 1.25 f_hi).
 EDGE_FRACTION = 0.5
@@ -61,6 +62,8 @@ class StateSignals:
     taper_n: int = 0
     #: the displacement below the band (m), when identified (identify.inband.slow_displacement)
     q2_offset: np.ndarray | None = None
+    #: the input as the chain made it (its band's spectrum), when kept: exact between samples (input_fine)
+    input_spectrum: BandLimitedSignal | None = None
 
     @property
     def states(self) -> np.ndarray:
@@ -73,6 +76,26 @@ class StateSignals:
         """(q1, q2 [+ q2_offset]) on `rows`: the states' columns, without building the (n, 2) array."""
         q2 = self.q2[rows] if self.q2_offset is None else self.q2[rows] + self.q2_offset[rows]
         return self.q1[rows], q2
+
+    def input_fine(self, substeps: int) -> np.ndarray:
+        """The input on the valid rows every h/2, h = 1 / (fs substeps): simulate()'s inputs_fine, shape
+        ((n - 1) 2 substeps + 1, 1). The chain's input is band-limited by construction, a trigonometric
+        polynomial, so when its spectrum was kept (and `input` is still the array it describes) the
+        values between samples are that polynomial's, exactly, from one inverse transform of the shifted
+        spectrum; otherwise fine_grid_input interpolates the samples (its windowed-sinc filter is off by
+        up to ~5e-4 of the signal, e.g. 1.0005 x the samples themselves)."""
+        v = self.valid
+        up = 2 * substeps
+        spec = self.input_spectrum
+        if spec is None or spec.samples is not self.input or up == 1 or v.stop - v.start < 2:
+            return fine_grid_input(self.input[v][:, None], substeps)
+        n = v.stop - v.start
+        fine = np.empty(((n - 1) * up + 1, 1))
+        fine[::up, 0] = self.input[v]
+        between = spec.between_samples(np.arange(1, up) / up, v.stop - 1)
+        for p in range(1, up):
+            fine[p::up, 0] = between[p - 1, v.start:]
+        return fine
 
     def band_limit(self, x: np.ndarray) -> np.ndarray:
         """Pass a signal on the valid rows (a simulation, a library column) through the same band as the
@@ -217,6 +240,11 @@ def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, tap
     detrended signal transformed once: integrals of one signal share its spectrum, and all forward
     and all inverse transforms go through one batched rfft / irfft each, of the band's bins only.
     dtype : the transforms' precision (the detrending and the results are double whatever it is)."""
+    return _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype)[0]
+
+
+def _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype=np.float64):
+    """spectral_ops' results, and each as a BandLimitedSignal (its filtered bins, shared; the line)."""
     signals = [np.asarray(x, dtype=float) for x in signals]
     n = signals[0].size
     # integrating: only the mean goes. A line removed from an acceleration is a cubic removed from
@@ -252,15 +280,19 @@ def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, tap
                       spectra.dtype)
     del spectra
     y = lowband_irfft(out, nfft, n)
-    results = []
+    results, exact = [], []
     for k, (i, power) in enumerate(requests):
         yk = y[k]
+        line = (0.0, 0.0)
         if band[0] == 0 and power in (0, 1):
             # DC is in the band: the detrending line is signal, restore it (or its slope)
             x = signals[i]
-            yk += lines[i] if power == 0 else (x[-1] - x[0]) * fs_hz / max(n - 1, 1)
+            slope = (x[-1] - x[0]) / max(n - 1, 1)
+            yk += lines[i] if power == 0 else slope * fs_hz
+            line = (float(x[0]), float(slope)) if power == 0 else (float(slope * fs_hz), 0.0)
         results.append(yk)
-    return results
+        exact.append(BandLimitedSignal(out[k], nfft, yk, line))
+    return results, exact
 
 
 class BandLimitedNoise:
@@ -390,13 +422,11 @@ def reconstruct_states(rec: Recording, band_hz: tuple[float, float] | None = Non
         raise IdentificationError(f"{rec.source}: too short for band {lo:.3g}-{hi:.3g} Hz: "
                                   f"{rec.n_samples} samples, {sum(trims)} lost to edge tapers and guards")
     band = (lo, hi)
-    if rec.layout == "base":
-        qdd = response  # relative acceleration q'' = x'' - z''
-        q1, q2, q1_dot, u = spectral_ops([qdd, rec.input], fs, band, STATE_REQUESTS["base"], taper_n)
-    else:
-        q1, q2, q1_dot, u = spectral_ops([rec.output, rec.input], fs, band, STATE_REQUESTS["force"], taper_n)
+    # base layout: the relative acceleration q'' = x'' - z''; force layout: the output (a displacement)
+    (q1, q2, q1_dot, u), exact = _spectral_ops([response, rec.input], fs, band, STATE_REQUESTS[rec.layout],
+                                               taper_n)
     return StateSignals(q1, q2, q1_dot, u, fs, band, slice(trims[0], rec.n_samples - trims[1]),
-                        "zdd" if rec.layout == "base" else "u", taper_n)
+                        "zdd" if rec.layout == "base" else "u", taper_n, input_spectrum=exact[3])
 
 
 def _rms_about_mean(x: np.ndarray) -> float:

@@ -17,7 +17,7 @@ from scipy.optimize import least_squares
 
 from .chain import StateSignals
 from .model import SparseModel
-from .simulate import choose_substeps, fine_grid_input, simulate
+from .simulate import choose_substeps, simulate
 
 
 def interior_rows(sig: StateSignals) -> np.ndarray:
@@ -56,7 +56,7 @@ class FreeRunError:
         if substeps is None:
             substeps = choose_substeps(model, self.dt, self.scale)
         self.substeps = int(substeps)
-        self.u_fine = fine_grid_input(sig.input[v][:, None], self.substeps)
+        self.u_fine = sig.input_fine(self.substeps)  # exact between samples (the chain's band-limited input)
         self.norms = {s: np.std(self.measured[s][self.rows]) or 1.0 for s in self.signals}
         self.n_rows = max(int(self.rows.sum()), 1)
 

@@ -3,7 +3,9 @@
 Fixed-step classical RK4 in a compiled kernel, `substeps` steps per sample interval. The input at
 the RK stages (every half step) comes from interpolating the samples: band-limited by default
 (polyphase windowed-sinc, right for signals sampled above Nyquist such as accelerometer channels),
-or linear / cubic. Analytic inputs (the rig simulator's table motion) can be given on the fine grid.
+or linear / cubic. Inputs known between samples can be given on the fine grid: the rig simulator's
+analytic table motion, and the chain's band-limited input, exact from its spectrum
+(identify.chain.StateSignals.input_fine: what validation and the free-run refit use).
 """
 from __future__ import annotations
 

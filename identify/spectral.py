@@ -8,6 +8,7 @@ segment, and all segments of all signals go through one batched rfft.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -142,3 +143,28 @@ def lowband_irfft(spec: np.ndarray, nfft: int, n_out: int) -> np.ndarray:
     out = np.empty((k, rows, m))
     out[...] = y[:, :, :rows].transpose(0, 2, 1)
     return out.reshape(k, rows * m)[:, :n_out]
+
+
+@dataclass(frozen=True)
+class BandLimitedSignal:
+    """A band-limited signal as the chain makes it: the inverse transform of its spectrum on the band's
+    bins 0..k_max of an nfft-point grid, plus the straight line value0 + slope t (per sample) restored
+    when DC is in the band. It has values between its samples, exactly (a trigonometric polynomial),
+    with no interpolation filter: what a free run's RK4 stages read at half steps (identify.chain,
+    StateSignals.input_fine). `samples`: the array of its values at the samples it describes."""
+
+    bins: np.ndarray
+    nfft: int
+    samples: np.ndarray
+    line: tuple[float, float] = (0.0, 0.0)
+
+    def between_samples(self, fractions, n_out: int) -> np.ndarray:
+        """(len(fractions), n_out) values at t + fraction, t = 0 .. n_out - 1 (fractions in samples):
+        the spectrum shifted by exp(2 pi i k fraction / nfft), one batched inverse transform."""
+        fractions = np.asarray(fractions, dtype=float)
+        shift = np.exp(2j * np.pi * np.outer(fractions, np.arange(self.bins.size)) / self.nfft)
+        y = lowband_irfft(self.bins * shift, self.nfft, n_out)
+        value0, slope = self.line
+        if value0 or slope:
+            y += value0 + slope * (np.arange(n_out) + fractions[:, None])
+        return y

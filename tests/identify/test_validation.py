@@ -1,0 +1,29 @@
+"""Free-run validation's scoring: held-out subsets and fit metrics against their definitions."""
+import numpy as np
+import pytest
+
+from identify.validation import _runs_of, fit_metrics
+
+
+@pytest.mark.parametrize("mask", [
+    np.repeat([False, True, False, False, True, True, False, True], [5, 3, 4, 2, 6, 1, 3, 7]).astype(bool),
+    np.ones(20, dtype=bool), np.zeros(20, dtype=bool),
+    np.arange(30) % 3 == 0,  # runs of one
+])
+def test_held_out_runs_are_the_masked_rows(mask):
+    x = np.random.default_rng(0).standard_normal(mask.size)
+    np.testing.assert_array_equal(_runs_of(mask)(x), x[mask])
+
+
+def test_fit_metrics_follow_their_definitions_and_refuse_a_non_finite_simulation():
+    rng = np.random.default_rng(1)
+    y = 3.0 + rng.standard_normal(1000)
+    s = y + 0.1 * rng.standard_normal(1000)
+    m = fit_metrics(y, s)
+    nrmse = np.sqrt(np.mean((y - s) ** 2)) / np.std(y)
+    assert m["nrmse"] == pytest.approx(nrmse, rel=1e-13) and m["fit_percent"] == pytest.approx(100 * (1 - nrmse))
+    for bad in (np.nan, np.inf):
+        s2 = s.copy()
+        s2[500] = bad
+        assert fit_metrics(y, s2) == {"nrmse": None, "fit_percent": None, "rmse": None}
+    assert fit_metrics(y[:0], s[:0])["nrmse"] is None
