@@ -15,10 +15,13 @@ import numpy as np
 from scipy.fft import irfft, rfft, rfftfreq
 
 
-def welch_psd(x: np.ndarray, fs_hz: float, nperseg: int) -> tuple[np.ndarray, np.ndarray]:
+def welch_psd(x: np.ndarray, fs_hz: float, nperseg: int, dtype=np.float64) -> tuple[np.ndarray, np.ndarray]:
     """Frequencies (Hz) and power spectral density ((unit)^2/Hz) of x, shape (n,) or (k, n) (one PSD per row).
 
-    Equal to scipy.signal.welch(x, fs_hz, nperseg=nperseg, detrend="linear", axis=-1)."""
+    Equal to scipy.signal.welch(x, fs_hz, nperseg=nperseg, detrend="linear", axis=-1). dtype: the
+    precision the detrended, windowed segments are transformed in (the segments' lines and the average
+    stay double): np.float32 moves a PSD by ~1e-6 of itself (tests/identify/test_spectral.py), nothing to
+    a band or a noise floor read from it, for ~35 % less time on a million samples."""
     x = np.asarray(x, dtype=float)
     rows = x[None, :] if x.ndim == 1 else x
     n = rows.shape[-1]
@@ -33,12 +36,12 @@ def welch_psd(x: np.ndarray, fs_hz: float, nperseg: int) -> tuple[np.ndarray, np
     mean = segs.mean(axis=-1)
     slope = (segs @ t) / (t @ t)
     win = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(nperseg) / nperseg)  # periodic Hann
-    detrended = segs - mean[..., None]
-    detrended -= slope[..., None] * t
-    detrended *= win
-    spec = rfft(detrended, axis=-1)
+    detrended = np.subtract(segs, mean[..., None], dtype=dtype)
+    detrended -= (slope[..., None] * t).astype(dtype, copy=False)
+    detrended *= win.astype(dtype, copy=False)
+    spec = rfft(detrended, axis=-1, overwrite_x=True)
     power = spec.real**2 + spec.imag**2
-    p = power.mean(axis=1) / (fs_hz * float(np.sum(win**2)))
+    p = power.mean(axis=1, dtype=np.float64) / (fs_hz * float(np.sum(win**2)))
     p[:, 1:-1 if nperseg % 2 == 0 else None] *= 2.0  # one-sided: negative frequencies folded in
     f = rfftfreq(nperseg, 1.0 / fs_hz)
     return f, (p[0] if x.ndim == 1 else p)

@@ -76,6 +76,10 @@ def test_welch_psd_is_scipy_welch_with_linear_detrend(n, nperseg):
     f, p2 = welch_psd(x, FS, nperseg)  # several signals in one call: one PSD per row
     assert p2.shape == (2, f.size)
     assert all(_close(p2[k], welch(x[k], FS, nperseg=min(nperseg, n), detrend="linear")[1]) for k in range(2))
+    # segments transformed in single precision (excited_band): rounding's share of the largest bin
+    f, p32 = welch_psd(x, FS, nperseg, np.float32)
+    assert p32.dtype == np.float64 and all(_close(p32[k], p2[k], 1e-6) and not _close(p32[k], p2[k], 1e-12)
+                                           for k in range(2))
 
 
 def test_band_gain_is_unchanged():
@@ -109,8 +113,10 @@ def test_reconstruct_states_equals_the_previous_chain(table1_run, monkeypatch):
         a, b = getattr(padded, name)[v], getattr(s, name)[v]
         assert np.max(np.abs(a - b)) < 1e-7 * np.max(np.abs(b)), name
     bands = [excited_band(x, rec.fs_hz) for x in (rec.input, rec.output - rec.input)]
-    # the bands, estimated with scipy's welch as before, are the same bands
-    monkeypatch.setattr(chain, "welch_psd", lambda x, fs, nper: welch(x, fs, nperseg=nper, detrend="linear"))
+    # the bands, estimated with scipy's welch as before (in double precision; excited_band's segments are
+    # transformed in single), are the same bands
+    monkeypatch.setattr(chain, "welch_psd", lambda x, fs, nper, dtype=None: welch(x, fs, nperseg=nper,
+                                                                                detrend="linear"))
     assert [excited_band(x, rec.fs_hz) for x in (rec.input, rec.output - rec.input)] == bands
     assert reconstruct_states(rec).band_hz == s.band_hz
     qdd = rec.output - rec.input
