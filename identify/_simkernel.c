@@ -15,8 +15,10 @@
  * cut at the crossing, found by regula falsi (Illinois) on the held-side step; the input at a cut is
  * the quadratic through the step's three grid values. Models without them step exactly as before.
  *
- * simulate(term_ptr, fac_feat, fac_pow, coef, x0, u_fine, n_inputs, n_out, substeps, dt, bound, out
+ * simulate(term_ptr, fac_feat, fac_pow, coef, x0, u_fine, n_inputs, n_out, substeps, stride, dt, bound, out
  *          [, travel])
+ *   stride > 1 (substeps 1, no end stops): steps of `stride` samples, the samples between from RK4's
+ *   continuous extension (strided_run).
  *   int32 buffers: term_ptr (n_terms+1), fac_feat, fac_pow; float64 buffers: coef (n_states*n_terms),
  *   x0 (n_states), u_fine ((n_out-1)*2*substeps+1 rows of n_inputs), out (n_out*n_states, writable),
  *   travel (n_states, m; inf = no end stop; omitted = none anywhere); optional eq, u_samples (n_out rows of
@@ -276,13 +278,61 @@ static void stop_substep(const model_t *m, double *x, double h, const double *u0
     for (i = 0; i < m->n_states; i++) mode[i] = side(m, x, i);
 }
 
+/* The free run in steps of `stride` samples (h = stride dt) for a model without end stops: the input at a
+   step's start, middle and end read from the half-sample grid u (index 2 t is sample t, 2 t + 1 the half
+   sample after it), the samples inside a step from RK4's continuous extension, third order like the
+   step's own local error (x(t + th h) = x + h (b1 k1 + b2 (k2 + k3) + b4 k4), Hairer, Norsett & Wanner,
+   Solving ODEs I, II.6): a smooth model slow against the sample rate (omega dt <= STEP_OMEGA / stride,
+   identify.simulate.choose_step) takes stride times fewer right-hand sides on its chain of dependencies.
+   The last step may be shorter. Returns the samples written, as simulate. */
+static Py_ssize_t strided_run(const model_t *m, const double *x0, const double *u, Py_ssize_t n_out, int stride,
+                              double dt, double bound, double *out, int deq, const double *us, double *dxo) {
+    double x[MAX_STATES], xa[MAX_STATES], xs[MAX_STATES], xt[MAX_STATES], kk[3][MAX_STATES], k4[MAX_STATES];
+    int i, ni = m->n_inputs, e, ns = m->n_states;
+    Py_ssize_t t0, written = 0;
+    if (n_out <= 0) return 0;
+    for (i = 0; i < ns; i++) out[i] = x[i] = x0[i];
+    if (deq >= 0) dxo[0] = equation(m, deq, x, us, NULL, 0);
+    written = 1;
+    Py_BEGIN_ALLOW_THREADS
+    for (t0 = 0; t0 < n_out - 1;) {
+        int w = (int)(n_out - 1 - t0 < stride ? n_out - 1 - t0 : stride), ok = 1;
+        double h = w * dt;
+        const double *ua = u + 2 * t0 * ni;
+        for (i = 0; i < ns; i++) xa[i] = x[i];
+        stage(m, x, x, ua, 0.5 * h, kk[0], xs, NULL);
+        stage(m, x, xs, ua + w * ni, 0.5 * h, kk[1], xt, NULL);
+        stage(m, x, xt, ua + w * ni, h, kk[2], xs, NULL);
+        stage(m, x, xs, ua + 2 * w * ni, h / 6.0, k4, x, (const double (*)[MAX_STATES])kk);
+        for (i = 0; i < ns; i++)
+            if (!(fabs(x[i]) <= bound)) ok = 0; /* also catches NaN */
+        if (!ok) break;
+        for (int j = 1; j <= w; j++) {
+            double *o = out + (t0 + j) * ns;
+            if (j < w) {
+                double th = (double)j / w, b1 = th - 1.5 * th * th + 2.0 / 3.0 * th * th * th,
+                       b2 = th * th - 2.0 / 3.0 * th * th * th, b4 = -0.5 * th * th + 2.0 / 3.0 * th * th * th;
+                for (e = 0; e < ns; e++)
+                    o[e] = xa[e] + h * (b1 * kk[0][e] + b2 * (kk[1][e] + kk[2][e]) + b4 * k4[e]);
+            } else {
+                for (e = 0; e < ns; e++) o[e] = x[e];
+            }
+            if (deq >= 0) dxo[t0 + j] = equation(m, deq, o, us + (t0 + j) * ni, NULL, 0);
+        }
+        t0 += w;
+        written = t0 + 1;
+    }
+    Py_END_ALLOW_THREADS
+    return written;
+}
+
 static PyObject *simulate(PyObject *self, PyObject *args) {
     Py_buffer b_ptr, b_feat, b_pow, b_coef, b_x0, b_u, b_out, b_travel = {0}, b_us = {0}, b_dx = {0};
-    int n_inputs, substeps, i, deq = -1;
+    int n_inputs, substeps, stride, i, deq = -1;
     Py_ssize_t n_out;
     double dt, bound;
-    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*iniddw*|y*iy*w*", &b_ptr, &b_feat, &b_pow, &b_coef, &b_x0, &b_u,
-                          &n_inputs, &n_out, &substeps, &dt, &bound, &b_out, &b_travel, &deq, &b_us, &b_dx))
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*iniiddw*|y*iy*w*", &b_ptr, &b_feat, &b_pow, &b_coef, &b_x0, &b_u,
+                          &n_inputs, &n_out, &substeps, &stride, &dt, &bound, &b_out, &b_travel, &deq, &b_us, &b_dx))
         return NULL;
     model_t m;
     m.ptr = (const int *)b_ptr.buf;
@@ -307,7 +357,16 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
         PyErr_SetString(PyExc_ValueError, "simulate: inconsistent buffer sizes or model too large");
         goto done;
     }
+    if (stride < 1 || (stride > 1 && (substeps != 1 || m.has_stops))) {
+        PyErr_SetString(PyExc_ValueError, "simulate: a stride of several samples needs substeps 1 and no end stops");
+        goto done;
+    }
     for (i = 0; i < m.n_states; i++) m.travel[i] = has_travel ? ((const double *)b_travel.buf)[i] : HUGE_VAL;
+    if (stride > 1) {
+        result = PyLong_FromSsize_t(strided_run(&m, (const double *)b_x0.buf, u, n_out, stride, dt, bound, out, deq,
+                                                (const double *)b_us.buf, (double *)b_dx.buf));
+        goto done;
+    }
     {
         double x[MAX_STATES], xs[MAX_STATES], xt[MAX_STATES], kk[3][MAX_STATES],
             k4[MAX_STATES];

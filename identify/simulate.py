@@ -18,10 +18,15 @@ from scipy.signal import resample_poly
 from . import _simkernel
 from .model import SparseModel
 
-#: RK4 step size target: h * omega_max. At 0.1 the global error is ~1e-7 of the response for the
-#: Duffing rig (measured in benchmarks/identify_speed.py), below any accelerometer's noise.
+#: RK4 step size target: h * omega_max. The global error grows as (h omega)^4 below it: the Table 1 rig
+#: under an 8 s sweep, of its peak, 1.2e-8 / 2.0e-7 / 3.4e-6 at h omega 0.036 / 0.072 / 0.14
+#: (tests/identify/test_simulate.py); on the million-sample sweep of benchmarks/identify_speed.py,
+#: whose error peaks at resonance, 6.9e-7 / 1.4e-5 at 0.036 / 0.072. Either way below any
+#: accelerometer's noise (0.5 % = 5e-3), which is what a free run is compared with.
 STEP_OMEGA = 0.1
 MAX_SUBSTEPS = 256
+#: Longest RK4 step, in samples, of a smooth model slow against the sample rate (choose_step).
+MAX_STRIDE = 4
 
 
 @dataclass
@@ -86,8 +91,27 @@ def max_frequency(model: SparseModel, state_scale, n_grid: int = 6) -> float:
 
 
 def choose_substeps(model: SparseModel, dt: float, state_scale) -> int:
+    """RK4 steps per sample so that h omega_max <= STEP_OMEGA."""
+    return choose_step(model, dt, state_scale)[0]
+
+
+def choose_step(model: SparseModel, dt: float, state_scale) -> tuple[int, int]:
+    """(substeps, stride): RK4 steps of dt / substeps with h omega_max <= STEP_OMEGA, or, for a model
+    without end stops slow enough for steps of several samples, steps of `stride` <= MAX_STRIDE samples
+    within the same bound (simulate's stride: the Table 1 rig at 2048 Hz, omega_max dt = 0.036, takes
+    steps of 2 samples)."""
     omega = max_frequency(model, state_scale)
-    return int(np.clip(np.ceil(omega * dt / STEP_OMEGA), 1, MAX_SUBSTEPS))
+    substeps = int(np.clip(np.ceil(omega * dt / STEP_OMEGA), 1, MAX_SUBSTEPS))
+    if substeps > 1 or has_end_stops(model):
+        return substeps, 1
+    return 1, int(np.clip(np.floor(STEP_OMEGA / max(omega * dt, 1e-300)), 1, MAX_STRIDE))
+
+
+def has_end_stops(model: SparseModel) -> bool:
+    """Whether any term uses an end-stop feature (stop(q), contact(q)), whose jumps need the kernel's
+    step cutting, sample by sample."""
+    _, feat, _ = model.space.encode(model.terms)
+    return bool(np.any(np.asarray(feat) >= 3 * len(model.states) + len(model.inputs)))
 
 
 def equation_rows(model: SparseModel, states, inputs, equation: int = 0) -> np.ndarray:
@@ -122,7 +146,7 @@ def equation_rows(model: SparseModel, states, inputs, equation: int = 0) -> np.n
 
 def simulate(model: SparseModel, dt: float, x0, inputs=None, *, inputs_fine=None, substeps: int | None = None,
              interpolation: str = "bandlimited", state_scale=None, n_samples: int | None = None,
-             bound: float | None = None, derivative=None) -> SimulationResult:
+             bound: float | None = None, derivative=None, stride: int = 1) -> SimulationResult:
     """Free-run `model` from state `x0` over the input's samples (spacing `dt` seconds).
 
     Give either `inputs` (n, n_inputs) sampled at dt, or `inputs_fine` already on the h/2 grid (then
@@ -130,6 +154,9 @@ def simulate(model: SparseModel, dt: float, x0, inputs=None, *, inputs_fine=None
     substeps automatically; `bound` stops the run when a state leaves [-bound, bound] (divergence).
     `derivative` = (e, u_samples (n, n_inputs)): also equation e at each simulated sample with that sample's
     input (validation's simulated q1_dot), computed in the run, as equation_rows would: the same numbers.
+    `stride` > 1 (substeps 1, a model without end stops; choose_step says when): RK4 steps of `stride`
+    samples, their input read from the same half-sample grid, the samples inside a step from RK4's
+    continuous extension (third order, like a step's local error).
     """
     x0 = np.ascontiguousarray(np.asarray(x0, dtype=float).ravel())
     if x0.size != len(model.states):
@@ -164,7 +191,7 @@ def simulate(model: SparseModel, dt: float, x0, inputs=None, *, inputs_fine=None
     n_valid = _simkernel.simulate(
         np.asarray(ptr, dtype=np.int32).tobytes(), np.asarray(feat, dtype=np.int32).tobytes(),
         np.asarray(powr, dtype=np.int32).tobytes(), np.ascontiguousarray(model.coef_).tobytes(),
-        x0.tobytes(), u.reshape(-1), u.shape[1], int(n_samples), int(substeps), float(dt), float(bound),
+        x0.tobytes(), u.reshape(-1), u.shape[1], int(n_samples), int(substeps), int(stride), float(dt), float(bound),
         out.reshape(-1), np.array([model.travel.get(s, np.inf) for s in model.states]).tobytes(), *extra)
     if n_valid < n_samples:
         out[n_valid:] = np.nan

@@ -6,7 +6,7 @@ import numpy as np
 
 from .chain import StateSignals
 from .model import SparseModel
-from .simulate import choose_substeps, equation_rows, simulate
+from .simulate import choose_step, equation_rows, simulate
 
 
 def fit_metrics(measured: np.ndarray, simulated: np.ndarray) -> dict:
@@ -43,11 +43,13 @@ def free_run(model: SparseModel, sig: StateSignals, substeps: int | None = None)
     u = sig.input[v][:, None]
     scale = 1.5 * np.array([np.max(np.abs(q1)), np.max(np.abs(q2))])
     dt = 1.0 / sig.fs_hz
-    substeps = choose_substeps(model, dt, scale) if substeps is None else int(substeps)
+    # RK4 steps with h omega_max <= STEP_OMEGA: several per sample, or, for a model slow against the
+    # sample rate, one per `stride` samples (identify.simulate.choose_step)
+    substeps, stride = choose_step(model, dt, scale) if substeps is None else (int(substeps), 1)
     # the input between samples as the chain's band-limited input has it (StateSignals.input_fine);
     # q1_dot = first_equation at the simulated states and the input's samples, computed during the run
     res = simulate(model, dt, [q1[0], q2[0]], inputs_fine=sig.input_fine(substeps), substeps=substeps,
-                   n_samples=u.shape[0], bound=100.0 * float(np.max(scale)), derivative=(0, u))
+                   n_samples=u.shape[0], bound=100.0 * float(np.max(scale)), derivative=(0, u), stride=stride)
     qdot = res.derivative
     sim = res.states
     if not res.diverged:

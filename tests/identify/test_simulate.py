@@ -123,3 +123,66 @@ def test_derivative_in_the_run_is_equation_rows_at_the_simulated_states(travel):
     assert res.diverged and np.all(np.isnan(res.derivative[res.n_valid:]))
     np.testing.assert_array_equal(res.derivative[:res.n_valid],
                                   equation_rows(unstable, res.states[:res.n_valid], np.zeros((res.n_valid, 1)), 0))
+
+
+def test_steps_of_several_samples_converge_at_fourth_order():
+    """simulate(stride=s): RK4 steps of s samples, the samples inside a step from RK4's continuous
+    extension. Against DOP853 on the Duffing sweep (analytic input): the error grows as h^4 with the step
+    (16x per doubling; an O(h^2) or O(h^3) interpolation bug shows as 4-8x), the samples inside a step no
+    worse than its ends, the last, shorter step included (n - 1 not a multiple of the stride), and the
+    in-run derivative is the model's equation at the returned states. Measured (of the peak): 1.2e-8,
+    2.0e-7, 1.05e-6, 3.4e-6 for strides 1-4 (h omega_max 0.036-0.14)."""
+    from identify.simulate import equation_rows
+    fs, T = 2048.0, 8.0
+    n = int(T * fs) + 3  # n - 1 = 16386: a last step of 2 samples for stride 4, of 1 for stride 3
+
+    def u(t):
+        return -1.3e-3 * (2 * np.pi * 5) ** 2 * np.sin(2 * np.pi * (3 * t + 0.5 * t**2))
+
+    model = SparseModel(TABLE1)
+    t = np.arange(n) / fs
+    ref = solve_ivp(lambda tt, x: model.rhs(x[None, :], [[u(tt)]])[0], (0, t[-1]), [0.0, 0.0], t_eval=t,
+                    method="DOP853", rtol=1e-11, atol=1e-14).y[1]
+    fine = u(np.arange((n - 1) * 2 + 1) / (2 * fs))[:, None]
+    u_samples = u(t)[:, None]
+    scale = np.max(np.abs(ref))
+    errors = {}
+    for stride in (1, 2, 3, 4):
+        res = simulate(model, 1 / fs, [0.0, 0.0], inputs_fine=fine, substeps=1, n_samples=n, stride=stride,
+                       derivative=(0, u_samples))
+        err = np.abs(res.states[:, 1] - ref) / scale
+        ends, inside = err[::stride].max(), err.max()
+        assert inside < 2.0 * ends, (stride, ends, inside)
+        errors[stride] = inside
+        np.testing.assert_array_equal(res.derivative, equation_rows(model, res.states, u_samples, 0))
+    assert errors[1] < 1e-7 and errors[2] < 1e-6, errors
+    assert 10 < errors[4] / errors[2] < 25 and 10 < errors[2] / errors[1] < 25, errors
+
+
+def test_a_stride_is_refused_where_it_does_not_apply():
+    stops = SparseModel({"q1_dot": {"q2": -900.0, "stop(q2)": -5e5, "zdd": -1.0}, "q2_dot": {"q1": 1.0}},
+                        travel={"q2": 0.02})
+    with pytest.raises(ValueError, match="stride"):
+        simulate(stops, 1e-3, [0.0, 0.0], inputs_fine=np.zeros((199, 1)), substeps=1, n_samples=100, stride=2)
+    with pytest.raises(ValueError, match="stride"):
+        simulate(SparseModel(TABLE1), 1e-3, [0.0, 0.0], inputs_fine=np.zeros((397, 1)), substeps=2,
+                 n_samples=100, stride=2)
+
+
+def test_choose_step_keeps_h_omega_within_the_bound():
+    """Steps of several samples only for a model without end stops slow against the sample rate, each
+    with h omega_max <= STEP_OMEGA like substeps."""
+    from identify.simulate import STEP_OMEGA, choose_step, max_frequency
+    scale = [0.8, 0.023]  # the Table 1 rig's states at 15 mm (x 1.5)
+    model = SparseModel(TABLE1)
+    omega = max_frequency(model, scale)
+    for fs in (2048.0, 8192.0, 256.0):
+        substeps, stride = choose_step(model, 1 / fs, scale)
+        h = stride / (substeps * fs)
+        assert h * omega <= STEP_OMEGA and (stride == 1 or substeps == 1)
+        assert (stride + 1) / fs * omega > STEP_OMEGA or stride == 4  # the longest step allowed
+    assert choose_step(model, 1 / 2048.0, scale) == (1, 2)
+    assert choose_step(model, 1 / 256.0, scale)[1] == 1
+    stops = SparseModel({"q1_dot": {"q2": -900.0, "stop(q2)": -5e5, "zdd": -1.0}, "q2_dot": {"q1": 1.0}},
+                        travel={"q2": 0.02})
+    assert choose_step(stops, 1 / 2048.0, [0.8, 0.023])[1] == 1

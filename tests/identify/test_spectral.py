@@ -141,15 +141,15 @@ def test_force_layout_states_equal_the_previous_chain():
 
 def _free_run_before(model, sig):
     """identify.validation.free_run as it was: full right-hand side, one band_limit per signal, in double
-    precision (the input between samples as now: StateSignals.input_fine)."""
-    from identify.simulate import choose_substeps, simulate
+    precision (the input between samples and the steps as now: StateSignals.input_fine, choose_step)."""
+    from identify.simulate import choose_step, simulate
     v = sig.valid
     states = sig.states[v]
     u = sig.input[v][:, None]
     scale = 1.5 * np.max(np.abs(states), axis=0)
-    subs = choose_substeps(model, 1.0 / sig.fs_hz, scale)
+    subs, stride = choose_step(model, 1.0 / sig.fs_hz, scale)
     res = simulate(model, 1.0 / sig.fs_hz, states[0], inputs_fine=sig.input_fine(subs), substeps=subs,
-                   n_samples=u.shape[0], bound=100.0 * float(np.max(scale)))
+                   n_samples=u.shape[0], bound=100.0 * float(np.max(scale)), stride=stride)
     qdot = np.full(u.shape[0], np.nan)
     qdot[:res.n_valid] = model.rhs(res.states[:res.n_valid], u[:res.n_valid])[:, 0]
     sim = np.column_stack([sig.band_limit(res.states[:, 0]), sig.band_limit(res.states[:, 1])])
