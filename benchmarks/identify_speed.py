@@ -173,9 +173,12 @@ def identification_figures(n: int, repeat: int, pysindy: bool = True) -> dict:
 def validation_parts(n: int, repeat: int) -> dict:
     """What the free-run validation of the fitted (training-only) model spends, CPU seconds, best of
     `repeat`: validate() as a whole, and its parts done alone: the input on the RK4 half-step grid (from
-    the chain's spectrum, StateSignals.input_fine), the compiled RK4 run on it, the three simulated signals
+    the chain's spectrum, StateSignals.input_fine; what a run in steps of `stride` samples reads), the
+    compiled RK4 run on it (with the steps validate takes, identify.simulate.choose_step; and in steps of
+    one sample, for comparison), the three simulated signals
     through the chain's band (one batch, single-precision transforms, as validate does them), the
     acceleration equation at the simulated states (all rows) and the fit metrics of the seven pairs."""
+    from identify.simulate import choose_step
     from identify.validation import first_equation, fit_metrics, validate
 
     rec, _ = sweep_recording(n)
@@ -184,23 +187,27 @@ def validation_parts(n: int, repeat: int) -> dict:
     v = sig.valid
     x, u = sig.states[v], sig.input[v][:, None]
     out, sim, qdot = validate(model, sig, rows)
-    subs = out["substeps"]
-    fine = sig.input_fine(subs)
-    res = simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine, substeps=subs, n_samples=u.shape[0], bound=1e3)
+    subs, stride = choose_step(model, 1.0 / sig.fs_hz, 1.5 * np.max(np.abs(x), axis=0))
+    assert subs == out["substeps"]
+    fine, fine_all = sig.input_fine(subs, stride), sig.input_fine(subs)
+    res = simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine, substeps=subs, n_samples=u.shape[0], bound=1e3,
+                   stride=stride)
     signals = [res.states[:, 0], res.states[:, 1], qdot]
 
     def cpu(fn):
         return best_of(fn, repeat)[0][1]
 
-    return {"rows": u.shape[0], "substeps": subs, "validate": cpu(lambda: validate(model, sig, rows)),
-            "input_grid": cpu(lambda: sig.input_fine(subs)),
+    return {"rows": u.shape[0], "substeps": subs, "stride": stride, "validate": cpu(lambda: validate(model, sig, rows)),
+            "input_grid": cpu(lambda: sig.input_fine(subs, stride)),
             "rk4": cpu(lambda: simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine, substeps=subs,
-                                        n_samples=u.shape[0], bound=1e3)),
+                                        n_samples=u.shape[0], bound=1e3, stride=stride)),
+            "rk4_one_sample": cpu(lambda: simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine_all, substeps=subs,
+                                                   n_samples=u.shape[0], bound=1e3)),
             "band_limit": cpu(lambda: sig.band_limit_many(signals, np.float32)),
             "q1_dot": cpu(lambda: first_equation(model, res.states[:, 0], res.states[:, 1], u)),
             # the run with q1_dot computed in it, as validate does
             "rk4_q1_dot": cpu(lambda: simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine, substeps=subs,
-                                               n_samples=u.shape[0], bound=1e3, derivative=(0, u))),
+                                               n_samples=u.shape[0], bound=1e3, derivative=(0, u), stride=stride)),
             "metrics": cpu(lambda: [fit_metrics(sig.q1[v], sim[:, 0]) for _ in range(7)])}
 
 
@@ -353,9 +360,10 @@ def main(argv=None) -> int:
               f"model: {fit['model']!r}", flush=True)
     if args.validation_parts and args.sizes:
         vp = validation_parts(max(args.sizes), args.repeat)
-        print(f"\nfree-run validation, {vp['rows']} rows, {vp['substeps']} RK4 substep(s), CPU s (best of "
-              f"{args.repeat}): validate {vp['validate']:.3f}; alone: input on the half-step grid "
-              f"{vp['input_grid']:.3f}, RK4 run {vp['rk4']:.3f}, 3 signals through the band {vp['band_limit']:.3f}, "
+        print(f"\nfree-run validation, {vp['rows']} rows, {vp['substeps']} RK4 substep(s), steps of {vp['stride']} "
+              f"sample(s), CPU s (best of {args.repeat}): validate {vp['validate']:.3f}; alone: input on the half-step "
+              f"grid {vp['input_grid']:.3f}, RK4 run {vp['rk4']:.3f} (in steps of one sample {vp['rk4_one_sample']:.3f}), "
+              f"3 signals through the band {vp['band_limit']:.3f}, "
               f"q1_dot at the simulated states {vp['q1_dot']:.3f}, 7 fit metrics (all rows) {vp['metrics']:.3f}; "
               f"RK4 run computing q1_dot as it goes {vp['rk4_q1_dot']:.3f}", flush=True)
     if args.uncertainty_parts and args.sizes:

@@ -77,13 +77,16 @@ class StateSignals:
         q2 = self.q2[rows] if self.q2_offset is None else self.q2[rows] + self.q2_offset[rows]
         return self.q1[rows], q2
 
-    def input_fine(self, substeps: int) -> np.ndarray:
+    def input_fine(self, substeps: int, stride: int = 1) -> np.ndarray:
         """The input on the valid rows every h/2, h = 1 / (fs substeps): simulate()'s inputs_fine, shape
         ((n - 1) 2 substeps + 1, 1). The chain's input is band-limited by construction, a trigonometric
         polynomial, so when its spectrum was kept (and `input` is still the array it describes) the
         values between samples are that polynomial's, exactly, from one inverse transform of the shifted
         spectrum; otherwise fine_grid_input interpolates the samples (its windowed-sinc filter is off by
-        up to ~5e-4 of the signal, e.g. 1.0005 x the samples themselves)."""
+        up to ~5e-4 of the signal, e.g. 1.0005 x the samples themselves).
+        stride (even, substeps 1): the grid a run in steps of `stride` samples reads (simulate's stride):
+        its steps' middles are samples, so only the last, shorter step's middle, when it falls between
+        samples, is computed (from the spectrum directly); the half samples no step reads are NaN."""
         v = self.valid
         up = 2 * substeps
         spec = self.input_spectrum
@@ -92,6 +95,13 @@ class StateSignals:
         n = v.stop - v.start
         fine = np.empty(((n - 1) * up + 1, 1))
         fine[::up, 0] = self.input[v]
+        if stride > 1 and stride % 2 == 0 and substeps == 1:
+            fine[1::2, 0] = np.nan
+            last = (n - 1) % stride  # the last step's length, in samples
+            if last % 2:
+                start = n - 1 - last
+                fine[2 * start + last, 0] = spec.at(v.start + start + last / 2)[0]
+            return fine
         between = spec.between_samples(np.arange(1, up) / up, v.stop - 1)
         for p in range(1, up):
             fine[p::up, 0] = between[p - 1, v.start:]

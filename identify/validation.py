@@ -48,7 +48,7 @@ def free_run(model: SparseModel, sig: StateSignals, substeps: int | None = None)
     substeps, stride = choose_step(model, dt, scale) if substeps is None else (int(substeps), 1)
     # the input between samples as the chain's band-limited input has it (StateSignals.input_fine);
     # q1_dot = first_equation at the simulated states and the input's samples, computed during the run
-    res = simulate(model, dt, [q1[0], q2[0]], inputs_fine=sig.input_fine(substeps), substeps=substeps,
+    res = simulate(model, dt, [q1[0], q2[0]], inputs_fine=sig.input_fine(substeps, stride), substeps=substeps,
                    n_samples=u.shape[0], bound=100.0 * float(np.max(scale)), derivative=(0, u), stride=stride)
     qdot = res.derivative
     sim = res.states

@@ -118,3 +118,35 @@ def test_input_between_samples_is_the_band_limited_inputs_own(substeps):
     # an input replaced after the chain (noise added, say) is interpolated, not taken from a stale spectrum
     noisy = replace(s, input=s.input + 1e-3)
     assert np.array_equal(noisy.input_fine(substeps), fine_grid_input(noisy.input[v], substeps))
+
+
+@pytest.mark.parametrize("n_extra", [0, 1])  # both parities of the valid rows' intervals
+def test_input_grid_of_a_strided_run_holds_what_its_steps_read(n_extra):
+    """input_fine(1, stride=2): the samples, and the middle of the last step when it falls between
+    samples (from the spectrum at that time: BandLimitedSignal.at), NaN at the half samples no step
+    reads; a stride-2 run on it is the run on the full grid, to rounding (that middle is summed over the
+    bins instead of transformed)."""
+    from identify.model import SparseModel
+    from identify.simulate import simulate
+    t = np.arange(int(20 * FS) + n_extra) / FS
+    table = 0.7 * np.sin(2 * np.pi * 6.3 * t + 0.4) * np.sin(np.pi * t / t[-1]) ** 2
+    s = reconstruct_states(Recording(table, 1.3 * table, FS, "base"), band_hz=(1.0, 40.0))
+    v = s.valid
+    n = v.stop - v.start
+    full, strided = s.input_fine(1), s.input_fine(1, stride=2)
+    read = np.zeros(full.shape[0], dtype=bool)
+    read[::2] = True
+    if (n - 1) % 2:
+        read[-2] = True  # the last step, one sample long: its middle is the half sample before the end
+    np.testing.assert_allclose(strided[read], full[read], rtol=0, atol=1e-13 * np.max(np.abs(full)))
+    assert np.all(np.isnan(strided[~read]))
+    model = SparseModel({"q1_dot": {"q1": -3.7, "q2": -971.0, "q2^3": -2.5e6, "zdd": -1.0}, "q2_dot": {"q1": 1.0}})
+    runs = [simulate(model, 1 / FS, [0.0, 0.0], inputs_fine=grid, substeps=1, n_samples=n, stride=2).states
+            for grid in (full, strided)]
+    assert np.all(np.isfinite(runs[1])) and np.allclose(runs[0], runs[1], rtol=0, atol=1e-15)
+    # the spectrum evaluated at any time is the transform's interpolation
+    spec = s.input_spectrum
+    times = np.array([v.start + 0.5, v.start + 1000.25, v.stop - 1.5])
+    ref = spec.between_samples([0.5, 0.25], v.stop)
+    np.testing.assert_allclose(spec.at(times), [ref[0, v.start], ref[1, v.start + 1000], ref[0, v.stop - 2]],
+                               rtol=0, atol=1e-12 * np.max(np.abs(ref)))
