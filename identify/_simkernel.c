@@ -278,6 +278,14 @@ static void stop_substep(const model_t *m, double *x, double h, const double *u0
     for (i = 0; i < m->n_states; i++) mode[i] = side(m, x, i);
 }
 
+/* The derivative at a sample (simulate's derivative=(eq, u_samples)) is the right-hand side the step
+   leaving that sample starts with, when that step reads the same input there (validation: the samples
+   themselves, bit for bit): then it is taken from the step's first stage, the same function of the same
+   numbers, instead of evaluated again. */
+static inline int same_input(const double *a, const double *b, int ni) {
+    return memcmp(a, b, sizeof(double) * (size_t)ni) == 0;
+}
+
 /* The free run in steps of `stride` samples (h = stride dt) for a model without end stops: the input at a
    step's start, middle and end read from the half-sample grid u (index 2 t is sample t, 2 t + 1 the half
    sample after it), the samples inside a step from RK4's continuous extension, third order like the
@@ -301,6 +309,8 @@ static Py_ssize_t strided_run(const model_t *m, const double *x0, const double *
         const double *ua = u + 2 * t0 * ni;
         for (i = 0; i < ns; i++) xa[i] = x[i];
         stage(m, x, x, ua, 0.5 * h, kk[0], xs, NULL);
+        if (deq >= 0 && t0 > 0) /* sample t0's derivative (same_input), before the step can fail */
+            dxo[t0] = same_input(ua, us + t0 * ni, ni) ? kk[0][deq] : equation(m, deq, x, us + t0 * ni, NULL, 0);
         stage(m, x, xs, ua + w * ni, 0.5 * h, kk[1], xt, NULL);
         stage(m, x, xt, ua + w * ni, h, kk[2], xs, NULL);
         stage(m, x, xs, ua + 2 * w * ni, h / 6.0, k4, x, (const double (*)[MAX_STATES])kk);
@@ -317,7 +327,8 @@ static Py_ssize_t strided_run(const model_t *m, const double *x0, const double *
             } else {
                 for (e = 0; e < ns; e++) o[e] = x[e];
             }
-            if (deq >= 0) dxo[t0 + j] = equation(m, deq, o, us + (t0 + j) * ni, NULL, 0);
+            if (deq >= 0 && (j < w || t0 + w == n_out - 1)) /* a step's end: at the next step's start */
+                dxo[t0 + j] = equation(m, deq, o, us + (t0 + j) * ni, NULL, 0);
         }
         t0 += w;
         written = t0 + 1;
@@ -394,6 +405,9 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
                 }
                 /* xs = x + h/2 k1, xt = x + h/2 k2, xs = x + h k3 (as (0.5 * h) * k, the same numbers) */
                 stage(&m, x, x, u0, 0.5 * h, kk[0], xs, NULL);
+                if (deq >= 0 && s == 0 && t > 1) /* sample t - 1's derivative (same_input) */
+                    dxo[t - 1] = same_input(u0, us + (t - 1) * ni, ni) ? kk[0][deq]
+                                                                       : equation(&m, deq, x, us + (t - 1) * ni, NULL, 0);
                 stage(&m, x, xs, u0 + ni, 0.5 * h, kk[1], xt, NULL);
                 stage(&m, x, xt, u0 + ni, h, kk[2], xs, NULL);
                 stage(&m, x, xs, u0 + 2 * ni, h / 6.0, k4, x, (const double (*)[MAX_STATES])kk);
@@ -402,9 +416,10 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
             }
             if (!ok) break;
             for (i = 0; i < m.n_states; i++) out[t * m.n_states + i] = x[i];
-            /* the derivative at the sample (off the steps' chain of dependencies: next to free) */
-            if (deq >= 0) dxo[t] = m.has_stops ? equation(&m, deq, x, us + t * ni, NULL, 1)
-                                              : equation(&m, deq, x, us + t * ni, NULL, 0);
+            /* the derivative at the sample: with end stops, and at the last sample, evaluated here (off
+               the steps' chain of dependencies); otherwise the next step's first stage (same_input) */
+            if (deq >= 0 && m.has_stops) dxo[t] = equation(&m, deq, x, us + t * ni, NULL, 1);
+            else if (deq >= 0 && t == n_out - 1) dxo[t] = equation(&m, deq, x, us + t * ni, NULL, 0);
             written = t + 1;
         }
         Py_END_ALLOW_THREADS
