@@ -219,7 +219,7 @@ def uncertainty_parts(n: int, repeat: int) -> dict:
     share alone (identify.noise_spread), and the inclusion probabilities (24 held-out placements: ADMM
     paths and the selection rule) with, of them, the ADMM paths alone."""
     from identify import uncertainty as unc
-    from identify.chain import BandLimitedNoise
+    from identify.chain_noise import BandLimitedNoise
     from identify.corrected import term_exponents
     from identify.identifier import effective_samples, holdout_blocks
     from identify.noise_spread import noise_variance

@@ -5,7 +5,7 @@ The states the library is evaluated on (q1, q2, the input) and the target (q1_do
 itself) are the true signals plus the chain's image of the sensors' white noise (identify.uncertainty):
 a stationary Gaussian noise d, independent of the motion, whose lag-0 covariance Sigma (4 x 4 over
 q1, q2, q1_dot, input; units squared) follows exactly from the band's filters and the channels' noise
-floors (chain.BandLimitedNoise.covariance). Every entry of the normal equations is a sum over t of a
+floors (chain_noise.BandLimitedNoise.covariance). Every entry of the normal equations is a sum over t of a
 monomial y_t^k of the noisy signals y = x + d at one time t, so only Sigma enters, not the noise's
 correlation over time. For Gaussian d there is a polynomial T_k (the multivariate Hermite / Wick
 polynomial of y^k) with E[T_k(x + d) | x] = x^k:

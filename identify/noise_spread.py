@@ -8,7 +8,7 @@ first order, G^-1 sum_t sum_v g_v(t) d_v(t), with
 
 theta the kept columns, r the residual and beta the coefficients: the derivative of the score
 theta (target - theta . beta). The sensor noise's image d is the band-limited white noise of the raw
-channels (chain.BandLimitedNoise): d_v = H_v e_i(v) on the band's bins, e the white response and input
+channels (chain_noise.BandLimitedNoise): d_v = H_v e_i(v) on the band's bins, e the white response and input
 noise of per-sample covariance c. Its variance is therefore exact and needs no draw:
 
     V = G^-1 [sum_ij c_ij / nfft sum_k w_k Re(U_i(k) U_j(k)^H)] G^-1,   U_i(k) = sum_{v of row i} conj(H_v(k)) Phi_v(k),
@@ -331,10 +331,10 @@ def noise_variance(parts, supports: dict, coefs: dict, G: np.ndarray, col_exps: 
     """{equation: (m,) variance of the refit from the sensor noise, linearised}.
 
     parts : per recording (signals, noise, (std_in, std_out)): signals the (q1, q2, q1_dot, input) rows
-    the Gram was summed over, noise its chain.BandLimitedNoise; G : the all-rows normal matrix (all
+    the Gram was summed over, noise its chain_noise.BandLimitedNoise; G : the all-rows normal matrix (all
     recordings); coefs : {equation: (m,) all-rows coefficients}; col_exps, target_exps : monomial
     exponents of the columns and of each equation's target (identify.corrected). Exact responses
-    H_v = gain (j w)^p on the bins (chain.BandLimitedNoise), as the chain and the noise draws have them."""
+    H_v = gain (j w)^p on the bins (chain_noise.BandLimitedNoise), as the chain and the noise draws have them."""
     kept = {e: np.flatnonzero(sup) for e, sup in supports.items() if sup.any()}
     V = {e: np.zeros((S.size, S.size)) for e, S in kept.items()}
     for y, noise, (s_in, s_out) in parts:

@@ -38,7 +38,8 @@ import dataclasses
 
 import numpy as np
 
-from .chain import STATE_REQUESTS, BandLimitedNoise, spectral_ops
+from .chain import STATE_REQUESTS, spectral_ops
+from .chain_noise import BandLimitedNoise
 from .corrected import CorrectedSums, analytic_bias, gram_moments, term_exponents
 from .gram import BlockGram, scaled_pinv
 from .noise_spread import noise_variance
@@ -127,7 +128,7 @@ class NoiseChain:
     def draw(self, rng: np.random.Generator, s_in: float, s_out: float):
         """(q1, q2, q1_dot, input) of fresh white noise of std s_in, s_out on the raw channels: the
         stationary image the chain gives it on the valid rows, drawn on the band's bins alone
-        (chain.BandLimitedNoise: no forward transform, random numbers for the band's bins only)."""
+        (chain_noise.BandLimitedNoise: no forward transform, random numbers for the band's bins only)."""
         if self._fresh is None:
             self._fresh = BandLimitedNoise(self.n, self.fs, self.band, self.layout)
         return tuple(self._fresh.draw(s_in, s_out, rng))

@@ -103,6 +103,6 @@ def test_package_imports_only_its_layer(package):
 
 def test_no_module_much_over_400_lines():
     for f in REPO.glob("*/**/*.py"):
-        if ".venv" in f.parts:
+        if ".venv" in f.parts or f.relative_to(REPO).parts[0] == "build":  # the environment; pip's build copies
             continue
         assert len(f.read_text().splitlines()) <= 450, f

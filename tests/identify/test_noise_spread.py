@@ -6,7 +6,7 @@ import pytest
 from scipy.fft import irfft, rfft
 
 from identify import noise_spread, uncertainty as unc
-from identify.chain import BandLimitedNoise
+from identify.chain_noise import BandLimitedNoise
 from identify.corrected import term_exponents
 from identify.gram import scaled_pinv
 from identify.identifier import SparseIdentifier, holdout_blocks

@@ -328,7 +328,7 @@ def test_lag0_covariance_is_that_of_the_band_limited_draws(layout):
     noise sits near 1 Hz, ~60 independent periods per draw: 1 / sqrt(300 x 60) x sqrt(2) ~ 1 %);
     asked within 3 %. The q2 / q1_dot covariance (the errors-in-variables bias of the stiffness) must be
     clearly negative, and q1's with q2 zero (H_q1 conj H_q2 is imaginary on every bin)."""
-    from identify.chain import BandLimitedNoise
+    from identify.chain_noise import BandLimitedNoise
 
     fs, n = 1024.0, 61_440
     band = (1.0, 100.0) if layout == "base" else (0.0, 100.0)
@@ -351,7 +351,7 @@ def test_corrected_sums_are_unbiased_for_the_noise_free_moments():
     errors of the mean of the noise-free sum, for monomials up to degree 9 (a Gram entry of a degree-4
     library with q1_dot's target is at most q1_dot x degree 4; q1^2 q2^4 q1_dot^2... covers products of
     all four signals)."""
-    from identify.chain import BandLimitedNoise
+    from identify.chain_noise import BandLimitedNoise
     from identify.corrected import CorrectedSums
 
     run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 20, 1.3), fs_hz=1024, **_sensors(0.0))
