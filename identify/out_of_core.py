@@ -166,13 +166,14 @@ class ChunkedIdentifier(SparseIdentifier):
         names = ("q1_dot", "q1", "q2")
         measured, simulated = {k: [] for k in names}, {k: [] for k in names}
         one_step = []
-        diverged, substeps, even = False, 0, False
+        diverged, substeps, samples_per_step, even = False, 0, None, False
         windows = self._windows()
         for i, (a, b, ka, kb) in enumerate(windows):
             sig = self.chain_.signals(self.source_, a, b)
             even = even or has_even_force(model, sig)
-            sim, qdot, used, div = free_run(model, sig)
+            sim, qdot, used, div, stride = free_run(model, sig)
             substeps = max(substeps, int(used))
+            samples_per_step = int(stride) if samples_per_step is None else min(samples_per_step, int(stride))
             diverged = diverged or bool(div)
             keep = slice(ka - a, kb - a)
             for k, m, s in zip(names, (sig.q1_dot, sig.q1, sig.q2), (qdot, sim[:, 0], sim[:, 1])):
@@ -183,7 +184,7 @@ class ChunkedIdentifier(SparseIdentifier):
                 progress("validation windows", i + 1, len(windows))
         cat = {k: (np.concatenate(measured[k]), np.concatenate(simulated[k])) for k in names}
         metrics = {k: fit_metrics(*cat[k]) for k in names}
-        return {"diverged": diverged, "substeps": substeps, "heldout": metrics,
+        return {"diverged": diverged, "substeps": substeps, "samples_per_step": samples_per_step, "heldout": metrics,
                 "all": {k: None for k in names},  # not simulated: the whole record is never free-run
                 "heldout_samples": int(cat["q1"][0].size),
                 "equation_error": {"q1_dot": fit_metrics(cat["q1_dot"][0], np.concatenate(one_step))},

@@ -39,6 +39,8 @@ class SimulationResult:
     #: simulate(derivative=(e, u)): equation e of the model at each simulated sample and u's row (NaN after
     #: a divergence), else None
     derivative: np.ndarray | None = None
+    #: samples per RK4 step (simulate's stride; 1: `substeps` steps per sample)
+    stride: int = 1
 
     @property
     def diverged(self) -> bool:
@@ -197,4 +199,4 @@ def simulate(model: SparseModel, dt: float, x0, inputs=None, *, inputs_fine=None
         out[n_valid:] = np.nan
         if extra:
             dx[n_valid:] = np.nan
-    return SimulationResult(out, int(n_valid), int(substeps), dx if extra else None)
+    return SimulationResult(out, int(n_valid), int(substeps), dx if extra else None, int(stride))

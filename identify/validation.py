@@ -32,8 +32,9 @@ def fit_metrics(measured: np.ndarray, simulated: np.ndarray) -> dict:
 def free_run(model: SparseModel, sig: StateSignals, substeps: int | None = None):
     """Simulate over the valid rows from the measured state at their start.
 
-    Returns (simulated states (n, 2), simulated q1_dot (n,), substeps, diverged), each simulated signal
-    passed through the measurement chain's band (StateSignals.band_limit) unless the run diverged.
+    Returns (simulated states (n, 2), simulated q1_dot (n,), substeps, diverged, samples per step), each
+    simulated signal passed through the measurement chain's band (StateSignals.band_limit) unless the
+    run diverged.
     The whole valid span is simulated, although only the held-out rows are scored out of sample: the
     free run starts from the measured state at the first valid row and carries its own state through
     the fit rows (validate also scores all rows), and band-limiting a signal needs all of it."""
@@ -58,7 +59,7 @@ def free_run(model: SparseModel, sig: StateSignals, substeps: int | None = None)
         # against the 1e-3 - 1e-2 a fit's free-run error is
         s1, s2, qdot = sig.band_limit_many([sim[:, 0], sim[:, 1], qdot], np.float32)
         sim = np.column_stack([s1, s2])
-    return sim, qdot, res.substeps, res.diverged
+    return sim, qdot, res.substeps, res.diverged, res.stride
 
 
 def first_equation(model: SparseModel, q1: np.ndarray, q2: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -71,11 +72,11 @@ def validate(model: SparseModel, sig: StateSignals, heldout_rows: np.ndarray, su
     """Free-run metrics on the held-out rows (mask over the valid rows) and on all valid rows.
 
     Returns (metrics dict, simulated states (n, 2), simulated q1_dot (n,)), as free_run()."""
-    sim_states, sim_qdot, used, diverged = free_run(model, sig, substeps)
+    sim_states, sim_qdot, used, diverged, stride = free_run(model, sig, substeps)
     v = sig.valid
     measured = {"q1_dot": sig.q1_dot[v], "q1": sig.q1[v], "q2": sig.q2[v]}
     simulated = {"q1_dot": sim_qdot, "q1": sim_states[:, 0], "q2": sim_states[:, 1]}
-    out = {"diverged": bool(diverged), "substeps": int(used), "heldout": {}, "all": {},
+    out = {"diverged": bool(diverged), "substeps": int(used), "samples_per_step": int(stride), "heldout": {}, "all": {},
            "heldout_samples": int(np.count_nonzero(heldout_rows))}
     held = _runs_of(heldout_rows)
     for name in measured:

@@ -27,3 +27,21 @@ def test_fit_metrics_follow_their_definitions_and_refuse_a_non_finite_simulation
         s2[500] = bad
         assert fit_metrics(y, s2) == {"nrmse": None, "fit_percent": None, "rmse": None}
     assert fit_metrics(y[:0], s[:0])["nrmse"] is None
+
+
+def test_the_validation_reports_the_steps_it_took(table1_run, table1_truth):
+    """validate's document says how the free run stepped: RK4 substeps per sample and samples per step
+    (identify.simulate.choose_step: the Table 1 rig at 2048 Hz is slow enough for steps of 2 samples)."""
+    from identify.chain import reconstruct_states
+    from identify.model import SparseModel
+    from identify.simulate import choose_step
+    from identify.validation import validate
+    sig = reconstruct_states(table1_run.recording)
+    model = SparseModel(table1_truth)
+    v = sig.valid
+    rows = np.zeros(v.stop - v.start, dtype=bool)
+    rows[::7] = True
+    out = validate(model, sig, rows)[0]
+    scale = 1.5 * np.max(np.abs(sig.states[v]), axis=0)
+    assert (out["substeps"], out["samples_per_step"]) == choose_step(model, 1 / sig.fs_hz, scale) == (1, 2)
+    assert out["heldout"]["q2"]["fit_percent"] > 95
