@@ -161,7 +161,7 @@ def test_free_run_equals_the_previous_formulation(table1_run, table1_truth):
     from identify.validation import first_equation, free_run
     sig = reconstruct_states(table1_run.recording)
     model = SparseModel(table1_truth)
-    sim, qdot, _, diverged = free_run(model, sig)
+    sim, qdot, _, diverged, _ = free_run(model, sig)
     sim_ref, qdot_ref = _free_run_before(model, sig)
     assert not diverged
     # the scored signals are band-limited in single precision (validation.free_run): ~3e-7 of their peak
