@@ -175,9 +175,9 @@ def validation_parts(n: int, repeat: int) -> dict:
     `repeat`: validate() as a whole, and its parts done alone: the input on the RK4 half-step grid (from
     the chain's spectrum, StateSignals.input_fine; what a run in steps of `stride` samples reads), the
     compiled RK4 run on it (with the steps validate takes, identify.simulate.choose_step; and in steps of
-    one sample, for comparison), the three simulated signals
-    through the chain's band (one batch, single-precision transforms, as validate does them), the
-    acceleration equation at the simulated states (all rows) and the fit metrics of the seven pairs."""
+    one sample, for comparison), the three simulated signals through the chain's band (one batch,
+    single-precision transforms, as validate does them), the acceleration equation at the simulated
+    states (all rows) and the fit metrics of the seven pairs."""
     from identify.simulate import choose_step
     from identify.validation import first_equation, fit_metrics, validate
 
