@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from .chain import STATE_REQUESTS, _band_response, band_bins, padded_length
-from .spectral import lowband_irfft
+from .spectral import bin_weights, lowband_irfft
 
 
 class BandLimitedNoise:
@@ -31,13 +31,13 @@ class BandLimitedNoise:
         """One draw for white noise of std std_in, std_out (per sample) on the input and output
         channels: [q1, q2, q1_dot, input], each (n,)."""
         kk = self.responses[0].size
+        # the bins that are their own twin (DC; Nyquist, for an even nfft): real, variance nfft std^2
+        own_twin = np.flatnonzero(self.bin_weights() == 1.0)
 
         def white(std: float) -> np.ndarray:
             z = rng.standard_normal((2, kk)) * (std * np.sqrt(self.nfft / 2.0))
             spec = z[0] + 1j * z[1]
-            spec[0] = z[0, 0] * np.sqrt(2.0)  # DC: real, variance nfft std^2
-            if kk - 1 == self.nfft // 2:
-                spec[-1] = z[0, -1] * np.sqrt(2.0)  # Nyquist: real too
+            spec[own_twin] = z[0, own_twin] * np.sqrt(2.0)
             return spec
 
         e_in, e_out = white(std_in), white(std_out)
@@ -58,14 +58,8 @@ class BandLimitedNoise:
         return cross.real * self.white_covariance(std_in, std_out)[np.ix_(rows, rows)] / self.nfft
 
     def bin_weights(self) -> np.ndarray:
-        """w_k of the band's bins in a sum over the whole spectrum: 2 (a bin and its negative frequency),
-        1 at DC and at Nyquist."""
-        kk = self.responses[0].size
-        w = np.full(kk, 2.0)
-        w[0] = 1.0
-        if kk - 1 == self.nfft // 2:
-            w[-1] = 1.0
-        return w
+        """w_k of the band's bins in a sum over the whole spectrum (spectral.bin_weights)."""
+        return bin_weights(self.responses[0].size, self.nfft)
 
     def white_covariance(self, std_in: float, std_out: float) -> np.ndarray:
         """(2, 2) covariance per sample of the white signals the chain transforms, [response, input]

@@ -49,6 +49,17 @@ def welch_psd(x: np.ndarray, fs_hz: float, nperseg: int, dtype=np.float64) -> tu
     return f, (p[0] if x.ndim == 1 else p)
 
 
+def bin_weights(n_bins: int, nfft: int) -> np.ndarray:
+    """w_k of an nfft-point rfft's bins 0 .. n_bins - 1 in a sum over the whole spectrum (Parseval, the
+    inverse transform): 2, a bin and its negative frequency, except the bins that are their own twin, DC
+    and, for an even nfft only, Nyquist (an odd nfft's last bin has a twin)."""
+    w = np.full(n_bins, 2.0)
+    w[0] = 1.0
+    if nfft % 2 == 0 and n_bins - 1 == nfft // 2:
+        w[-1] = 1.0
+    return w
+
+
 def polyphase_factor(nfft: int, k_max: int, largest: int = 8) -> int:
     """The largest M <= `largest` that divides nfft with k_max < nfft / (2 M): the number of polyphase
     components a spectrum that is zero above bin k_max can be split into without aliasing (1: none)."""
@@ -177,14 +188,10 @@ class BandLimitedSignal:
 
     def at(self, times) -> np.ndarray:
         """Values at a few times (in samples, any real numbers), each summed over the bins directly
-        (the inverse transform's weights: 1 at DC and Nyquist, 2 elsewhere; real parts), for when a whole
-        transform would be spent on a handful of values."""
+        (bin_weights, real parts), for when a whole transform would be spent on a handful of values."""
         times = np.atleast_1d(np.asarray(times, dtype=float))
         k = np.arange(self.bins.size)
-        w = np.full(k.size, 2.0)
-        w[0] = 1.0
-        if k[-1] == self.nfft // 2 and self.nfft % 2 == 0:
-            w[-1] = 1.0
+        w = bin_weights(k.size, self.nfft)
         y = (np.exp(2j * np.pi * np.outer(times, k) / self.nfft) * (w * self.bins)).real.sum(axis=1) / self.nfft
         value0, slope = self.line
         return y + value0 + slope * times

@@ -236,3 +236,17 @@ def test_twiddles_by_recurrence_match_the_exponentials():
     err = np.abs(tw - exact).max()
     assert err < 5e-15, err
     assert np.array_equal(tw[0], np.ones(k_max + 1))
+
+
+@pytest.mark.parametrize("nfft", [1000, 1001])
+def test_bin_weights_are_parsevals(nfft):
+    """spectral.bin_weights (BandLimitedNoise's sums over the bins, BandLimitedSignal.at): sum_k w_k |X_k|^2
+    / nfft over an rfft's bins is the signal's energy, for an even nfft (a Nyquist bin of weight 1) and an
+    odd one (whose last bin has a twin: weight 2)."""
+    from identify.spectral import bin_weights
+    x = np.random.default_rng(4).standard_normal(nfft)
+    spec = rfft(x)
+    w = bin_weights(spec.size, nfft)
+    assert w[0] == 1.0 and w[-1] == (1.0 if nfft % 2 == 0 else 2.0)
+    assert np.isclose(np.sum(w * np.abs(spec) ** 2) / nfft, np.sum(x ** 2), rtol=1e-12)
+    assert np.all(bin_weights(10, nfft)[1:] == 2.0)  # the band's bins only: no Nyquist among them
