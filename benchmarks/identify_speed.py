@@ -104,8 +104,9 @@ def anchor(rec, lib, X, U) -> dict:
 def chain_transforms(rec, sig) -> dict:
     """The chain's transforms alone, each (wall, cpu) seconds: 3 forward (qdd without its mean, qdd and
     the input without their end-point lines) and 4 inverse (q1, q2, q1_dot, input) rffts, zero-padded as
-    the chain pads (identify.chain.padded_length) and limited to the band's bins as the chain does them (identify.spectral), and the
-    two Welch spectra of the band estimate (16384-sample segments)."""
+    the chain pads (identify.chain.padded_length) and limited to the band's bins as the chain does them
+    (identify.spectral), and the two Welch spectra of the band estimate (16384-sample segments,
+    transformed in single precision as identify.chain.excited_band does)."""
     from identify.chain import band_gain, padded_length
     from identify.spectral import lowband_irfft, lowband_rfft, welch_psd
 
@@ -117,7 +118,7 @@ def chain_transforms(rec, sig) -> dict:
     t_fwd, spec = timed(lambda: lowband_rfft(rows, m, k_max))
     t_inv, _ = timed(lambda: lowband_irfft(np.vstack([spec, spec[:1]]), m, n))
     out["padded_ffts"] = tuple(a + b for a, b in zip(t_fwd, t_inv))
-    out["welch"], _ = timed(lambda: [welch_psd(x, rec.fs_hz, 16384) for x in (rec.input, rows[0])])
+    out["welch"], _ = timed(lambda: [welch_psd(x, rec.fs_hz, 16384, np.float32) for x in (rec.input, rows[0])])
     return out
 
 
