@@ -224,7 +224,8 @@ def _pooled(model: SparseModel, runs: list) -> dict:
         one_step.append(first_equation(model, x[:, 0], x[:, 1], sig.input[v][:, None]))
     mask = np.concatenate([r[1] for r in runs])
     out = {"diverged": any(r[4]["diverged"] for r in runs), "substeps": max(r[4]["substeps"] for r in runs),
-           "samples_per_step": min(r[4]["samples_per_step"] for r in runs), "heldout": {}, "all": {}, "heldout_samples": int(np.count_nonzero(mask)), "pooled_recordings": len(runs)}
+           "samples_per_step": min(r[4]["samples_per_step"] for r in runs), "heldout": {}, "all": {},
+           "heldout_samples": int(np.count_nonzero(mask)), "pooled_recordings": len(runs)}
     for k in SIGNALS:
         m, s = np.concatenate(measured[k]), np.concatenate(simulated[k])
         out["heldout"][k] = fit_metrics(m[mask], s[mask])

@@ -27,12 +27,12 @@ Against the formula evaluated term by term at full rate (tests/identify/test_noi
 records): 2e-11 without decimation, 5e-6 - 1.6e-5 with it (the fitted rows' two ends leak). It had
 combined the integrated signals in time by running trapezoidal integrals (one transform per signal row
 and term); the exact responses (j w)^p now multiply on the bins, as the chain's and the noise draws' do
-(the variances moved by < 1e-4). A million-sample fit spends 0.04-0.05 s CPU here, less than half of it
+(the variances moved by < 1e-4). A million-sample fit spends 0.04-0.06 s CPU here, less than half of it
 in pocketfft (0.040-0.054 s in three rounds of benchmarks/identify_speed.py --sizes 200000 1000000
---repeat 4 --no-simulation --uncertainty-parts, "the noise's share of the variance"; 0.062-0.069 s in
-double precision (DTYPE) in the same rounds; 0.100-0.122 s before the rows were built in the
-transforms' polyphase order, in place, and batched across signals and equations). Against SIMEX's replicate spread (256 replicates, ~6 % Monte Carlo error) on the
-Table 1 rig: within 1-7 % at 0.5 % noise, 5-20 % at 5 % (where the replicates' antithetic halves carry
+--repeat 4 --no-simulation --uncertainty-parts, "the noise's share of the variance", 0.045-0.057 s in
+three more the next day; 0.062-0.069 s in double precision (DTYPE) in the first rounds; 0.100-0.122 s
+before the rows were built in the transforms' polyphase order, in place, and batched across signals and
+equations). Against SIMEX's replicate spread (256 replicates, ~6 % Monte Carlo error) on the Table 1 rig: within 1-7 % at 0.5 % noise, 5-20 % at 5 % (where the replicates' antithetic halves carry
 third-order terms too). Why it is worth it: for a weak term the block estimates of the
 variance (sandwich, jackknife) are noisy because its information sits in a few blocks, while this one is
 not (docs/identification.md section 5). Monomial terms only (their derivatives are monomials); the caller

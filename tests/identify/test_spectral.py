@@ -165,7 +165,8 @@ def test_free_run_equals_the_previous_formulation(table1_run, table1_truth):
     sim_ref, qdot_ref = _free_run_before(model, sig)
     assert not diverged
     # the scored signals are band-limited in single precision (validation.free_run): ~3e-7 of their peak
-    assert all(_close(a, b, 1e-6) for a, b in ((sim[:, 0], sim_ref[:, 0]), (sim[:, 1], sim_ref[:, 1]), (qdot, qdot_ref)))
+    pairs = ((sim[:, 0], sim_ref[:, 0]), (sim[:, 1], sim_ref[:, 1]), (qdot, qdot_ref))
+    assert all(_close(a, b, 1e-6) for a, b in pairs)
     # the first equation alone, for a model whose equations share and do not share terms
     other = SparseModel({"q1_dot": {"1": 0.2, "q1*|q1|": -3.0, "q2^3": -2e6, "zdd": -1.0},
                          "q2_dot": {"q1": 1.0, "q2^2": 5.0}})
