@@ -31,7 +31,7 @@ from scipy.fft import next_fast_len
 from .chain import (EDGE_FRACTION, AT_REST_FRACTION, PAD_PERIODS, STATE_REQUESTS, StateSignals, band_and_taper,
                     band_bins, band_filter, band_from_psd, taper_ramp, welch_length)
 from .errors import IdentificationError
-from .spectral import lowband_irfft, lowband_rfft, welch_psd
+from .spectral import BandLimitedSignal, lowband_irfft, lowband_rfft, welch_psd
 
 #: Overlap on each side of a chunk, in periods of f_lo: the same reach as the whole-record chain's padding.
 OVERLAP_PERIODS = PAD_PERIODS
@@ -106,7 +106,8 @@ class ChunkedChain:
             sumsq += (d * d).sum(axis=1)
             k0, k1 = -(-a // hop), min(-(-b // hop), n_seg)  # segments starting in [a, b)
             if k1 > k0:
-                f, p = welch_psd(x[:, k0 * hop - a:(k1 - 1) * hop + nper - a], fs, nper)
+                # segments in single precision, as chain.excited_band takes them: one rule for the band
+                f, p = welch_psd(x[:, k0 * hop - a:(k1 - 1) * hop + nper - a], fs, nper, np.float32)
                 psd = p * (k1 - k0) if psd is None else psd + p * (k1 - k0)
             if progress:
                 progress("scan", i + 1, len(ranges))
@@ -140,6 +141,10 @@ class ChunkedChain:
     def states(self, source: ChunkSource, a: int, b: int):
         """(q1, q2, q1_dot, input) on samples [a, b), equal to reconstruct_states' on those rows up to
         the operator's tail beyond the overlap."""
+        return self._states(source, a, b)[0]
+
+    def _states(self, source: ChunkSource, a: int, b: int):
+        """states(), and the input as a BandLimitedSignal (exact between samples, as the chain's)."""
         n, L, fs, band = self.n, self.overlap, self.fs_hz, self.band_hz
         s0, s1 = max(a - L, 0), min(b + L, n)
         x = _regressed(self.layout, *source.read(s0, s1))
@@ -176,13 +181,16 @@ class ChunkedChain:
                 yk += self._line(i, np.arange(a, b, dtype=float)) if p == 0 else \
                     (self.lasts[i] - self.firsts[i]) * fs / max(n - 1, 1)
             results.append(yk)
-        return tuple(results)
+        i = requests[3][0]  # the input, filtered (power 0): its line is restored when DC is in the band
+        line = ((float(self._line(i, np.array([float(a)]))[0]), (self.lasts[i] - self.firsts[i]) / max(n - 1, 1))
+                if band[0] == 0 else (0.0, 0.0))
+        return tuple(results), BandLimitedSignal(out[3], nfft, results[3], line, offset=L)
 
     def signals(self, source: ChunkSource, a: int, b: int) -> StateSignals:
         """StateSignals of the stretch [a, b), all of it valid (free-run windows: identify.out_of_core)."""
-        q1, q2, q1_dot, u = self.states(source, a, b)
+        (q1, q2, q1_dot, u), exact = self._states(source, a, b)
         return StateSignals(q1, q2, q1_dot, u, self.fs_hz, self.band_hz, slice(0, b - a), self.input_name,
-                            self.taper_n)
+                            self.taper_n, input_spectrum=exact)
 
     def summary(self) -> StateSignals:
         """StateSignals without samples: band, valid rows, sample rate and input name of the record (what

@@ -168,19 +168,22 @@ class BandLimitedSignal:
     bins 0..k_max of an nfft-point grid, plus the straight line value0 + slope t (per sample) restored
     when DC is in the band. It has values between its samples, exactly (a trigonometric polynomial),
     with no interpolation filter: what a free run's RK4 stages read at half steps (identify.chain,
-    StateSignals.input_fine). `samples`: the array of its values at the samples it describes."""
+    StateSignals.input_fine). `samples`: the array of its values at the samples it describes, the first
+    of them at time `offset` of the transform (a stretch of a long record transformed with `offset`
+    samples of overlap before it: identify.chunked); times and the line are counted from that sample."""
 
     bins: np.ndarray
     nfft: int
     samples: np.ndarray
     line: tuple[float, float] = (0.0, 0.0)
+    offset: int = 0
 
     def between_samples(self, fractions, n_out: int) -> np.ndarray:
         """(len(fractions), n_out) values at t + fraction, t = 0 .. n_out - 1 (fractions in samples):
         the spectrum shifted by exp(2 pi i k fraction / nfft), one batched inverse transform."""
         fractions = np.asarray(fractions, dtype=float)
         shift = np.exp(2j * np.pi * np.outer(fractions, np.arange(self.bins.size)) / self.nfft)
-        y = lowband_irfft(self.bins * shift, self.nfft, n_out)
+        y = lowband_irfft(self.bins * shift, self.nfft, self.offset + n_out)[:, self.offset:]
         value0, slope = self.line
         if value0 or slope:
             y += value0 + slope * (np.arange(n_out) + fractions[:, None])
@@ -192,6 +195,7 @@ class BandLimitedSignal:
         times = np.atleast_1d(np.asarray(times, dtype=float))
         k = np.arange(self.bins.size)
         w = bin_weights(k.size, self.nfft)
-        y = (np.exp(2j * np.pi * np.outer(times, k) / self.nfft) * (w * self.bins)).real.sum(axis=1) / self.nfft
+        phase = np.outer(self.offset + times, k) / self.nfft
+        y = (np.exp(2j * np.pi * phase) * (w * self.bins)).real.sum(axis=1) / self.nfft
         value0, slope = self.line
         return y + value0 + slope * times
