@@ -67,20 +67,19 @@ def free_port(host: str = "127.0.0.1") -> int:
         return s.getsockname()[1]
 
 
-#: The TCP port every ADS client dials (AMS over TCP): ADS servers on one machine differ by address only.
-ADS_TCP_PORT = 48898
-
-
 def free_ads_address() -> str:
     """A loopback address 127.a.b.c (Linux answers on all of 127/8) where nothing listens on the ADS
     port, for a SimulatedRig's ADS server (its `ads_address`). Drawn at random: with one fixed address,
     two test runs on one machine (a CI clone beside a developer's `make test`) both took 127.0.0.5, and
-    the later one's rigs failed to start with "address already in use"."""
+    the later one's rigs failed to start with "address already in use". ADS_PORT: the TCP port every ADS
+    client dials and pyads' test server listens on (48898), so ADS servers on one machine differ by
+    address only (imported here, not with the module: pyads takes ~40 ms to import)."""
+    from pyads.testserver.testserver import ADS_PORT
     for a, b, c in np.random.default_rng().integers(1, 255, size=(200, 3)):
         host = f"127.{a}.{b}.{c}"
-        if _bindable(host, ADS_TCP_PORT, reuse_address=True):  # as AdsTestServer binds
+        if _bindable(host, ADS_PORT, reuse_address=True):  # as AdsTestServer binds
             return host
-    raise RuntimeError(f"no loopback address with TCP {ADS_TCP_PORT} free (200 tried)")
+    raise RuntimeError(f"no loopback address with TCP {ADS_PORT} free (200 tried)")
 
 
 class SimulatedRig:

@@ -417,13 +417,15 @@ def test_free_ads_address_is_a_random_loopback_address_free_on_the_ads_port():
     import ipaddress
     import socket
 
-    from sim.server import ADS_TCP_PORT, _bindable
+    from pyads.testserver.testserver import ADS_PORT
+
+    from sim.server import _bindable
     hosts = [free_ads_address() for _ in range(30)]
     assert all(ipaddress.ip_address(h).is_loopback and not h.startswith("127.0.0.") for h in hosts), hosts
     assert len(set(hosts)) > 20
     with socket.socket() as listener:
         listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        listener.bind((hosts[0], ADS_TCP_PORT))
+        listener.bind((hosts[0], ADS_PORT))
         listener.listen()
-        assert not _bindable(hosts[0], ADS_TCP_PORT, reuse_address=True)  # the check free_ads_address makes
-    assert _bindable(hosts[0], ADS_TCP_PORT, reuse_address=True)  # and free again once the server is gone
+        assert not _bindable(hosts[0], ADS_PORT, reuse_address=True)  # the check free_ads_address makes
+    assert _bindable(hosts[0], ADS_PORT, reuse_address=True)  # and free again once the server is gone
