@@ -17,7 +17,7 @@ from scipy.optimize import least_squares
 
 from .chain import StateSignals
 from .model import SparseModel
-from .simulate import choose_substeps, simulate
+from .simulate import choose_step, simulate
 
 
 def interior_rows(sig: StateSignals) -> np.ndarray:
@@ -53,16 +53,19 @@ class FreeRunError:
         self.dt = 1.0 / sig.fs_hz
         self.scale = 1.5 * np.max(np.abs(sig.states[v]), axis=0)
         self.bound = 100.0 * float(np.max(self.scale))
-        if substeps is None:
-            substeps = choose_substeps(model, self.dt, self.scale)
-        self.substeps = int(substeps)
-        self.u_fine = sig.input_fine(self.substeps)  # exact between samples (the chain's band-limited input)
+        # RK4 steps as validation takes them (identify.simulate.choose_step): several per sample, or, for a
+        # model slow against the sample rate, one per `stride` samples; a given `substeps` is one step of
+        # dt / substeps each
+        substeps, stride = choose_step(model, self.dt, self.scale) if substeps is None else (int(substeps), 1)
+        self.substeps, self.stride = int(substeps), int(stride)
+        # exact between samples (the chain's band-limited input), where the steps read it
+        self.u_fine = sig.input_fine(self.substeps, self.stride)
         self.norms = {s: np.std(self.measured[s][self.rows]) or 1.0 for s in self.signals}
         self.n_rows = max(int(self.rows.sum()), 1)
 
     def residuals(self, model: SparseModel) -> np.ndarray:
         res = simulate(model, self.dt, self.x0, inputs_fine=self.u_fine, substeps=self.substeps, n_samples=self.n,
-                       bound=self.bound)
+                       bound=self.bound, stride=self.stride)
         if res.diverged:  # a large but finite penalty: a trust region backs off instead of failing
             return np.full(self.n_rows * len(self.signals), 1e3 / np.sqrt(self.n_rows))
         # compared like with like: the simulation through the same band as the measured states
@@ -79,11 +82,12 @@ class FreeRunError:
 
 def refine_free_run(model: SparseModel, sig: StateSignals, fit_rows: np.ndarray | None = None,
                     equation: str = "q1_dot", signals=("q2", "q1"), max_nfev: int = 60,
-                    ftol: float = 1e-8) -> tuple[SparseModel, dict]:
+                    ftol: float = 1e-8, substeps: int | None = None) -> tuple[SparseModel, dict]:
     """Refit `equation`'s coefficients of `model` on the free-run error of `signals` over `fit_rows`
     (bool mask over sig.valid; interior rows only, FreeRunError). Each signal's error is normalised by its
-    std. `ftol`: relative change of the cost at which the search stops. Returns (model, info)."""
-    error = FreeRunError(sig, fit_rows, signals, model=model)
+    std. `ftol`: relative change of the cost at which the search stops; `substeps`: RK4 steps per sample
+    (None: as FreeRunError chooses them, for `model`). Returns (model, info)."""
+    error = FreeRunError(sig, fit_rows, signals, substeps=substeps, model=model)
     terms = list(model.equations[equation])
     theta0 = np.array([model.equations[equation][t] for t in terms])
 
