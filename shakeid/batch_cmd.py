@@ -140,7 +140,8 @@ def cmd_batch(args) -> int:
         if "result" in outcome:
             result = models[name] = outcome["result"]
             if out:
-                (out / f"{Path(name).stem}.model.json").write_text(json.dumps(result, indent=2))
+                # the whole file name: sweep.csv and sweep.h5 are two recordings, two models
+                (out / f"{name}.model.json").write_text(json.dumps(result, indent=2))
             if result["status"] == "failed":
                 failed[name] = {"reason": f"identification failed: {result['reason']}",
                                 "computed_on": result["computed_on"]}
@@ -179,7 +180,8 @@ def add_batch_parser(sub, add_identify_options, make_identifier, read_recording)
     q.add_argument("--workers", type=int, help="local pool: processes (default: the number of CPUs)")
     q.add_argument("--connect-timeout", type=float, default=10.0, metavar="S",
                    help="--scheduler: seconds to wait for the scheduler, s")
-    q.add_argument("--out", metavar="DIR", help="write NAME.model.json per file and batch.json here "
+    q.add_argument("--out", metavar="DIR", help="write NAME.model.json per file (NAME: the file's name with its "
+                                                "extension, e.g. sweep.h5.model.json) and batch.json here "
                                                 "(default: none)")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     q.add_argument("--accept-faulty", action="store_true",

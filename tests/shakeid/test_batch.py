@@ -63,7 +63,7 @@ def test_batch_on_a_dask_cluster_gives_one_model_per_file_each_naming_its_worker
     for name, model in doc["models"].items():
         assert model["computed_on"] in workers, (name, model["computed_on"], workers)
         assert model["status"] == "ok" and _support(model) == true_q1_terms
-        assert json.loads((out / f"{Path(name).stem}.model.json").read_text()) == model
+        assert json.loads((out / f"{name}.model.json").read_text()) == model
     assert doc["failed"] == {"bad.csv": {"reason": reason, "computed_on": doc["failed"]["bad.csv"]["computed_on"]}}
     assert doc["failed"]["bad.csv"]["computed_on"] in workers
     assert json.loads((out / "batch.json").read_text()) == doc
@@ -86,6 +86,23 @@ def test_batch_in_the_local_pool_names_the_worker_process(recordings, capsys, tr
         assert "q1_dot: " + " ".join(sorted(true_q1_terms)) + ";" in line
         pid = int(line.rsplit("(computed on local:", 1)[1].rstrip(")"))
         assert pid != os.getpid()  # a pool process, not this one
+
+
+def test_files_differing_only_in_extension_keep_one_model_each(recordings, tmp_path, capsys):
+    """sweep0.csv and sweep0.h5 are two recordings: each model is written under the whole file name (the
+    name without its extension had written both to sweep0.model.json, and the last to finish won)."""
+    good, _ = recordings
+    twin = tmp_path / "in" / "sweep0.h5"
+    twin.parent.mkdir()
+    twin.write_bytes(good[2].read_bytes())  # another recording (sweep2's), named like sweep0.csv but .h5
+    out = tmp_path / "models"
+    assert main(["batch", str(good[0]), str(twin), "--workers", "2", "--out", str(out)]) == 0
+    assert capsys.readouterr().out.strip().splitlines()[-1] == f"2 of 2 file(s) identified on local; models in {out}"
+    assert sorted(p.name for p in out.iterdir()) == ["batch.json", "sweep0.csv.model.json", "sweep0.h5.model.json"]
+    doc = json.loads((out / "batch.json").read_text())
+    for name in ("sweep0.csv", "sweep0.h5"):
+        assert json.loads((out / f"{name}.model.json").read_text()) == doc["models"][name]
+    assert doc["models"]["sweep0.csv"]["model"] != doc["models"]["sweep0.h5"]["model"]  # two fits, two models
 
 
 def test_option_errors_refuse_before_any_work(recordings, tmp_path, capsys):
