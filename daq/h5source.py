@@ -14,6 +14,8 @@ import numpy as np
 
 from identify.errors import RecordingError
 
+from .recorder import check_h5_path
+
 #: Rows of the time axis read at a time when looking for gaps (8 MB).
 TIME_CHUNK_ROWS = 1 << 20
 
@@ -32,6 +34,7 @@ class H5ChunkSource:
         self.input_name, self.output_name = input, output
         self.source = str(path)
         self._f = None
+        check_h5_path(path)
         f = self._file()
         if "entry/data" not in f:
             raise RecordingError(f"{path}: not a shakeid HDF5 recording (no /entry/data)")

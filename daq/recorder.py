@@ -268,8 +268,26 @@ def recover_directory(directory) -> list[Path]:
     return [p for p in sorted(Path(directory).glob("*.h5")) if recover(p)]
 
 
+def check_h5_path(path) -> None:
+    """Refuse, naming the problem in words, a path that cannot be an HDF5 recording: missing, not a file,
+    or a file of another format (h5py's own message for these is its library's, errno and all)."""
+    p = Path(path)
+    if not p.exists():
+        raise RecordingError(f"{path}: no such file")
+    if not p.is_file():
+        raise RecordingError(f"{path}: not a file")
+    try:
+        ok = h5py.is_hdf5(p)
+    except OSError as exc:  # unreadable (permissions)
+        raise RecordingError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+    if not ok:
+        raise RecordingError(f"{path}: not an HDF5 file (shakeid's recordings are the HDF5 files `shakeid sweep` "
+                             "writes; CSV and MAT recordings end in .csv and .mat)")
+
+
 def describe(path) -> dict:
     """Metadata, status, gaps and quality flags of a recording (for `shakeid recordings`)."""
+    check_h5_path(path)
     try:
         with h5py.File(path, "r") as f:
             e = f["entry"]
@@ -327,7 +345,11 @@ def open_recording(path, layout: str = "base", input: str | None = None, output:
                    samples: tuple[int, int] | None = None) -> Recording:
     """Any recording file, cut to rows samples=[a, b) if given: the DAQ's HDF5 (never across a gap),
     else CSV / MAT with identify's readers (layout, column names, sample rate as there)."""
-    if Path(path).suffix.lower() in (".h5", ".hdf5"):
+    suffix = Path(path).suffix.lower()
+    if suffix not in (".h5", ".hdf5", ".csv", ".txt", ".mat"):
+        raise RecordingError(f"{path}: unsupported file type {suffix!r} (HDF5 .h5 from `shakeid sweep`, CSV .csv "
+                             "or MAT .mat)")
+    if suffix in (".h5", ".hdf5"):
         return read_h5_recording(path, input or "table_acc", output or "mass_acc", samples)
     from identify.recording import read_recording
 

@@ -74,6 +74,27 @@ def test_errors_are_one_clear_line(tmp_path, content, args, message):
     assert len(lines) == 1 and lines[0].startswith("shakeid: error:") and message in lines[0], proc.stderr
 
 
+@pytest.mark.parametrize("command,name,content,message", [
+    (command, name, content, message)
+    for command in ("identify", "recordings")
+    for name, content, message in [
+        ("nosuch.h5", None, "nosuch.h5: no such file"),
+        ("notes.h5", "not an HDF5 file at all\n", "notes.h5: not an HDF5 file (shakeid's recordings are the HDF5"),
+    ]
+] + [("identify", "rec.dat", "t,table_acc,mass_acc\n0,1,2\n", "rec.dat: unsupported file type '.dat' (HDF5 .h5")])
+def test_a_wrong_file_is_named_in_words_not_in_hdf5s(tmp_path, command, name, content, message):
+    """A mistyped path, a text file named .h5, an unknown extension: one line saying which, without h5py's
+    errno and library wording ("Unable to synchronously open file ... errno = 2")."""
+    path = tmp_path / name
+    if content is not None:
+        path.write_text(content)
+    proc = run(command, path)
+    assert proc.returncode == 2 and proc.stdout == ""
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("shakeid: error:"), proc.stderr
+    assert message in lines[0] and "errno" not in lines[0] and "Unable to" not in lines[0], lines[0]
+
+
 def test_simulate_writes_recording_and_truth(tmp_path):
     out = tmp_path / "s.csv"
     proc = run("simulate", "--out", out, "--duration-s", "10", "--effect", "coulomb_friction=0.1",
@@ -86,8 +107,15 @@ def test_simulate_writes_recording_and_truth(tmp_path):
     assert lines[0] == "t,table_acc,mass_acc"
     table = [float(ln.split(",")[1]) for ln in lines[1:200]]  # at rest before the sweep: bias, quantised
     assert all(abs(round(v / 0.01) * 0.01 - v) < 1e-9 for v in table) and abs(sum(table) / len(table) - 0.05) < 0.01
-    bad = run("simulate", "--out", out, "--effect", "warp_drive=1")
+    bad = run("simulate", "--out", out, "--effect", "warp_drive=1", "--overwrite")
     assert bad.returncode == 2 and "unknown effect" in bad.stderr
+    # an existing --out is a recording: refused before anything runs, the file kept byte for byte
+    before = out.read_bytes()
+    again = run("simulate", "--out", out, "--duration-s", "10")
+    assert again.returncode == 2 and "never overwritten" in again.stderr and "--overwrite" in again.stderr
+    assert out.read_bytes() == before
+    assert run("simulate", "--out", out, "--duration-s", "10", "--overwrite").returncode == 0
+    assert out.read_bytes() != before  # the default rig without friction: another recording
 
 
 def test_version_is_the_packages():
