@@ -165,6 +165,10 @@ def test_every_readme_command_runs_verbatim(tmp_path):
     for page in ("demo-output/report/index.html", "report/index.html", "explain/index.html"):
         assert "<table>" in (clone / page).read_text(), page
     assert json.loads((clone / "models" / "batch.json").read_text())
+    # `shakeid batch sweep.csv sweep.h5`: two recordings, two models (not one file written twice)
+    assert sorted(p.name for p in (clone / "models").iterdir()) == ["batch.json", "sweep.csv.model.json",
+                                                                    "sweep.h5.model.json"]
+    assert "identified beside the simulated rig's true model" in output  # the demo's comparison
     with h5py.File(clone / "sweep.h5") as f:
         assert f["entry"].attrs["status"] == "complete" and "processed" in f["entry"]
     assert len(list((clone / "levels").glob("quick-*.h5"))) == 2

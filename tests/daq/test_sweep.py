@@ -166,6 +166,8 @@ def test_sigkill_of_the_sweep_process_the_watchdog_stops_the_table(tmp_path):
         assert np.allclose(np.diff(t), 1 / 2048) and np.all(np.isfinite(f["entry/data/mass_acc"][()]))
     p = subprocess.run([exe, "recordings", "--recover", str(out)], capture_output=True, text=True)
     assert p.returncode == 0 and "marked aborted" in p.stdout and describe(out)["status"] == "aborted"
+    again = subprocess.run([exe, "recordings", "--recover", str(out)], capture_output=True, text=True)
+    assert again.returncode == 0 and f"{out}: not left running by a crash; nothing to recover" in again.stdout
 
 
 @pytest.mark.parametrize("event,status,reason", [

@@ -1,6 +1,7 @@
 """The command explains itself: every option's help gives its unit and default; human output has no
 Python reprs; progress is readable without a terminal."""
 import io
+import json
 import re
 import subprocess
 import sys
@@ -65,6 +66,36 @@ def test_recordings_prints_plain_words_not_reprs(tmp_path):
     assert re.search(r"started \d{4}-\d\d-\d\d \d\d:\d\d:\d\d UTC", p.stdout)
 
 
+def test_recordings_gives_identifys_verdict_not_only_the_signals(tmp_path):
+    """`shakeid recordings` says "usable for identification" only where `shakeid identify` would identify:
+    an aborted sweep and a file without the mass channel have clean signals, but identify refuses both."""
+    import h5py
+
+    rng = np.random.default_rng(0)
+    files = {}
+    for name, status, reason in (("ok", "complete", ""), ("aborted", "aborted", "emergency stop"),
+                                 ("nomass", "complete", "")):
+        files[name] = tmp_path / f"{name}.h5"
+        r = Recorder(files[name], fs_hz=1000.0)
+        r.append(0, rng.normal(size=(5000, 2)))
+        r.close(status, reason)
+    with h5py.File(files["nomass"], "r+") as f:
+        del f["entry/data/mass_acc"]
+    text = {k: subprocess.run([SHAKEID, "recordings", str(p)], capture_output=True, text=True, timeout=120)
+            for k, p in files.items()}
+    assert all(p.returncode == 0 for p in text.values()), {k: p.stderr for k, p in text.items()}
+    assert "quality: usable for identification" in text["ok"].stdout
+    assert ("quality: NOT usable for identification: status is aborted (emergency stop), not complete"
+            in text["aborted"].stdout)
+    assert "quality: NOT usable for identification: missing channel(s) ['mass_acc']" in text["nomass"].stdout
+    for k, expected in (("aborted", "status is aborted"), ("nomass", "missing channel(s) ['mass_acc']")):
+        refused = subprocess.run([SHAKEID, "identify", str(files[k])], capture_output=True, text=True, timeout=120)
+        assert refused.returncode == 2 and expected in refused.stderr, refused.stderr  # what identify says too
+        doc = json.loads(subprocess.run([SHAKEID, "recordings", str(files[k]), "--json"], capture_output=True,
+                                        text=True, timeout=120).stdout)
+        assert doc["identification"]["usable"] is False and expected in doc["identification"]["reasons"][0]
+
+
 class Status:
     """A PLC status as SweepRunner hands it to on_progress."""
     def __init__(self, frac):
@@ -101,3 +132,18 @@ def test_progress_on_a_tty_redraws_one_line():
     progress.close()
     text = out.getvalue()
     assert text.count("\r") == 101 and text.count("\n") == 1 and "100.0 %" in text
+
+
+def test_demo_sets_the_model_beside_the_truth_term_by_term():
+    """The demo's comparison: one number format for both columns, the relative error, a missed or an extra
+    term named as such, and no "-0.00 %" for a coefficient equal to the truth at that precision."""
+    from shakeid.lab import truth_lines
+
+    truth = {"q1_dot": {"q1": -3.7294, "q2": -971.0169, "q2^3": -2503300.0}, "q2_dot": {"q1": 1.0}}
+    got = {"q1_dot": {"q1": -3.7294000001, "q2^3": -2502800.0, "q1^2": 0.5}, "q2_dot": {"q1": 1.0}}
+    rows = {tuple(line.split()[:2]): line.split()[2:] for line in truth_lines(got, truth)[2:-1]}
+    assert rows[("q1_dot", "q1")] == ["-3.7294", "-3.7294", "+0.00", "%"]
+    assert rows[("q1_dot", "q2")] == ["-", "-971.02", "missed"]
+    assert rows[("q1_dot", "q2^3")] == ["-2.5028e+06", "-2.5033e+06", "+0.02", "%"]
+    assert rows[("q1_dot", "q1^2")] == ["0.5", "-", "extra"]
+    assert rows[("q2_dot", "q1")] == ["1", "1", "+0.00", "%"]
