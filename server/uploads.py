@@ -91,6 +91,11 @@ def check(path: Path, suffix: str, filename: str, options: dict) -> dict:
             from daq.recorder import describe
 
             d = describe(path)
+            # the channels a job will read (its options, else identify's pair): refused now, not at the job
+            wanted = [options.get("input") or "table_acc", options.get("output") or "mass_acc"]
+            missing = [c for c in wanted if c not in d["channels"]]
+            if missing:
+                raise ShakeidError(f"{filename}: missing channel(s) {missing}; found {d['channels']}")
             return {"samples": d["samples"], "fs_hz": d["fs_hz"], "gaps": len(d["gaps"]), "status_in_file": d["status"]}
         from identify.recording import read_recording
 

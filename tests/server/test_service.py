@@ -146,6 +146,13 @@ def test_uploads_jobs_and_clear_errors(service, tmp_path, table1_run):
     failed = wait_for(lambda: (j := viewer.get(f"/api/jobs/{failing['id']}").json())["state"] in ("completed", "failed")
                       and j, 60, "job")
     assert failed["state"] == "failed" and "warp" in failed["error"]  # the user's mistake, named
+    # a read option that does not fit the file: the job names the recording as the API lists it (its id
+    # and extension), not by the server's own path to its store
+    wrong = op.post(f"/api/recordings/{rec['id']}/identify", json={"input": "acc_base"}).json()
+    wrong = wait_for(lambda: (j := viewer.get(f"/api/jobs/{wrong['id']}").json())["state"] in ("completed", "failed")
+                     and j, 60, "job")
+    assert wrong["state"] == "failed" and wrong["error"].startswith(f"{rec['id']}.csv: missing column"), wrong
+    assert str(service.data_dir) not in wrong["error"]
     listed = {r["id"] for r in viewer.get("/api/recordings").json()}
     assert rec["id"] in listed and len(listed) == 1  # refused uploads left nothing behind
     assert sorted(p.name for p in (service.data_dir / "recordings").iterdir()) == [f"{rec['id']}.csv"]
@@ -305,6 +312,16 @@ def test_mat_and_hdf5_uploads(service, tmp_path, table1_run):
                    content=(tmp_path / "lab.mat").read_bytes()).status_code == 422
     up = op.post("/api/recordings", params={"filename": "daq.h5"}, content=h5.read_bytes())
     assert up.status_code == 201 and up.json()["info"]["samples"] == rec.n_samples
+    # an HDF5 recording without a channel the job would read: refused on arrival, like a CSV without its
+    # column (not stored, to fail later as a job naming the server's own path)
+    import h5py
+
+    with h5py.File(h5, "r+") as f:
+        del f["entry/data/mass_acc"]
+    nomass = op.post("/api/recordings", params={"filename": "nomass.h5"}, content=h5.read_bytes())
+    assert nomass.status_code == 422, nomass.text
+    assert nomass.json()["detail"] == "nomass.h5: missing channel(s) ['mass_acc']; found ['table_acc']"
+    assert nomass.json()["detail"].count("/") == 0  # no path of the server's
     for rid in (mat.json()["id"], up.json()["id"]):
         job = op.post(f"/api/recordings/{rid}/identify", json={}).json()
         done = wait_for(lambda: (j := op.get(f"/api/jobs/{job['id']}").json())["state"] in ("completed", "failed")
