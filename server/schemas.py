@@ -17,11 +17,17 @@ class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
+#: Upper bounds of the request schemas' frequencies (Hz) and amplitudes (mm): numbers beyond any rig, so
+#: that a request above the rig's own limits is refused by those limits, in their words ("amplitude
+#: 2000 mm above the stroke limit 5 mm"), not by the schema ("less than or equal to 1000").
+MAX_HZ, MAX_MM = 1e6, 1e6
+
+
 class SweepIn(Strict):
-    f_start_hz: float = Field(gt=0, le=1e4, description="start frequency, Hz")
-    f_end_hz: float = Field(gt=0, le=1e4, description="end frequency, Hz")
+    f_start_hz: float = Field(gt=0, le=MAX_HZ, description="start frequency, Hz")
+    f_end_hz: float = Field(gt=0, le=MAX_HZ, description="end frequency, Hz")
     duration_s: float = Field(gt=0, le=1e5, description="sweep duration, s")
-    amplitude_mm: float = Field(gt=0, le=1e3, description="table displacement amplitude, mm")
+    amplitude_mm: float = Field(gt=0, le=MAX_MM, description="table displacement amplitude, mm")
     settle_s: float = Field(2.0, ge=0, le=60, description="recording after the sweep ends, s")
     note: str = Field("", max_length=500)
 
@@ -121,17 +127,17 @@ class JobOut(BaseModel):
 
 class CampaignSweepDefaults(Strict):
     """Every sweep of a campaign: an "up" sweep goes f_start_hz -> f_end_hz, a "down" one back."""
-    f_start_hz: float = Field(gt=0, le=1e4, description="the lower frequency, Hz (below f_end_hz)")
-    f_end_hz: float = Field(gt=0, le=1e4, description="the upper frequency, Hz")
+    f_start_hz: float = Field(gt=0, le=MAX_HZ, description="the lower frequency, Hz (below f_end_hz)")
+    f_end_hz: float = Field(gt=0, le=MAX_HZ, description="the upper frequency, Hz")
     duration_s: float = Field(gt=0, le=1e5, description="each sweep's duration, s")
     settle_s: float = Field(2.0, ge=0, le=60, description="recording after each sweep ends, s")
 
 
 class AmplitudeRange(Strict):
     """Amplitudes start, start + step, ... up to stop (included when it is on the grid), mm."""
-    start: float = Field(gt=0, le=1e3)
-    stop: float = Field(gt=0, le=1e3)
-    step: float = Field(gt=0, le=1e3)
+    start: float = Field(gt=0, le=MAX_MM)
+    stop: float = Field(gt=0, le=MAX_MM)
+    step: float = Field(gt=0, le=MAX_MM)
 
 
 class CampaignIn(Strict):
@@ -139,7 +145,7 @@ class CampaignIn(Strict):
     amplitude, for each direction, one sweep; `rest_between_s` of wall time with the table at rest between two."""
     name: str = Field(pattern=NAME_PATTERN, description="letters, digits, . _ - (1-64)")
     sweep: CampaignSweepDefaults
-    amplitudes_mm: list[Annotated[float, Field(gt=0, le=1e3)]] | AmplitudeRange = Field(
+    amplitudes_mm: list[Annotated[float, Field(gt=0, le=MAX_MM)]] | AmplitudeRange = Field(
         description="table displacement amplitudes, mm: a list or {start, stop, step}")
     directions: list[Literal["up", "down"]] = Field(["up"], min_length=1, max_length=2)
     repeats: int = Field(1, ge=1, le=MAX_SWEEPS)

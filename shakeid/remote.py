@@ -43,11 +43,25 @@ class ServiceClient:
                 detail = json.loads(exc.read()).get("detail", exc.reason)
             except ValueError:
                 detail = exc.reason
-            raise ServiceError(f"{method} {path}: {exc.code} {detail if isinstance(detail, str) else json.dumps(detail)}",
-                               exc.code) from None
+            raise ServiceError(f"{method} {path}: {exc.code} {_words(detail)}", exc.code) from None
         except (urllib.error.URLError, OSError) as exc:
             raise ServiceError(f"the service at {self.url} does not answer: {exc}") from None
         return payload if raw else (json.loads(payload) if payload else {})
+
+
+def _words(detail) -> str:
+    """The service's error detail as a sentence: a request the schema refused (FastAPI's list of
+    {"loc", "msg", "input"}) as "field: what is wrong (got value)" per field, not as JSON."""
+    if isinstance(detail, str):
+        return detail
+    if isinstance(detail, list) and all(isinstance(d, dict) and "msg" in d for d in detail):
+        parts = []
+        for d in detail:
+            loc = [str(x) for x in d.get("loc", []) if x != "body"]
+            got = f" (got {d['input']})" if "input" in d and not isinstance(d["input"], (dict, list)) else ""
+            parts.append(f"{'.'.join(loc) or 'request'}: {d['msg']}{got}")
+        return "; ".join(parts)
+    return json.dumps(detail)
 
 
 def cmd_sweep_remote(args) -> int:
@@ -66,7 +80,7 @@ def cmd_sweep_remote(args) -> int:
     progress = Progress("sweep", args.duration_s)
     try:
         while (sweep := client.request("GET", f"/api/sweeps/{sweep_id}"))["state"] in ("queued", "running"):
-            progress.update(sweep["progress"], sweep["state"])
+            progress.update(sweep["progress"], _rig_label(client, sweep["state"]))
             time.sleep(0.2)
     except KeyboardInterrupt:
         client.request("POST", f"/api/sweeps/{sweep_id}/abort")
@@ -96,4 +110,17 @@ def cmd_sweep_remote(args) -> int:
                     raise ShakeidError(f"identification failed: {jobs[0]['error']}") from None
                 time.sleep(0.2)
         print(summary(result, f"recording {rec_id}"))
+        print(f"plots and report: {args.server.rstrip('/')}/#/recording/{rec_id} (the dashboard; "
+              f"GET /api/recordings/{rec_id}/plots lists the figures)")
     return 0
+
+
+def _rig_label(client: ServiceClient, state: str) -> str:
+    """The progress line's label: the sweep's state with the PLC's frequency and table position, as a local
+    sweep shows them (GET /api/rig, which the service answers from a status at most 0.1 s old); the state
+    alone when the rig's status cannot be read."""
+    try:
+        plc = client.request("GET", "/api/rig").get("plc", {})
+        return f"{state:8s} {float(plc['frequency_hz']):6.2f} Hz  table {float(plc['position_mm']):+6.2f} mm"
+    except (ShakeidError, KeyError, TypeError, ValueError):
+        return state

@@ -1,4 +1,5 @@
 """`shakeid sweep --server`: the CLI driving a sweep through a running service (two real processes)."""
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -26,11 +27,24 @@ def test_sweep_through_the_service_downloads_the_file_and_prints_the_model(servi
     info = describe(out)
     assert info["status"] == "complete" and info["gaps"] == [] and info["samples"] > 30 * 2048
     assert "q1*q2^2" in p.stdout and "free-run fit" in p.stdout  # the model table, as `shakeid identify`
+    # the progress lines say what a local sweep's say: the frequency and the table's position
+    assert re.search(r"^sweep \d+ % \(.* s of 30 s\)  running +\d+\.\d\d Hz  table [+-]\d+\.\d\d mm$", p.stderr, re.M), \
+        p.stderr
+    rec_id = re.search(r"recording ([0-9a-f]{12})", p.stdout).group(1)
+    assert f"plots and report: {service.url}/#/recording/{rec_id}" in p.stdout
 
 
 def test_refusals_arrive_as_one_line_errors(service):
     unsafe = _sweep(service, "--amplitude-mm", "9")
     assert unsafe.returncode == 2 and "422 sweep refused: amplitude 9 mm above the stroke limit" in unsafe.stderr
+    # beyond any rig: still the rig's limit that refuses it, in its words (not the schema's bound)
+    far = _sweep(service, "--amplitude-mm", "2000")
+    assert far.returncode == 2 and "422 sweep refused: amplitude 2000 mm above the stroke limit 5 mm" in far.stderr
+    # what the request schema refuses, field by field in words, not as FastAPI's JSON list
+    negative = _sweep(service, "--amplitude-mm", "-1")
+    assert negative.returncode == 2 and "Traceback" not in negative.stderr
+    assert "422 amplitude_mm: Input should be greater than 0 (got -1.0)" in negative.stderr, negative.stderr
+    assert '"loc"' not in negative.stderr and "[{" not in negative.stderr
     viewer = _sweep(service, token=VIEWER)
     assert viewer.returncode == 2 and "403" in viewer.stderr and "operator role" in viewer.stderr
     nobody = subprocess.run([SHAKEID, "sweep", "--server", "http://127.0.0.1:9", "--token", OPERATOR, *ARGS],
