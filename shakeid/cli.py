@@ -251,10 +251,14 @@ def _synthesize(args):
 def cmd_simulate(args) -> int:
     from identify.recording import write_csv
 
-    run = _synthesize(args)
     out = Path(args.out)
-    write_csv(out, run.recording)
     truth = out.with_suffix(".truth.json")
+    existing = [str(p) for p in (out, truth) if p.exists()]
+    if existing and not args.overwrite:  # checked before the run: a mistyped --out costs nothing
+        raise ShakeidError(f"{' and '.join(existing)} exist(s) already; a recording is never overwritten "
+                           "(another --out, or --overwrite to replace a synthetic one)")
+    run = _synthesize(args)
+    write_csv(out, run.recording)
     truth.write_text(json.dumps(run.truth, indent=2))
     stops, n_contact = run.truth["end_stops"], run.truth["contact_samples"]
     if stops is None:
@@ -313,6 +317,9 @@ def build_parser() -> argparse.ArgumentParser:
     q = sub.add_parser("simulate", help="write a synthetic recording of the simulated rig (CSV + truth JSON)")
     q.add_argument("--out", required=True, metavar="FILE.csv",
                    help="the recording (t, table_acc, mass_acc); the truth goes to FILE.truth.json")
+    q.add_argument("--overwrite", action="store_true",
+                   help="replace FILE.csv and FILE.truth.json if they exist (default: refuse, as a recording is "
+                        "never overwritten)")
     _add_sweep_options(q)
     q.set_defaults(func=cmd_simulate)
     return p
