@@ -6,6 +6,8 @@ simulated rig serves too. The accelerometer sources are in daq/sources.py.
 """
 from __future__ import annotations
 
+import contextlib
+import logging
 import struct
 from dataclasses import dataclass
 
@@ -40,13 +42,29 @@ LIMIT_NAMES = ("max_stroke_mm", "max_velocity_ms", "max_acceleration_ms2", "f_mi
                "max_duration_s", "watchdog_s")
 
 
+@contextlib.contextmanager
+def _quiet(logger: str):
+    """Silence a library's logger below CRITICAL for the duration (its level restored after)."""
+    log = logging.getLogger(logger)
+    level = log.level
+    log.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
+
+
 class ModbusPLC(PLC):
     def __init__(self, host: str, port: int, device_id: int = 1, timeout_s: float = 1.0):
         from pymodbus.client import ModbusTcpClient
 
         self.client = ModbusTcpClient(host, port=port, timeout=timeout_s, retries=1)
         self.device_id = device_id
-        if not self.client.connect():
+        # a refused connection is ours to report (DeviceError, once, in words); pymodbus would also log it
+        # ("Connection to (host, port) failed: [Errno 111] ...") through Python's last-resort handler
+        with _quiet("pymodbus"):
+            connected = self.client.connect()
+        if not connected:
             raise DeviceError(f"PLC at {host}:{port} (Modbus TCP) does not answer")
 
     def _call(self, fn, *args, **kw):

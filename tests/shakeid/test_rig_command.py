@@ -84,3 +84,13 @@ def test_an_unreachable_plc_is_one_line_and_exit_2(tmp_path, capsys):
         assert main(["rig", action, "--config", str(cfg)]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith(f"shakeid: error: {cfg}: PLC at 127.0.0.1:") and "does not answer" in err[0]
+    # as a separate process (no pytest log capture): pymodbus's own "Connection to ... failed" log line is
+    # not printed before ours
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    p = subprocess.run([str(Path(sys.executable).with_name("shakeid")), "rig", "status", "--config", str(cfg)],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2 and p.stdout == ""
+    assert p.stderr.strip().splitlines() == [err[0]], p.stderr
