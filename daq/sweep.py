@@ -101,8 +101,11 @@ class SweepRunner:
         except DeviceError as exc:
             raise SweepRefused(f"sweep refused: {exc}") from None
         if st.state not in (State.IDLE, State.DONE):
-            raise SweepRefused(f"sweep refused: PLC is {State(st.state).name.lower()} (fault code {st.fault_code}); "
-                               "reset it first")
+            how = {State.ESTOP: "in emergency stop", State.FAULT: f"in fault (code {st.fault_code})",
+                   State.RUNNING: "running a sweep"}.get(State(st.state), State(st.state).name.lower())
+            raise SweepRefused(f"sweep refused: PLC is {how}; " + (
+                "wait for it to end" if st.state == State.RUNNING else
+                "reset it first (`shakeid rig reset --config RIG.toml`, or POST /api/rig/reset on the service)"))
         if out_path is not None:
             directory = Path(out_path).resolve().parent
             try:

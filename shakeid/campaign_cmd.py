@@ -133,7 +133,7 @@ def _local(args, plan) -> int:
         progress = None
         try:
             devices.append(open_plc(cfg.plc))  # the heartbeat's own link: never behind a status poll
-            progress = Progress(f"sweep {planned.index}", planned.duration_s)
+            progress = Progress(f"sweep {planned.index} of {campaign.total}:", planned.duration_s)
             runner = SweepRunner(plc, source, cfg.limits, float(cfg.stream["sensitivity_counts_per_ms2"]),
                                  cfg.channels, on_progress=progress.sweep_status, heartbeat_plc=devices[2],
                                  rig_config={"source": cfg.source, "plc": cfg.plc})

@@ -94,7 +94,7 @@ def test_an_estop_pauses_the_campaign_resume_goes_on_and_ctrl_c_aborts(rig, tmp_
     assert "--resume" in proc.stdout.read()
 
     refused = _campaign(plan, cfg, out, "--resume")  # not reset: the sweep is refused, nothing moves
-    assert refused.returncode == 1 and "not started: sweep refused: PLC is estop" in refused.stdout
+    assert refused.returncode == 1 and "not started: sweep refused: PLC is in emergency stop; reset it first" in refused.stdout
     plc.command(Command.RESET)
     assert plc.status().state == State.IDLE
     # resume: sweep 1 again (the stopped file kept aside), then sweep 2; Ctrl-C during sweep 2
@@ -108,7 +108,7 @@ def test_an_estop_pauses_the_campaign_resume_goes_on_and_ctrl_c_aborts(rig, tmp_
     assert [it["status"] for it in state["sweeps"]] == ["complete", "failed"]
     stopped, refused_attempt = state["sweeps"][0]["attempts"]  # the estop's, then the one the PLC refused
     assert stopped["path"] == str(out / "stops-1.attempt-1.h5") and "emergency stop" in stopped["reason"]
-    assert refused_attempt["path"] is None and "PLC is estop" in refused_attempt["reason"]
+    assert refused_attempt["path"] is None and "PLC is in emergency stop" in refused_attempt["reason"]
     with h5py.File(out / "stops-1.attempt-1.h5") as f:
         assert f["entry"].attrs["status"] == "aborted"
     with h5py.File(out / "stops-1.h5") as f:
