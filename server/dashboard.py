@@ -21,12 +21,13 @@ from .schemas import Problem
 
 HERE = FsPath(__file__).parent
 STATIC = HERE / "static"
-#: the physical parameters the rig history plots: key in the model's "physical" object -> (symbol, unit)
+#: the physical parameters the rig history plots: key in the model's "physical" object (SI) -> (symbol,
+#: unit shown, factor from SI to it): b in mm, as the CLI and the report print it
 HISTORY_PARAMETERS = {
-    "damping_ns_per_m": ("c", "N s/m"),
-    "stiffness_n_per_m": ("k", "N/m"),
-    "cubic_stiffness_n_per_m3": ("k3", "N/m³"),
-    "prestress_b_m": ("b", "m"),
+    "damping_ns_per_m": ("c", "N s/m", 1.0),
+    "stiffness_n_per_m": ("k", "N/m", 1.0),
+    "cubic_stiffness_n_per_m3": ("k3", "N/m³", 1.0),
+    "prestress_b_m": ("b", "mm", 1e3),
 }
 
 
@@ -98,7 +99,7 @@ def dashboard_router(catalog: Callable[[], Catalog], viewer) -> APIRouter:
                            "amplitude_mm": sweep.get("amplitude_mm"), "fit_percent": summary.get("fit_percent"),
                            # reasons the data were refused and identified anyway (an aborted sweep, say)
                            "accepted_faulty": summary.get("accepted_faulty") or [], **params})
-        return {"parameters": {k: {"symbol": s, "unit": u} for k, (s, u) in HISTORY_PARAMETERS.items()},
+        return {"parameters": {k: {"symbol": s, "unit": u, "scale": f} for k, (s, u, f) in HISTORY_PARAMETERS.items()},
                 "points": points}
 
     return router

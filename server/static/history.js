@@ -33,8 +33,10 @@ function drawHistory(h) {
     return;
   }
   const W = 270, H = 210, L = 74, R = 12, T = 22, B = 38, PAD = 10;  // px; PAD keeps end points off the axes
-  const panels = Object.entries(h.parameters).map(([key, {symbol, unit}]) => {
-    const vals = pts.map(p => p[key]).filter(v => v && v.value != null);
+  const panels = Object.entries(h.parameters).map(([key, {symbol, unit, scale = 1}]) => {
+    // drawn in the unit shown (scale: from the model's SI value); data-value / data-se stay SI, as in model.json
+    const shown = v => v && v.value != null ? {value: v.value * scale, std_error: v.std_error == null ? null : v.std_error * scale} : null;
+    const vals = pts.map(p => shown(p[key])).filter(v => v);
     if (!vals.length) return `<svg width="${W}" height="${H}"><text x="${L}" y="${T}">${symbol}: none</text></svg>`;
     const lo = Math.min(...vals.map(v => v.value - 2 * (v.std_error || 0))), hi = Math.max(...vals.map(v => v.value + 2 * (v.std_error || 0)));
     const pad = (hi - lo) * 0.1 || Math.abs(hi) * 0.01 || 1;
@@ -42,13 +44,13 @@ function drawHistory(h) {
     const X = i => L + PAD + (pts.length === 1 ? (W - L - R - 2 * PAD) / 2 : i * (W - L - R - 2 * PAD) / (pts.length - 1));
     const Y = v => T + (y1 - v) / (y1 - y0) * (H - T - B);
     const marks = pts.map((p, i) => {
-      const v = p[key];
-      if (!v || v.value == null) return "";
+      const v = shown(p[key]), raw = p[key];
+      if (!v) return "";
       const faulty = p.accepted_faulty.length > 0;
       const se = v.std_error || 0, tip = `${p.recording_id} · ${when(p.created)}` + (p.amplitude_mm ? ` · ${p.amplitude_mm} mm` : "") +
         `\n${symbol} = ${v.value.toPrecision(5)} ± ${se.toPrecision(2)} ${unit} (1 SE)` +
         (faulty ? `\nidentified from faulty data: ${p.accepted_faulty.join("; ")}` : "");
-      return `<g class="point" data-rec="${p.recording_id}" data-value="${v.value}" data-se="${v.std_error ?? ""}"><title>${esc(tip)}</title>` +
+      return `<g class="point" data-rec="${p.recording_id}" data-value="${raw.value}" data-se="${raw.std_error ?? ""}"><title>${esc(tip)}</title>` +
         `<line class="bar" x1="${X(i)}" x2="${X(i)}" y1="${Y(v.value - 2 * se)}" y2="${Y(v.value + 2 * se)}"/>` +
         `<line class="bar" x1="${X(i) - 3}" x2="${X(i) + 3}" y1="${Y(v.value - 2 * se)}" y2="${Y(v.value - 2 * se)}"/>` +
         `<line class="bar" x1="${X(i) - 3}" x2="${X(i) + 3}" y1="${Y(v.value + 2 * se)}" y2="${Y(v.value + 2 * se)}"/>` +

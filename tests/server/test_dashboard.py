@@ -253,6 +253,14 @@ def test_rig_history_matches_the_models(page, service, sweep_recording):
         models = {r: api.get(f"/api/recordings/{r}/model").json()["physical"] for r in recs}
     assert sweep_recording["id"] in recs
     page.wait_for_selector("#history svg[data-parameter]")
+    # b is shown in mm, as the CLI and the report print it (its points' data-value stay in the model's SI)
+    with service.client() as api:
+        assert api.get("/api/dashboard/history").json()["parameters"]["prestress_b_m"] == \
+            {"symbol": "b", "unit": "mm", "scale": 1000.0}
+    assert page.locator("#history svg[data-parameter='prestress_b_m'] text").first.text_content() == "b, mm"
+    b_ticks = page.locator("#history svg[data-parameter='prestress_b_m'] text[text-anchor='end']").all_text_contents()
+    b_mm = [1e3 * models[r]["prestress_b_m"]["value"] for r in recs]
+    assert min(b_mm) - 1 < float(b_ticks[1]) < max(b_mm) + 1, (b_ticks, b_mm)  # the middle tick, in mm
     for key in ("damping_ns_per_m", "stiffness_n_per_m", "cubic_stiffness_n_per_m3", "prestress_b_m"):
         marks = page.locator(f"#history svg[data-parameter='{key}'] g.point")
         assert marks.count() >= len(recs)  # a recording identified since the API call may have joined
