@@ -28,7 +28,7 @@ def test_sweep_through_the_service_downloads_the_file_and_prints_the_model(servi
     assert info["status"] == "complete" and info["gaps"] == [] and info["samples"] > 30 * 2048
     assert "q1*q2^2" in p.stdout and "free-run fit" in p.stdout  # the model table, as `shakeid identify`
     # the progress lines say what a local sweep's say: the frequency and the table's position
-    assert re.search(r"^sweep \d+ % \(.* s of 30 s\)  running +\d+\.\d\d Hz  table [+-]\d+\.\d\d mm$", p.stderr, re.M), \
+    assert re.search(r"^sweep \d+ % \(.* s of 30 s\)  running +\d+\.\d\d Hz  table +[+-]\d+\.\d\d mm$", p.stderr, re.M), \
         p.stderr
     rec_id = re.search(r"recording ([0-9a-f]{12})", p.stdout).group(1)
     assert f"plots and report: {service.url}/#/recording/{rec_id}" in p.stdout
