@@ -25,24 +25,32 @@ class Service:
         self.proc: subprocess.Popen | None = None
         self.port = 0
 
-    def start(self) -> "Service":
-        self.port = free_port()  # below the ephemeral range: no client socket can take it before the bind
-        env = {**os.environ, "SHAKEID_TOKENS": f"{OPERATOR}:operator,{VIEWER}:viewer", **self.extra_env}
-        self.log = open(self.data_dir.parent / f"serve-{self.port}.log", "w")
-        self.proc = subprocess.Popen([SHAKEID, "serve", "--data-dir", str(self.data_dir), "--port", str(self.port),
-                                      "--sim-speed", str(self.speed), *self.args], stdout=self.log,
-                                     stderr=subprocess.STDOUT,
-                                     env=env)
-        end = time.monotonic() + 60
-        while True:
-            try:
-                if httpx.get(self.url + "/api/health", timeout=1).status_code == 200:
-                    return self
-            except httpx.HTTPError:
-                pass
-            assert self.proc.poll() is None, self.output()
-            assert time.monotonic() < end, "service did not start: " + self.output()
-            time.sleep(0.1)
+    def start(self, attempts: int = 3) -> "Service":
+        """Start the process on a free port; another port when the bind lost a race for it (free_port draws
+        below the ephemeral range, but another server started meanwhile, the service's own embedded rig
+        included, may draw the same port: seen once in a suite run as "address already in use")."""
+        for attempt in range(attempts):
+            self.port = free_port()  # below the ephemeral range: no client socket can take it before the bind
+            env = {**os.environ, "SHAKEID_TOKENS": f"{OPERATOR}:operator,{VIEWER}:viewer", **self.extra_env}
+            self.log = open(self.data_dir.parent / f"serve-{self.port}.log", "w")
+            self.proc = subprocess.Popen([SHAKEID, "serve", "--data-dir", str(self.data_dir), "--port",
+                                          str(self.port), "--sim-speed", str(self.speed), *self.args],
+                                         stdout=self.log, stderr=subprocess.STDOUT, env=env)
+            end = time.monotonic() + 60
+            while True:
+                try:
+                    if httpx.get(self.url + "/api/health", timeout=1).status_code == 200:
+                        return self
+                except httpx.HTTPError:
+                    pass
+                if self.proc.poll() is not None:
+                    break
+                assert time.monotonic() < end, "service did not start: " + self.output()
+                time.sleep(0.1)
+            lost_race = "address already in use" in self.output()
+            self.log.close()
+            assert lost_race and attempt + 1 < attempts, self.output()
+        raise AssertionError("unreachable")
 
     @property
     def url(self) -> str:
