@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .model import SparseModel
-from .simulate import choose_step, fine_grid_input, simulate
+from .simulate import choose_substeps, fine_grid_input, simulate
 
 #: Segment length in periods of the (linear) resonance.
 SEGMENT_PERIODS = 4.0
@@ -56,9 +56,6 @@ class ShootingData:
     held: np.ndarray
     scale: float = 1.0          # the gap error is reported in recorded units: (1 + mass gain) x error
     lowpass: object = None      # callable: the measurement chain's band applied to a simulated signal
-    #: callable substeps -> the first input every half step (StateSignals.input_fine: exact between samples
-    #: for the chain's band-limited input); None: interpolated from the samples (fine_grid_input)
-    input_fine: object = None
 
     def __post_init__(self):
         self._fine: dict[int, np.ndarray] = {}
@@ -66,8 +63,7 @@ class ShootingData:
 
     def fine(self, substeps: int) -> np.ndarray:
         if substeps not in self._fine:
-            u = (self.input_fine(substeps) if self.input_fine is not None
-                 else fine_grid_input(self.inputs[:, :1], substeps))
+            u = fine_grid_input(self.inputs[:, :1], substeps)
             if self.inputs.shape[1] > 1:  # known smooth extra inputs (the time ramp): linear interpolation
                 extra = fine_grid_input(self.inputs[:, 1:], substeps, "linear")
                 u = np.column_stack([u, extra])
@@ -79,9 +75,7 @@ class ShootingData:
         per-segment squared error (diverged: 4x the segment's signal energy); substeps)."""
         n = self.states.shape[0]
         scale = 1.5 * np.max(np.abs(self.states), axis=0)
-        # RK4 steps as validation takes them (choose_step); a run in steps of several samples reads the
-        # same half-sample grid, so any segment start is a step's start
-        substeps, stride = choose_step(model, 1.0 / self.fs_hz, scale)
+        substeps = choose_substeps(model, 1.0 / self.fs_hz, scale)
         uf = self.fine(substeps)
         up = 2 * substeps
         out = np.full(n, np.nan)
@@ -94,7 +88,7 @@ class ShootingData:
             x0 = self.states[a].copy()
             x0[1] += offsets[i]
             res = simulate(model, dt, x0, inputs_fine=uf[a * up:(b - 1) * up + 1], substeps=substeps,
-                           n_samples=b - a, bound=self.bound, stride=stride)
+                           n_samples=b - a, bound=self.bound)
             if res.diverged:
                 bad.append(i)
                 continue

@@ -187,8 +187,7 @@ class Fitter:
         s0 = self.starts if starts is None else np.asarray(starts)
         s1 = self.stops if stops is None else np.asarray(stops)
         held = self.seg_held if starts is None else np.zeros(len(s0), bool)
-        d = ShootingData(X, U, measured, self.gap, fs, s0, s1, held, 1.0 + st.p.get("mass_acc_gain", 0.0), lowpass,
-                         sig.input_fine)
+        d = ShootingData(X, U, measured, self.gap, fs, s0, s1, held, 1.0 + st.p.get("mass_acc_gain", 0.0), lowpass)
         if len(self._data) > 48:
             self._data.clear()  # before inserting: the entry is used right after
         self._data[key] = d
