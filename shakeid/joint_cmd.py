@@ -9,6 +9,7 @@ model, 2 data refused, 1 the joint model failed (its validation, or a recording 
 from __future__ import annotations
 
 import json
+import os
 import sys
 
 from identify.errors import ShakeidError
@@ -20,6 +21,16 @@ def cmd_identify_joint(args, make_identifier, read) -> int:
 
     if args.report:
         raise ShakeidError("--report takes one recording; identify several without it (or one by one)")
+    if getattr(args, "chunked", False) or getattr(args, "chunk_samples", None):
+        raise ShakeidError("--chunked identifies one recording out of core; a joint fit of several reads them "
+                           "into memory (drop --chunked, or identify the files one by one)")
+    seen: dict = {}
+    for path in args.files:  # one recording counted twice would shrink every standard error by sqrt(2)
+        key = os.path.realpath(path)
+        if key in seen:
+            raise ShakeidError(f"{path}: the same recording as {seen[key]}; a joint fit takes each recording once "
+                               "(twice would count its evidence twice and shrink the standard errors)")
+        seen[key] = path
     ident = make_identifier(args)  # option errors first, before any file is read
     recs, quality = [], []
     for path in args.files:

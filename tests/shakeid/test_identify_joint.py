@@ -69,3 +69,20 @@ def test_identify_three_files_prints_the_joint_table_and_one_line_per_recording(
 def test_report_is_refused_for_several_files(files, capsys, tmp_path):
     assert main(["identify", str(files[0]), str(files[1]), "--report", str(tmp_path / "r")]) == 2
     assert "--report takes one recording" in capsys.readouterr().err
+
+
+def test_one_recording_twice_is_refused(files, capsys, tmp_path):
+    """The same file twice (by any path to it) would count its evidence twice: every standard error
+    shrunk by sqrt(2), as if a second recording had been made. Refused before anything is read."""
+    twin = tmp_path / "same.h5"
+    twin.symlink_to(files[0])
+    for second in (str(files[0]), str(twin)):
+        assert main(["identify", str(files[0]), str(files[1]), second]) == 2
+        err = capsys.readouterr().err
+        assert f"{second}: the same recording as {files[0]}" in err and "standard errors" in err, err
+
+
+def test_chunked_is_refused_for_several_files(files, capsys):
+    """--chunked bounds memory for one recording; a joint fit reads all into memory: refused, not ignored."""
+    assert main(["identify", str(files[0]), str(files[1]), "--chunked"]) == 2
+    assert "--chunked identifies one recording out of core" in capsys.readouterr().err
