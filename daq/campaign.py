@@ -206,8 +206,9 @@ def load_plan(path) -> CampaignPlan:
         raise PlanError(f"{path}: {exc}") from None
     try:
         return parse_plan(data, str(path))
-    except PlanError as exc:
-        raise PlanError(f"{path}: {exc}") from None
+    except PlanError as exc:  # the file named once (its top level's errors name it as their `where`)
+        message = str(exc)
+        raise PlanError(message if message.startswith(f"{path}:") else f"{path}: {message}") from None
 
 
 def plan_violation(limits: Limits, plan: CampaignPlan) -> str | None:

@@ -64,6 +64,17 @@ def test_a_non_finite_number_in_a_toml_plan_is_refused(tmp_path):
         load_plan(path)
 
 
+def test_a_toml_plan_error_names_the_file_once(tmp_path):
+    """An unknown key at the plan's top level: "plan.toml: unknown key(s) rest_s; ..." (it read
+    "plan.toml: plan.toml: unknown key(s) ...")."""
+    path = tmp_path / "plan.toml"
+    path.write_text('name = "x"\namplitudes_mm = [1.0]\nrest_s = 3\n'
+                    '[sweep]\nf_start_hz = 1.0\nf_end_hz = 20.0\nduration_s = 10.0\n')
+    with pytest.raises(PlanError) as err:
+        load_plan(path)
+    assert str(err.value).startswith(f"{path}: unknown key(s) rest_s; known: ") and str(err.value).count(str(path)) == 1
+
+
 def test_the_limit_check_names_the_first_unsafe_sweep_and_its_limit():
     plan = parse_plan({**PLAN, "sweep": {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 60.0},
                        "amplitudes_mm": [1.0, 3.0, 4.5]})
