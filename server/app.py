@@ -322,11 +322,20 @@ def create_app(settings: Settings) -> FastAPI:
         """Queue one model of several recordings (job kind identify_joint); poll GET /api/jobs/{id}, then
         GET /api/jobs/{id}/joint for the result (the JSON of `shakeid identify A.h5 B.h5 --json`)."""
         ids = list(body.recording_ids)
-        for rec_id in ids:
-            if recording_or_404(rec_id)["status"] == "running":
+        twice = sorted({r for r in ids if ids.count(r) > 1})
+        if twice:  # one recording counted twice would shrink every standard error by sqrt(2)
+            raise HTTPException(422, f"recording(s) {', '.join(twice)} given more than once: a joint fit takes "
+                                     "each recording once")
+        recs = [recording_or_404(rec_id) for rec_id in ids]
+        for rec_id, rec in zip(ids, recs):
+            if rec["status"] == "running":
                 raise HTTPException(409, f"recording {rec_id} is still being recorded")
         options = body.model_dump(exclude_none=True, exclude={"recording_ids"})
-        return state["jobs"].submit("identify_joint", ids[0], {**options, "recording_ids": ids})
+        # each recording read as it was uploaded (its stored read options: layout, columns, rate), the
+        # body's read options over them, as for one recording (_submit)
+        stored = [rec["info"].get("read_options", {}) for rec in recs]
+        return state["jobs"].submit("identify_joint", ids[0], {**options, "recording_ids": ids,
+                                                               "read_options_by_recording": stored})
 
     @app.get("/api/jobs/{job_id}/joint", tags=["jobs"], dependencies=[viewer],
              responses={**errors, 404: {"model": schemas.Problem}})
@@ -342,9 +351,9 @@ def create_app(settings: Settings) -> FastAPI:
     @app.post("/api/recordings/{rec_id}/explain", status_code=202, response_model=schemas.JobOut,
               tags=["jobs"], dependencies=[operator],
               responses={**errors, 404: {"model": schemas.Problem}, 409: {"model": schemas.Problem}})
-    def explain(body: schemas.ExplainIn, rec_id: str = Id()):
+    def explain(body: schemas.ExplainIn | None = None, rec_id: str = Id()):
         """Queue a discrepancy analysis (`shakeid explain`): missing effect, gap before/after."""
-        return _submit("explain", rec_id, body.model_dump(exclude_none=True))
+        return _submit("explain", rec_id, body.model_dump(exclude_none=True) if body is not None else {})
 
     @app.get("/api/jobs", response_model=list[schemas.JobOut], tags=["jobs"], dependencies=[viewer],
              responses=errors)
@@ -366,7 +375,21 @@ def create_app(settings: Settings) -> FastAPI:
             path = FsPath(job["result_dir"]) / name
             if path.exists():
                 return path
-        raise HTTPException(404, f"no {kind} result for recording {rec_id} yet")
+        raise HTTPException(404, _why_no_result(rec_id, kind))
+
+    def _why_no_result(rec_id: str, kind: str) -> str:
+        """Why a recording has no result of `kind`: its latest job's state (failed: with the reason), or,
+        with no job, whether one will come by itself (a completed sweep is identified automatically)."""
+        latest = catalog().list("jobs", "recording_id = ? AND kind = ?", (rec_id, kind), limit=1)
+        if latest:
+            job = latest[0]
+            if job["state"] == "failed":
+                return f"no {kind} result for recording {rec_id}: its latest {kind} job {job['id']} failed: {job['error']}"
+            return f"no {kind} result for recording {rec_id} yet: job {job['id']} is {job['state']}"
+        rec = catalog().get("recordings", rec_id)
+        auto = kind == "identify" and rec.get("origin") == "sweep" and rec.get("status") in ("complete", "running")
+        return (f"no {kind} result for recording {rec_id} yet: it is identified when its sweep completes" if auto else
+                f"no {kind} result for recording {rec_id}: none was asked for (POST /api/recordings/{rec_id}/{kind})")
 
     @app.get("/api/recordings/{rec_id}/model", tags=["jobs"], dependencies=[viewer],
              responses={**errors, 404: {"model": schemas.Problem}})

@@ -239,7 +239,13 @@ class RigController:
         return self.rig.emergency_stop()
 
     def op_reset(self) -> dict:
+        if self.rig.active is not None:  # nothing to reset while a sweep runs (RESET would not take)
+            raise Refused(409, f"sweep {self.rig.active['id']} is running: there is nothing to reset (to stop it: "
+                               f"POST /api/sweeps/{self.rig.active['id']}/abort, or POST /api/rig/estop)")
         st = self.rig.reset()
+        if st.state == State.RUNNING:
+            raise Refused(409, "the PLC is running a sweep it was given outside this service: there is nothing to "
+                               "reset (POST /api/rig/estop stops it)")
         if st.state not in (State.IDLE, State.DONE):
             raise Refused(409, f"the PLC stayed in {State(st.state).name.lower()} (fault code {st.fault_code}): "
                                "the table is not at rest yet, or the fault is still there; try again")

@@ -106,7 +106,10 @@ def dashboard_router(catalog: Callable[[], Catalog], viewer) -> APIRouter:
 
 
 def _overview(cat: Catalog, rec: dict) -> dict:
+    """A recording for the dashboard: as GET /api/recordings lists it (no server path: the file is
+    GET /api/recordings/{id}/file), its sweep and its latest jobs."""
     sweep = cat.get("sweeps", rec["sweep_id"]) if rec.get("sweep_id") else None
+    rec = {k: v for k, v in rec.items() if k != "path"}
     return {**rec, "sweep": sweep and {k: sweep[k] for k in ("state", "progress", "error", "request", "operator")},
             "jobs": {kind: _latest_job(cat, rec["id"], kind) for kind in ("identify", "explain")}}
 

@@ -111,6 +111,18 @@ class JobQueue:
             fut.add_done_callback(lambda f, jid=job["id"], rid=rec["id"], kind=job["kind"], p=pool:
                                   self._done(jid, rid, kind, f, p))
 
+    def _as_uploaded(self, message: str, job_id: str) -> str:
+        """A job's error with each uploaded recording named as the operator uploaded it: "short.csv
+        (recording 470613d7dd6e)" for the store's "470613d7dd6e.csv" (the worker names files by their name
+        in the store, never by the server's path; a sweep's recording has no other name)."""
+        job = self.catalog.get("jobs", job_id) or {}
+        ids = [job.get("recording_id")] + list((job.get("options") or {}).get("recording_ids") or [])
+        for rec_id in dict.fromkeys(i for i in ids if i):
+            rec = self.catalog.get("recordings", rec_id)
+            if rec and rec.get("origin") == "upload" and rec.get("filename"):
+                message = message.replace(os.path.basename(rec["path"]), f"{rec['filename']} (recording {rec_id})")
+        return message
+
     def _done(self, job_id: str, recording_id: str, kind: str, fut: Future, broken_pool=None) -> None:
         self._running.pop(job_id, None)
         if fut.cancelled() or self._stop:
@@ -135,7 +147,7 @@ class JobQueue:
                     self.pool.shutdown(wait=False, cancel_futures=True)
                     self.pool = self._new_pool()
         elif isinstance(exc, ShakeidError):
-            self.catalog.update("jobs", job_id, state="failed", error=str(exc))
+            self.catalog.update("jobs", job_id, state="failed", error=self._as_uploaded(str(exc), job_id))
         else:
             self.catalog.update("jobs", job_id, state="failed", error=f"internal error: {type(exc).__name__}: {exc}")
         self._wake.set()

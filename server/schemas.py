@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from daq.campaign import MAX_SWEEPS, NAME_PATTERN
 
@@ -78,6 +78,22 @@ class ReadOptions(Strict):
     fs_hz: float | None = Field(None, gt=0, le=1e7)
     accept_faulty: bool | None = Field(None, description="go on with a recording that is not complete or whose "
                                                          "quality flags make it unusable (the result says so)")
+
+    @field_validator("band_hz")
+    @classmethod
+    def _band_in_order(cls, band):
+        """0 <= f_lo < f_hi, refused with the request (422) rather than by the job it would fail."""
+        if band is not None and not 0 <= band[0] < band[1]:
+            raise ValueError(f"band {list(band)} Hz must satisfy 0 <= f_lo < f_hi")
+        return band
+
+    @field_validator("samples")
+    @classmethod
+    def _rows_in_order(cls, rows):
+        """0 <= a < b (whether b is within the recording, the job's read says)."""
+        if rows is not None and not 0 <= rows[0] < rows[1]:
+            raise ValueError(f"rows {list(rows)} must satisfy 0 <= a < b")
+        return rows
 
 
 class IdentifyIn(ReadOptions):

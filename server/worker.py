@@ -113,8 +113,9 @@ def _run_joint(paths: list, options: dict, out: Path) -> dict:
 
     try:
         recs = []
-        for p in paths:
-            rec = read(p, options)
+        stored = options.get("read_options_by_recording") or [{}] * len(paths)
+        for p, own in zip(paths, stored):
+            rec = read(p, {**own, **options})  # as uploaded, the request's read options over that
             check_identifiable(rec, Path(p).name, bool(options.get("accept_faulty")),
                                "set accept_faulty to identify it anyway")
             rec.source = Path(p).name

@@ -87,8 +87,8 @@ def test_a_refused_recording_fails_its_job_with_the_reason_through_a_local_clust
         finally:
             jobs.stop()
     assert failed["state"] == "failed"
-    # named as the service lists it (the file's name), not by the path on the worker's disk
-    assert failed["error"] == "bad.csv: missing column(s) 'mass_acc'; found 't', 'table_acc'"
+    # named as it was uploaded, with its id, not by the path on the worker's disk
+    assert failed["error"] == "bad.csv (recording 0000000000bb): missing column(s) 'mass_acc'; found 't', 'table_acc'"
     assert good["state"] == "completed", good
     assert set(cat.get("recordings", "0000000000aa")["info"]["identify"]["terms"]["q1_dot"]) == true_q1_terms
     cat.close()

@@ -47,6 +47,10 @@ def test_sweep_live_model_and_the_rules_around_it(service):
     sweep_id = r.json()["id"]
     busy = op.post("/api/sweeps", json=SWEEP)
     assert busy.status_code == 409 and sweep_id in busy.json()["detail"]
+    # a reset while the sweep runs: nothing to reset, said so (not "the fault is still there; try again")
+    reset = op.post("/api/rig/reset")
+    assert reset.status_code == 409 and reset.json()["detail"].startswith(f"sweep {sweep_id} is running: there is "
+                                                                          "nothing to reset"), reset.text
     rec_id = viewer.get(f"/api/sweeps/{sweep_id}").json()["recording_id"]
     assert viewer.get(f"/api/recordings/{rec_id}/file").status_code == 409  # not while it is written
     events, stop = [], threading.Event()
@@ -89,7 +93,14 @@ def test_abort_mid_sweep_leaves_an_aborted_recording(service):
     rec = op.get(f"/api/recordings/{sweep['recording_id']}").json()
     assert rec["status"] == "aborted" and rec["info"]["samples"] > 0
     assert op.post(f"/api/sweeps/{sweep_id}/abort").status_code == 409  # nothing left to abort
-    assert op.get(f"/api/recordings/{rec['id']}/model").status_code == 404  # aborted: not identified
+    none = op.get(f"/api/recordings/{rec['id']}/model")  # aborted: not identified, and the 404 says so
+    assert none.status_code == 404 and none.json()["detail"] == (
+        f"no identify result for recording {rec['id']}: none was asked for (POST /api/recordings/{rec['id']}/identify)")
+    job = op.post(f"/api/recordings/{rec['id']}/identify", json={}).json()  # refused data: the job fails ...
+    wait_for(lambda: op.get(f"/api/jobs/{job['id']}").json()["state"] == "failed", 60, "job")
+    failed = op.get(f"/api/recordings/{rec['id']}/model").json()["detail"]  # ... and the 404 gives its reason
+    assert failed.startswith(f"no identify result for recording {rec['id']}: its latest identify job {job['id']} "
+                             "failed: ") and "status is aborted" in failed, failed
 
 
 def test_emergency_stop_stops_the_simulated_table(service):
@@ -146,12 +157,13 @@ def test_uploads_jobs_and_clear_errors(service, tmp_path, table1_run):
     failed = wait_for(lambda: (j := viewer.get(f"/api/jobs/{failing['id']}").json())["state"] in ("completed", "failed")
                       and j, 60, "job")
     assert failed["state"] == "failed" and "warp" in failed["error"]  # the user's mistake, named
-    # a read option that does not fit the file: the job names the recording as the API lists it (its id
-    # and extension), not by the server's own path to its store
+    # a read option that does not fit the file: the job names the recording as it was uploaded, with its
+    # id, not by the server's own path to its store
     wrong = op.post(f"/api/recordings/{rec['id']}/identify", json={"input": "acc_base"}).json()
     wrong = wait_for(lambda: (j := viewer.get(f"/api/jobs/{wrong['id']}").json())["state"] in ("completed", "failed")
                      and j, 60, "job")
-    assert wrong["state"] == "failed" and wrong["error"].startswith(f"{rec['id']}.csv: missing column"), wrong
+    assert wrong["state"] == "failed" and wrong["error"].startswith(f"sweep.csv (recording {rec['id']}): missing "
+                                                                    "column"), wrong
     assert str(service.data_dir) not in wrong["error"]
     listed = {r["id"] for r in viewer.get("/api/recordings").json()}
     assert rec["id"] in listed and len(listed) == 1  # refused uploads left nothing behind
@@ -289,6 +301,43 @@ def test_dashboard_is_served_and_calls_only_real_endpoints(service):
         template = re.sub(r"\$\{[^}]+\}", "{x}", path)
         matches = [p for p in spec if re.fullmatch(re.sub(r"\{[^}]+\}", "[^/]+", p), template)]
         assert matches and any(method.lower() in spec[p] for p in matches), (method, path)
+
+
+def test_joint_and_job_requests_are_checked_when_made(service, tmp_path, table1_run):
+    """What a job would fail on is refused with the request: a recording given twice to a joint fit (its
+    evidence counted twice, every standard error shrunk by sqrt(2)), a band or rows out of order. A joint fit
+    reads each recording as it was uploaded (a MAT file with its own variable names); explain needs no body;
+    the dashboard's recordings carry no server path."""
+    from scipy.io import savemat
+
+    from identify.recording import write_csv
+
+    op = service.client()
+    rec = table1_run.recording
+    write_csv(tmp_path / "sweep.csv", rec)
+    savemat(tmp_path / "lab.mat", {"acc_base": rec.input, "acc_mass": rec.output})
+    csv_id = op.post("/api/recordings", params={"filename": "sweep.csv"},
+                     content=(tmp_path / "sweep.csv").read_bytes()).json()["id"]
+    mat_id = op.post("/api/recordings", content=(tmp_path / "lab.mat").read_bytes(),
+                     params={"filename": "lab.mat", "input": "acc_base", "output": "acc_mass",
+                             "fs_hz": rec.fs_hz}).json()["id"]
+    twice = op.post("/api/identify", json={"recording_ids": [csv_id, csv_id]})
+    assert twice.status_code == 422 and twice.json()["detail"].startswith(f"recording(s) {csv_id} given more than once")
+    for body in ({"band_hz": [20, 1]}, {"samples": [500, 100]}):
+        bad = op.post(f"/api/recordings/{csv_id}/identify", json=body)
+        assert bad.status_code == 422 and "must satisfy" in bad.text, bad.text
+    explain = op.post(f"/api/recordings/{csv_id}/explain")  # no body: the defaults
+    assert explain.status_code == 202, explain.text
+    joint = op.post("/api/identify", json={"recording_ids": [csv_id, mat_id], "placements": 0})
+    assert joint.status_code == 202, joint.text
+    done = wait_for(lambda: (j := op.get(f"/api/jobs/{joint.json()['id']}").json())["state"] in ("completed", "failed")
+                    and j, 180, "joint job")
+    assert done["state"] == "completed", done  # the MAT file read with its own names, as uploaded
+    listed = op.get("/api/dashboard/recordings").json()
+    assert listed and all("path" not in r for r in listed)
+    assert "path" not in op.get(f"/api/dashboard/recordings/{csv_id}").json()
+    wait_for(lambda: op.get(f"/api/jobs/{explain.json()['id']}").json()["state"] in ("completed", "failed"), 180,
+             "explain job")  # not left running into the next test
 
 
 def test_mat_and_hdf5_uploads(service, tmp_path, table1_run):
