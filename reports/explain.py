@@ -19,6 +19,7 @@ import numpy as np
 
 from .html import Page
 from .identification import RESIDUAL, _save, plt
+from .text import gap_closed_text
 
 FIGURES = ("residual_time.png", "residual_state.png", "candidates.png", "gap.png")
 CLIP = -0.5  # candidates.png: shooting-gap bars below this are drawn cut here, their value written on them
@@ -77,7 +78,7 @@ def _candidates_figure(analysis, result, path):
     bars = ax.bar(x + 0.2, [max(v, CLIP) for v in closed], 0.4, label="shooting gap closed (held-out)")
     for bar, v in zip(bars, closed):
         if v < CLIP:  # cut at the axis: its value written on it
-            ax.annotate(f"{v:+.2f}", (bar.get_x() + bar.get_width() / 2, CLIP), xytext=(0, 3),
+            ax.annotate(gap_closed_text(v), (bar.get_x() + bar.get_width() / 2, CLIP), xytext=(0, 3),
                         textcoords="offset points", ha="center", fontsize=7, rotation=90, va="bottom")
     ax.set_xticks(x, [c["name"].replace("_", " ") for c in cands], fontsize=8, rotation=35, ha="right")
     ax.axhline(analysis.min_gap_closed, color="r", lw=0.8, ls="--", label="naming threshold")
@@ -155,7 +156,7 @@ def _index_html(out: Path, analysis, result: dict, u: str) -> str:
     page.heading("Every candidate (first round)")
     crow = [[c["name"], c["kind"], f"{c['score']:+.3f}",
              "-" if c.get("kind") == "measurement" else f"{c['p_value']:.1e}",
-             "-" if c.get("gap_share_closed") is None else f"{c['gap_share_closed']:+.2f}",
+             "-" if c.get("gap_share_closed") is None else gap_closed_text(c["gap_share_closed"]),
              c.get("rejected") or ("named" if c["name"] in {e["name"] for e in result["effects"]} else "")]
             for c in result["candidates"]]
     page.table(["candidate", "kind", "equation-error share", "Wald p", "shooting gap closed", "rejected because"],

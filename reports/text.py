@@ -9,6 +9,17 @@ DESIGN_K3_NOTE = ("design k3 = 4 k_l a²: what the rig's linear springs (k_l eac
                   "has, so a difference means the springs or the profile differ from the drawing")
 
 
+def gap_closed_text(share: float | None) -> str:
+    """An effect's "shooting gap closed" (1 - gap_after^2 / gap_before^2) as a person reads it: the share
+    while it is one (+0.98, -0.84), and past -1, where the candidate made the gap itself several times
+    larger (a short record's diverging fit gave -112290.81), by that factor: "worse: gap x335"."""
+    if share is None:
+        return "n/a"
+    if share >= -1.0:
+        return f"{share:+.2f}"
+    return f"worse: gap x{(1.0 - share) ** 0.5:.3g}"
+
+
 def unit(text: str) -> str:
     """A unit as printed: 'm/s^2' -> 'm/s²', 'N/m^3' -> 'N/m³' (the recordings store ASCII units)."""
     return text.replace("^2", "²").replace("^3", "³")

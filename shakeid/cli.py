@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from identify.errors import ShakeidError
-from reports.text import summary
+from reports.text import gap_closed_text, summary
 
 from .batch_cmd import add_batch_parser
 from .campaign_cmd import add_campaign_parser
@@ -183,7 +183,7 @@ def cmd_explain(args) -> int:
         closed = c.get("gap_share_closed")
         p = "not tested" if c.get("kind") == "measurement" else f"{c['p_value']:.1e}"  # searched, no Wald test
         print(f"  {c['name']:32s} equation-error share {c['score']:+.3f}  p = {p}  "
-              f"shooting gap closed {'n/a' if closed is None else f'{closed:+.2f}'}"
+              f"shooting gap closed {gap_closed_text(closed)}"
               + (f"  (rejected: {c['rejected']})" if c.get("rejected") else ""))
     if result["effect"] in ("none", "unexplained"):
         print(f"missing effect: {result['effect']} (confidence {result['confidence']:.2f})")

@@ -147,3 +147,29 @@ def test_demo_sets_the_model_beside_the_truth_term_by_term():
     assert rows[("q1_dot", "q2^3")] == ["-2.5028e+06", "-2.5033e+06", "+0.02", "%"]
     assert rows[("q1_dot", "q1^2")] == ["0.5", "-", "extra"]
     assert rows[("q2_dot", "q1")] == ["1", "1", "+0.00", "%"]
+
+
+def test_gap_closed_reads_as_a_share_or_as_how_much_worse():
+    """explain's "shooting gap closed" (1 - after^2 / before^2): a share down to -1, past it the factor by
+    which the candidate enlarged the gap (a 10 s record printed -112290.81 for a diverging candidate)."""
+    from reports.text import gap_closed_text
+
+    assert [gap_closed_text(v) for v in (None, 0.98, 0.0, -0.84, -1.0)] == ["n/a", "+0.98", "+0.00", "-0.84", "-1.00"]
+    assert gap_closed_text(-112290.81) == "worse: gap x335"  # sqrt(1 + 112290.81) = 335.1
+    assert gap_closed_text(-3.0) == "worse: gap x2"
+
+
+def test_explain_on_a_short_record_prints_no_unreadable_shares(tmp_path):
+    """The operator's case: a 10 s sweep (1-10 Hz, where candidates fitted on so little make the free run
+    ~5x worse). Every candidate line's gap figure is a share within [-1, 1] or a "worse: gap xN" factor."""
+    rec = tmp_path / "short.csv"
+    made = subprocess.run([SHAKEID, "simulate", "--out", str(rec), "--duration-s", "10", "--f-end-hz", "10"],
+                          capture_output=True, text=True, timeout=120)
+    assert made.returncode == 0, made.stderr
+    p = subprocess.run([SHAKEID, "explain", str(rec)], capture_output=True, text=True, timeout=600)
+    assert p.returncode in (0, 1), p.stderr
+    figures = re.findall(r"shooting gap closed (\S+(?: gap x\S+)?)", p.stdout)
+    assert figures, p.stdout
+    for f in figures:
+        assert f == "n/a" or f.startswith("worse: gap x") or -1.0 <= float(f) <= 1.0, (f, p.stdout)
+    assert any(f.startswith("worse: gap x") for f in figures), p.stdout  # the case this is about, reached
