@@ -61,6 +61,19 @@ def _ended_by(exc: BaseException) -> tuple[str, str]:
     return "fault", f"DAQ error: {type(exc).__name__}: {exc}"  # a recorder or other internal error
 
 
+def plc_not_ready(status) -> str | None:
+    """Why no sweep can start on a PLC in this status (sim.plc's status fields), in the operator's words
+    and with what to do; None when it is idle or done. One wording for the DAQ and the service."""
+    state = State(status.state)
+    if state in (State.IDLE, State.DONE):
+        return None
+    if state == State.RUNNING:
+        return "the table is moving (a sweep runs); wait for it to end"
+    how = ("in emergency stop" if state == State.ESTOP else
+           f"in fault ({Fault(status.fault_code).name.lower()})" if state == State.FAULT else state.name.lower())
+    return f"the PLC is {how}; reset it first (`shakeid rig reset --config RIG.toml`, or POST /api/rig/reset)"
+
+
 class SweepRunner:
     """plc, source: device backends; limits: the configured safety limits; sensitivity: counts per
     m/s^2; on_progress(fraction, status) is called about ten times a second; on_samples(first index,
@@ -100,12 +113,9 @@ class SweepRunner:
             st = self.plc.status()
         except DeviceError as exc:
             raise SweepRefused(f"sweep refused: {exc}") from None
-        if st.state not in (State.IDLE, State.DONE):
-            how = {State.ESTOP: "in emergency stop", State.FAULT: f"in fault (code {st.fault_code})",
-                   State.RUNNING: "running a sweep"}.get(State(st.state), State(st.state).name.lower())
-            raise SweepRefused(f"sweep refused: PLC is {how}; " + (
-                "wait for it to end" if st.state == State.RUNNING else
-                "reset it first (`shakeid rig reset --config RIG.toml`, or POST /api/rig/reset on the service)"))
+        problem = plc_not_ready(st)
+        if problem:
+            raise SweepRefused(f"sweep refused: {problem}")
         if out_path is not None:
             directory = Path(out_path).resolve().parent
             try:

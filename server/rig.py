@@ -21,7 +21,7 @@ import numpy as np
 
 from daq.devices import DeviceError, open_plc
 from daq.sources import open_source
-from daq.sweep import SweepRefused, SweepRequest, SweepRunner, limit_violation
+from daq.sweep import SweepRefused, SweepRequest, SweepRunner, limit_violation, plc_not_ready
 from sim.config import RigConfig
 from sim.plc import Command, Fault, PLCConfig, State
 
@@ -168,12 +168,7 @@ class RigService:
     def not_ready(self) -> str | None:
         """Why a sweep cannot start now (the PLC in estop, fault or running), or None: asked before a
         sweep is accepted, so the caller hears it at once instead of from a failed sweep later."""
-        st = self._with_control(lambda plc: plc.status())
-        if st.state in (State.IDLE, State.DONE):
-            return None
-        how = {State.ESTOP: "the PLC is in emergency stop", State.RUNNING: "the table is moving",
-               State.FAULT: f"the PLC is in fault ({Fault(st.fault_code).name.lower()})"}[State(st.state)]
-        return f"{how}; reset it first (POST /api/rig/reset or `shakeid rig reset --config RIG.toml`)"
+        return plc_not_ready(self._with_control(lambda plc: plc.status()))
 
     def begin_sweep(self, sweep_id: str, req: SweepRequest, out_path: Path, on_progress, on_end) -> LiveBuffer:
         """Start a sweep thread. Raises RigBusy if one is active. on_end(result | None, error | None)."""

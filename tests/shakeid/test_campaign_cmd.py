@@ -94,7 +94,7 @@ def test_an_estop_pauses_the_campaign_resume_goes_on_and_ctrl_c_aborts(rig, tmp_
     assert "--resume" in proc.stdout.read()
 
     refused = _campaign(plan, cfg, out, "--resume")  # not reset: the sweep is refused, nothing moves
-    assert refused.returncode == 1 and "not started: sweep refused: PLC is in emergency stop; reset it first" in refused.stdout
+    assert refused.returncode == 1 and "not started: sweep refused: the PLC is in emergency stop; reset it first" in refused.stdout
     plc.command(Command.RESET)
     assert plc.status().state == State.IDLE
     # resume: sweep 1 again (the stopped file kept aside), then sweep 2; Ctrl-C during sweep 2
