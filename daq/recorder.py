@@ -33,7 +33,7 @@ import numpy as np
 
 from identify.errors import RecordingError
 from identify.quality import QualityMonitor, clip_level, verdict
-from identify.recording import Recording
+from identify.recording import CSV_SUFFIXES, MAT_SUFFIXES, Recording, check_file
 
 STATUSES = ("running", "complete", "aborted", "fault")
 
@@ -268,14 +268,16 @@ def recover_directory(directory) -> list[Path]:
     return [p for p in sorted(Path(directory).glob("*.h5")) if recover(p)]
 
 
+#: The DAQ's recordings, and the (input, output) channels identification reads from one unless told
+#: otherwise: the table's and the mass's accelerometers.
+H5_SUFFIXES = (".h5", ".hdf5")
+DEFAULT_CHANNELS = ("table_acc", "mass_acc")
+
+
 def check_h5_path(path) -> None:
     """Refuse, naming the problem in words, a path that cannot be an HDF5 recording: missing, not a file,
     or a file of another format (h5py's own message for these is its library's, errno and all)."""
-    p = Path(path)
-    if not p.exists():
-        raise RecordingError(f"{path}: no such file")
-    if not p.is_file():
-        raise RecordingError(f"{path}: not a file")
+    p = check_file(path)
     try:
         ok = h5py.is_hdf5(p)
     except OSError as exc:  # unreadable (permissions)
@@ -346,11 +348,11 @@ def open_recording(path, layout: str = "base", input: str | None = None, output:
     """Any recording file, cut to rows samples=[a, b) if given: the DAQ's HDF5 (never across a gap),
     else CSV / MAT with identify's readers (layout, column names, sample rate as there)."""
     suffix = Path(path).suffix.lower()
-    if suffix not in (".h5", ".hdf5", ".csv", ".txt", ".mat"):
+    if suffix not in H5_SUFFIXES + CSV_SUFFIXES + MAT_SUFFIXES:
         raise RecordingError(f"{path}: unsupported file type {suffix!r} (HDF5 .h5 from `shakeid sweep`, CSV .csv "
                              "or MAT .mat)")
-    if suffix in (".h5", ".hdf5"):
-        return read_h5_recording(path, input or "table_acc", output or "mass_acc", samples)
+    if suffix in H5_SUFFIXES:
+        return read_h5_recording(path, input or DEFAULT_CHANNELS[0], output or DEFAULT_CHANNELS[1], samples)
     from identify.recording import read_recording
 
     rec = read_recording(path, layout, input, output, time_column, fs_hz)

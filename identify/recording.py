@@ -98,6 +98,20 @@ def _sample_rate_from_time(t: np.ndarray, source: str, name: str) -> float:
     return (t.size - 1) / (t[-1] - t[0])
 
 
+#: File types read_recording reads (the DAQ's HDF5 recordings are read by daq.recorder).
+CSV_SUFFIXES, MAT_SUFFIXES = (".csv", ".txt"), (".mat",)
+
+
+def check_file(path) -> Path:
+    """The path as a Path, or RecordingError naming why it cannot be read: missing, or not a file."""
+    path = Path(path)
+    if not path.exists():
+        raise RecordingError(f"{path}: no such file")
+    if not path.is_file():
+        raise RecordingError(f"{path}: not a file")
+    return path
+
+
 def read_recording(path, layout: str = "base", input: str | None = None, output: str | None = None,
                    time: str | None = None, fs_hz: float | None = None) -> Recording:
     """Read a CSV or MAT recording (HDF5 recordings of the DAQ arrive with the DAQ)."""
@@ -108,14 +122,11 @@ def read_recording(path, layout: str = "base", input: str | None = None, output:
     input = input or names["input"]
     output = output or names["output"]
     time = time or names["time"]
-    if not path.exists():
-        raise RecordingError(f"{path}: no such file")
-    if not path.is_file():
-        raise RecordingError(f"{path}: not a file")
+    check_file(path)
     suffix = path.suffix.lower()
-    if suffix == ".mat":
+    if suffix in MAT_SUFFIXES:
         columns = _read_mat(path)
-    elif suffix in (".csv", ".txt"):
+    elif suffix in CSV_SUFFIXES:
         columns = _read_csv(path)
     else:
         raise RecordingError(f"{path}: unsupported file type {suffix!r} (csv or mat)")
