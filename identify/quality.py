@@ -337,14 +337,19 @@ def assess_recording(rec) -> dict:
     return {**report, "usable_for_identification": usable, "reasons": reasons}
 
 
+def status_problem(status: str | None, reason: str | None = None) -> str | None:
+    """Why a recording's status refuses it ("status is aborted (emergency stop), not complete"), or None:
+    complete, or no status at all (CSV and MAT files have none)."""
+    if status is None or status == "complete":
+        return None
+    return f"status is {status}" + (f" ({reason})" if reason else "") + ", not complete"
+
+
 def identification_problems(rec) -> tuple[list[str], dict]:
     """Why a recording cannot carry a model (empty: it can), and its quality report: a status other than
     complete (the DAQ's files; CSV/MAT have none), then the verdict of assess_recording()."""
-    problems = []
-    status = rec.metadata.get("status")
-    if status is not None and status != "complete":
-        why = rec.metadata.get("status_reason")
-        problems.append(f"status is {status}" + (f" ({why})" if why else "") + ", not complete")
+    status = status_problem(rec.metadata.get("status"), rec.metadata.get("status_reason"))
+    problems = [status] if status else []
     quality = assess_recording(rec)
     return problems + quality["reasons"], quality
 

@@ -88,11 +88,11 @@ def check(path: Path, suffix: str, filename: str, options: dict) -> dict:
     """Read the file as a job will; a RecordingError names what is wrong with it (as the client's name)."""
     try:
         if suffix in (".h5", ".hdf5"):
-            from daq.recorder import describe
+            from daq.recorder import DEFAULT_CHANNELS, describe
 
             d = describe(path)
             # the channels a job will read (its options, else identify's pair): refused now, not at the job
-            wanted = [options.get("input") or "table_acc", options.get("output") or "mass_acc"]
+            wanted = [options.get("input") or DEFAULT_CHANNELS[0], options.get("output") or DEFAULT_CHANNELS[1]]
             missing = [c for c in wanted if c not in d["channels"]]
             if missing:
                 raise ShakeidError(f"{filename}: missing channel(s) {missing}; found {d['channels']}")

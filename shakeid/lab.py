@@ -56,16 +56,17 @@ def cmd_demo(args) -> int:
     write_report(ident, out / "report")
     result = ident.result()
     print(summary(result, str(h5)))
-    print("\n".join(truth_lines(result["model"], truth)))
+    print("\n".join(truth_lines(result["model"], truth, result["physical"]["design"]["cubic_stiffness_per_kg"])))
     print(f"report: {out / 'report' / 'index.html'}")
     print("next: `.venv/bin/shakeid serve` runs the same chain behind HTTP, with a dashboard (docs/service.md)")
     return 0
 
 
-def truth_lines(identified: dict, truth: dict) -> list[str]:
+def truth_lines(identified: dict, truth: dict, design_k3_per_kg: float) -> list[str]:
     """The identified model beside the simulated rig's true one, term by term, in one number format, with
     the relative error: what the demo shows (a term the fit missed or added is named as such). The rig's
-    true k3 is its own, not the design value the summary quotes for a real rig."""
+    true k3 is its own (-the true q2^3 coefficient, N/m^3/kg), not the design value (`design_k3_per_kg`)
+    the summary quotes for a real rig."""
     lines = ["identified beside the simulated rig's true model (the paper's Table 1):",
              f"  {'equation':8s} {'term':9s} {'identified':>12s} {'true':>12s} {'error':>8s}"]
     for eq in truth:
@@ -76,8 +77,10 @@ def truth_lines(identified: dict, truth: dict) -> list[str]:
             err = f"{rel + 0.0:+.2f} %" if rel is not None else "missed" if g is None else "extra"  # + 0.0: no -0.00
             lines.append(f"  {eq:8s} {term:9s} {'-' if g is None else f'{g:.5g}':>12s} "
                          f"{'-' if t is None else f'{t:.5g}':>12s} {err:>8s}")
-    lines.append("  (the simulated rig has the paper's identified values: its k3 / m = 2.5 MN/m³/kg lies above the "
-                 "design 2.18 as the paper's rig did, hence the design k3 quoted above differs)")
+    true_k3 = -truth.get("q1_dot", {}).get("q2^3", 0.0)
+    lines.append(f"  (the simulated rig has the paper's identified values: its k3 / m = {true_k3 / 1e6:.3g} MN/m³/kg "
+                 f"against the design's {design_k3_per_kg / 1e6:.3g}, as on the paper's rig; hence the design k3 "
+                 "quoted above differs)")
     return lines
 
 
@@ -203,9 +206,8 @@ def cmd_recordings(args) -> int:
                   f"displacement; band {p['band_hz'][0]:.3g}-{p['band_hz'][1]:.3g} Hz, {p['segments']} segment(s), "
                   f"{100 * p['valid_fraction']:.1f} % of rows valid)")
         info = describe(path)
+        reasons = identification_reasons(info)
         if args.json:  # with `shakeid identify`'s verdict: its refusals and the signals' quality together
-            q = info["quality"]
-            reasons = refusals(info) + ([] if q.get("usable_for_identification", True) else list(q["reasons"]))
             print(json.dumps({**info, "identification": {"usable": not reasons, "reasons": reasons}}, default=str))
             continue
         dur = info["samples"] / info["fs_hz"] if info.get("fs_hz") else 0
@@ -224,27 +226,23 @@ def cmd_recordings(args) -> int:
             print(f"  ... {len(info['gaps']) - 10} more gap(s) (--json lists all)")
         if info.get("processed"):
             print(f"  processed: {', '.join(info['processed'])}")
-        for line in quality_lines(info["quality"], refusals(info)):
+        for line in quality_lines(info["quality"], reasons):
             print("  " + line)
     return 0
 
 
-#: The channels `shakeid identify` reads from an HDF5 recording unless told otherwise (--input, --output).
-IDENTIFY_CHANNELS = ("table_acc", "mass_acc")
+def identification_reasons(info: dict) -> list[str]:
+    """Why `shakeid identify` would refuse a recording, from daq.recorder.describe(): its status
+    (identify.quality.status_problem), a missing channel of the pair it reads by default, and the
+    recorder's quality verdict; empty when it would identify it."""
+    from daq.recorder import DEFAULT_CHANNELS
+    from identify.quality import status_problem
 
-
-def refusals(info: dict) -> list[str]:
-    """Why `shakeid identify` would refuse a recording beyond its signals' quality (identify.quality's
-    identification_problems, read from daq.recorder.describe()): a status other than complete, a missing
-    channel of the pair it reads by default."""
-    out = []
-    if info.get("status") != "complete":
-        reason = info.get("status_reason")
-        out.append(f"status is {info.get('status')}" + (f" ({reason})" if reason else "") + ", not complete")
-    missing = [c for c in IDENTIFY_CHANNELS if c not in info.get("channels", [])]
-    if missing:
-        out.append(f"missing channel(s) {missing}")
-    return out
+    status = status_problem(info.get("status") or "unknown", info.get("status_reason"))
+    missing = [c for c in DEFAULT_CHANNELS if c not in info.get("channels", [])]
+    q = info.get("quality") or {}
+    return (([status] if status else []) + ([f"missing channel(s) {missing}"] if missing else [])
+            + ([] if q.get("usable_for_identification", True) else list(q.get("reasons") or [])))
 
 
 def when(iso) -> str:
@@ -272,16 +270,14 @@ def sweep_text(sweep) -> str:
     return text + (f"; note: {sweep['note']}" if sweep.get("note") else "")
 
 
-def quality_lines(q: dict, refused: list[str] = (), max_flags: int = 10) -> list[str]:
-    """The quality flags and verdict of a recording (daq.recorder.describe()["quality"]), readably; the
-    verdict is `shakeid identify`'s: `refused` (refusals()) make it unusable whatever its signals."""
-    refused = list(refused)
+def quality_lines(q: dict, reasons: list[str], max_flags: int = 10) -> list[str]:
+    """The quality flags of a recording (daq.recorder.describe()["quality"]) and `shakeid identify`'s
+    verdict on it (`reasons`: identification_reasons()), readably."""
     if not q.get("assessed"):
         return [f"quality: {q.get('note', 'not assessed')}"] + (
-            ["NOT usable for identification: " + "; ".join(refused)] if refused else [])
+            ["NOT usable for identification: " + "; ".join(reasons)] if reasons else [])
     when = "" if q.get("final") else " (as of the last flush: the file was not closed)"
     ratio = q.get("mass_table_rms_ratio")
-    reasons = refused + ([] if q["usable_for_identification"] else list(q["reasons"]))
     head = (f"quality{when}: " + ("NOT usable for identification: " + "; ".join(reasons) if reasons
                                   else "usable for identification")
             + (f"; mass/table RMS ratio {ratio:.3g}" if ratio is not None else "")
