@@ -44,8 +44,7 @@ class Progress:
         """SweepRunner's on_progress(fraction, PLC status): the state, frequency and table position."""
         from sim.plc import State
 
-        self.update(frac, f"{State(status.state).name.lower():8s} {status.frequency_hz:6.2f} Hz  "
-                          f"table {status.position_mm:+6.2f} mm")
+        self.update(frac, rig_label(State(status.state).name.lower(), status.frequency_hz, status.position_mm))
 
     def close(self, final_label: str | None = None) -> None:
         """End the display: the bar's line is ended; without a TTY, the last state is printed once more
@@ -68,3 +67,9 @@ class Progress:
     def _line(self, frac: float, label: str) -> str:
         of = f" ({frac * self.duration_s:.1f} s of {self.duration_s:g} s)" if self.duration_s else ""
         return f"{self.what} {100 * frac:.0f} %{of}" + (f"  {label.strip()}" if label.strip() else "")
+
+
+def rig_label(state: str, frequency_hz: float, position_mm: float) -> str:
+    """A sweep's progress label: its state, the PLC's frequency and the table's position (local sweeps and
+    sweeps through the service print the same)."""
+    return f"{state:8s} {frequency_hz:6.2f} Hz  table {position_mm:+6.2f} mm"

@@ -16,6 +16,8 @@ from pathlib import Path
 
 from identify.errors import ShakeidError
 
+from .progress import rig_label
+
 
 class ServiceError(ShakeidError):
     """The service answered with an error; `status` is the HTTP status (0: no answer at all)."""
@@ -121,6 +123,6 @@ def _rig_label(client: ServiceClient, state: str) -> str:
     alone when the rig's status cannot be read."""
     try:
         plc = client.request("GET", "/api/rig").get("plc", {})
-        return f"{state:8s} {float(plc['frequency_hz']):6.2f} Hz  table {float(plc['position_mm']):+6.2f} mm"
+        return rig_label(state, float(plc["frequency_hz"]), float(plc["position_mm"]))
     except (ShakeidError, KeyError, TypeError, ValueError):
         return state
