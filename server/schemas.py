@@ -79,21 +79,16 @@ class ReadOptions(Strict):
     accept_faulty: bool | None = Field(None, description="go on with a recording that is not complete or whose "
                                                          "quality flags make it unusable (the result says so)")
 
-    @field_validator("band_hz")
+    @field_validator("band_hz", "samples")
     @classmethod
-    def _band_in_order(cls, band):
-        """0 <= f_lo < f_hi, refused with the request (422) rather than by the job it would fail."""
-        if band is not None and not 0 <= band[0] < band[1]:
-            raise ValueError(f"band {list(band)} Hz must satisfy 0 <= f_lo < f_hi")
-        return band
-
-    @field_validator("samples")
-    @classmethod
-    def _rows_in_order(cls, rows):
-        """0 <= a < b (whether b is within the recording, the job's read says)."""
-        if rows is not None and not 0 <= rows[0] < rows[1]:
-            raise ValueError(f"rows {list(rows)} must satisfy 0 <= a < b")
-        return rows
+    def _in_order(cls, pair, info):
+        """A band 0 <= f_lo < f_hi, rows 0 <= a < b: refused with the request (422) rather than by the job it
+        would fail (whether b is within the recording, the job's read says)."""
+        if pair is not None and not 0 <= pair[0] < pair[1]:
+            what = "band {} Hz must satisfy 0 <= f_lo < f_hi" if info.field_name == "band_hz" else \
+                "rows {} must satisfy 0 <= a < b"
+            raise ValueError(what.format(list(pair)))
+        return pair
 
 
 class IdentifyIn(ReadOptions):
