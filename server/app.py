@@ -369,24 +369,24 @@ def create_app(settings: Settings) -> FastAPI:
         return job
 
     def _latest_result(rec_id: str, kind: str, name: str) -> FsPath:
-        recording_or_404(rec_id)
+        rec = recording_or_404(rec_id)
         for job in catalog().list("jobs", "recording_id = ? AND kind = ? AND state IN ('running', 'completed')",
                                   (rec_id, kind)):
             path = FsPath(job["result_dir"]) / name
             if path.exists():
                 return path
-        raise HTTPException(404, _why_no_result(rec_id, kind))
+        raise HTTPException(404, _why_no_result(rec, kind))
 
-    def _why_no_result(rec_id: str, kind: str) -> str:
+    def _why_no_result(rec: dict, kind: str) -> str:
         """Why a recording has no result of `kind`: its latest job's state (failed: with the reason), or,
         with no job, whether one will come by itself (a completed sweep is identified automatically)."""
+        rec_id = rec["id"]
         latest = catalog().list("jobs", "recording_id = ? AND kind = ?", (rec_id, kind), limit=1)
         if latest:
             job = latest[0]
             if job["state"] == "failed":
                 return f"no {kind} result for recording {rec_id}: its latest {kind} job {job['id']} failed: {job['error']}"
             return f"no {kind} result for recording {rec_id} yet: job {job['id']} is {job['state']}"
-        rec = catalog().get("recordings", rec_id)
         auto = kind == "identify" and rec.get("origin") == "sweep" and rec.get("status") in ("complete", "running")
         return (f"no {kind} result for recording {rec_id} yet: it is identified when its sweep completes" if auto else
                 f"no {kind} result for recording {rec_id}: none was asked for (POST /api/recordings/{rec_id}/{kind})")
