@@ -93,7 +93,7 @@ class JobQueue:
             if rec is None:
                 self.catalog.update("jobs", job["id"], state="failed", error="recording no longer in the catalog")
                 continue
-            path = os.path.abspath(rec["path"])
+            path, recs = os.path.abspath(rec["path"]), [rec]
             if job["kind"] == "identify_joint":  # several recordings: options name them all, in order
                 recs = [self.catalog.get("recordings", r) for r in job["options"].get("recording_ids", [])]
                 if any(r is None for r in recs) or len(recs) < 2:
@@ -106,22 +106,14 @@ class JobQueue:
                 pool = self.pool
             # absolute paths: a Dask worker does not share our working directory (the data dir must be
             # mounted at the same path there)
-            fut = pool.submit(worker.run_job, job["kind"], path, job["options"], os.path.abspath(job["result_dir"]))
+            # the names its errors give the recordings (worker._public): an upload as uploaded, with its id
+            names = {os.path.abspath(r["path"]): f"{r['filename']} (recording {r['id']})" for r in recs
+                     if r.get("origin") == "upload" and r.get("filename")}
+            fut = pool.submit(worker.run_job, job["kind"], path, {**job["options"], "display_names": names},
+                              os.path.abspath(job["result_dir"]))
             self._running[job["id"]] = fut
             fut.add_done_callback(lambda f, jid=job["id"], rid=rec["id"], kind=job["kind"], p=pool:
                                   self._done(jid, rid, kind, f, p))
-
-    def _as_uploaded(self, message: str, job_id: str) -> str:
-        """A job's error with each uploaded recording named as the operator uploaded it: "short.csv
-        (recording 470613d7dd6e)" for the store's "470613d7dd6e.csv" (the worker names files by their name
-        in the store, never by the server's path; a sweep's recording has no other name)."""
-        job = self.catalog.get("jobs", job_id) or {}
-        ids = [job.get("recording_id")] + list((job.get("options") or {}).get("recording_ids") or [])
-        for rec_id in dict.fromkeys(i for i in ids if i):
-            rec = self.catalog.get("recordings", rec_id)
-            if rec and rec.get("origin") == "upload" and rec.get("filename"):
-                message = message.replace(os.path.basename(rec["path"]), f"{rec['filename']} (recording {rec_id})")
-        return message
 
     def _done(self, job_id: str, recording_id: str, kind: str, fut: Future, broken_pool=None) -> None:
         self._running.pop(job_id, None)
@@ -147,7 +139,7 @@ class JobQueue:
                     self.pool.shutdown(wait=False, cancel_futures=True)
                     self.pool = self._new_pool()
         elif isinstance(exc, ShakeidError):
-            self.catalog.update("jobs", job_id, state="failed", error=self._as_uploaded(str(exc), job_id))
+            self.catalog.update("jobs", job_id, state="failed", error=str(exc))
         else:
             self.catalog.update("jobs", job_id, state="failed", error=f"internal error: {type(exc).__name__}: {exc}")
         self._wake.set()

@@ -101,7 +101,7 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
             return {"effect": result["effect"], "gap_before": result["gap_before"], "gap_after": result["gap_after"]}
         raise ShakeidError(f"unknown job kind {kind!r}")
     except (ShakeidError, ValueError) as exc:  # the user's input: a message, not a traceback
-        raise ShakeidError(_public(str(exc), [path])) from None
+        raise ShakeidError(_public(str(exc), [path], options)) from None
 
 
 def _run_joint(paths: list, options: dict, out: Path) -> dict:
@@ -131,12 +131,14 @@ def _run_joint(paths: list, options: dict, out: Path) -> dict:
         return {"terms": {eq: sorted(terms) for eq, terms in result["model"].items()},
                 "recordings": {r["source"]: r["status"] for r in result["recordings"]}}
     except (ShakeidError, ValueError) as exc:
-        raise ShakeidError(_public(str(exc), paths)) from None
+        raise ShakeidError(_public(str(exc), paths, options)) from None
 
 
-def _public(message: str, paths) -> str:
-    """A job's error as the operator sees it: each recording by its file name in the service's store (the
-    recording's id and extension, as the API lists it), not by the server's absolute path."""
+def _public(message: str, paths, options: dict) -> str:
+    """A job's error as the operator sees it: each recording by the name the queue gave it
+    (options["display_names"], {path: name}: an upload as uploaded, "short.csv (recording 470613d7dd6e)"),
+    else by its file name in the store, never by the server's absolute path."""
+    names = options.get("display_names") or {}
     for p in paths:
-        message = message.replace(str(p), Path(p).name)
+        message = message.replace(str(p), names.get(str(p), Path(p).name))
     return message
