@@ -29,7 +29,9 @@ class Service:
         """Start the process on a free port; another port when the bind lost a race for it (free_port draws
         below the ephemeral range, but another server started meanwhile, the service's own embedded rig
         included, may draw the same port: seen once in a suite run as "address already in use")."""
-        for attempt in range(attempts):
+        attempt = 0
+        while True:
+            attempt += 1
             self.port = free_port()  # below the ephemeral range: no client socket can take it before the bind
             env = {**os.environ, "SHAKEID_TOKENS": f"{OPERATOR}:operator,{VIEWER}:viewer", **self.extra_env}
             self.log = open(self.data_dir.parent / f"serve-{self.port}.log", "w")
@@ -49,8 +51,8 @@ class Service:
                 time.sleep(0.1)
             lost_race = "address already in use" in self.output()
             self.log.close()
-            assert lost_race and attempt + 1 < attempts, self.output()
-        raise AssertionError("unreachable")
+            if not lost_race or attempt >= attempts:
+                raise AssertionError(f"service did not start (attempt {attempt} of {attempts}): " + self.output())
 
     @property
     def url(self) -> str:

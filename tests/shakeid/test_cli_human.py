@@ -141,7 +141,9 @@ def test_demo_sets_the_model_beside_the_truth_term_by_term():
 
     truth = {"q1_dot": {"q1": -3.7294, "q2": -971.0169, "q2^3": -2503300.0}, "q2_dot": {"q1": 1.0}}
     got = {"q1_dot": {"q1": -3.7294000001, "q2^3": -2502800.0, "q1^2": 0.5}, "q2_dot": {"q1": 1.0}}
-    rows = {tuple(line.split()[:2]): line.split()[2:] for line in truth_lines(got, truth)[2:-1]}
+    lines = truth_lines(got, truth, 1.069e6 / 0.49)
+    rows = {tuple(line.split()[:2]): line.split()[2:] for line in lines[2:-1]}
+    assert "k3 / m = 2.5 MN/m³/kg against the design's 2.18" in lines[-1]  # from the truth and the design
     assert rows[("q1_dot", "q1")] == ["-3.7294", "-3.7294", "+0.00", "%"]
     assert rows[("q1_dot", "q2")] == ["-", "-971.02", "missed"]
     assert rows[("q1_dot", "q2^3")] == ["-2.5028e+06", "-2.5033e+06", "+0.02", "%"]
