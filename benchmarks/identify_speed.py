@@ -234,7 +234,8 @@ def uncertainty_parts(n: int, repeat: int) -> dict:
     coefs = {e: unc.refit_all_rows(gram, sups[e], e, covariance=False)[0] for e in sups}
     v = sig.valid
     noise = BandLimitedNoise(rec.input.size, sig.fs_hz, sig.band_hz, rec.layout)
-    parts = [((sig.q1[v], sig.q2[v], sig.q1_dot[v], sig.input[v]), noise, unc.noise_floors(rec, sig.band_hz))]
+    floors = unc.noise_floors(rec, sig.band_hz, sig.spectra)  # from the band search's spectra, as the fit reads them
+    parts = [((sig.q1[v], sig.q2[v], sig.q1_dot[v], sig.input[v]), noise, floors)]
     G = gram.equations(np.ones(gram.n_blocks, dtype=bool)).G
     col_exps = [term_exponents(t, sig.input_name) for t in lib.terms]
     opt, n_eff = ident._optimizer(), effective_samples(sig)
@@ -248,7 +249,7 @@ def uncertainty_parts(n: int, repeat: int) -> dict:
         return best_of(fn, repeat)[0][1]
 
     return {"refits": cpu(lambda: [unc.refit_all_rows(gram, sups[e], e) for e in sups]),
-            "floors": cpu(lambda: unc.noise_floors(rec, sig.band_hz)),
+            "floors": cpu(lambda: unc.noise_floors(rec, sig.band_hz, sig.spectra)),
             "closed_form": cpu(lambda: unc.analytic_chain_bias(rec, sig, gram, lib, sups, coefs)),
             "noise_share": cpu(lambda: noise_variance(parts, sups, coefs, G, col_exps, unc.TARGET_EXPONENTS)),
             "inclusion": cpu(lambda: unc.inclusion_probabilities(gram, held, fit_and_select)),

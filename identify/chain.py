@@ -30,7 +30,7 @@ from scipy.stats import chi2
 from .errors import IdentificationError
 from .recording import Recording
 from .simulate import fine_grid_input
-from .spectral import BandLimitedSignal, lowband_irfft, lowband_rfft, welch_psd
+from .spectral import BandLimitedSignal, lowband_irfft, lowband_rfft, welch_dof, welch_psd, welch_segments
 
 #: Band edge roll-off as a fraction of the edge frequency (lower: down to f_lo/2; upper: up to 1.25 f_hi).
 EDGE_FRACTION = 0.5
@@ -45,6 +45,17 @@ LIVE_EDGE_PERIODS = 3.0
 AT_REST_FRACTION = 0.02
 #: Excited bins closer than this (Welch bins, ~0.125 Hz each) belong to one band.
 MAX_GAP_BINS = 8
+
+
+@dataclass(frozen=True)
+class BandSpectra:
+    """Welch PSDs ((unit)^2/Hz, one-sided) of a record's input and response (base layout: output - input)
+    on the bins f_hz, each the mean over `segments` Hann segments (excited_band's, single precision)."""
+
+    f_hz: np.ndarray
+    input: np.ndarray
+    response: np.ndarray
+    segments: int
 
 
 @dataclass
@@ -64,6 +75,9 @@ class StateSignals:
     q2_offset: np.ndarray | None = None
     #: the input as the chain made it (its band's spectrum), when kept: exact between samples (input_fine)
     input_spectrum: BandLimitedSignal | None = None
+    #: the raw channels' Welch spectra the band search read (base layout, automatic band): the noise
+    #: floors are read from them too (identify.uncertainty.noise_floors), not from spectra of their own
+    spectra: BandSpectra | None = None
 
     @property
     def states(self) -> np.ndarray:
@@ -175,8 +189,7 @@ def _low_decile_of_noise(n: int, nper: int) -> float:
     noise bins crossed it and, merged across MAX_GAP_BINS, pulled f_lo to the spectrum's bottom
     (0.31 Hz for a response that cannot clear its noise below ~1.5 Hz), leaving the record too short for
     its own band."""
-    k = 1 + max(n - nper, 0) // (nper - nper // 2)
-    dof = 2 * k / (1 + 2 * 0.167**2 * (k - 1) / k)
+    dof = welch_dof(welch_segments(n, nper))
     return float(chi2.ppf(0.1, dof) / dof)
 
 
@@ -357,11 +370,21 @@ def reconstruct_states(rec: Recording, band_hz: tuple[float, float] | None = Non
         bottom no lower than where the integrated response clears its noise floor, less 20 %.
     taper_s : edge taper length; default one period of f_lo (base layout) or 64 samples (force layout).
     """
-    fs = rec.fs_hz
+    fs, n = rec.fs_hz, rec.n_samples
     response = rec.output - rec.input if rec.layout == "base" else rec.output
-    (lo, hi), taper_n, live_guard = band_and_taper(
-        fs, rec.n_samples, rec.layout, band_hz, harmonics, taper_s,
-        lambda: (excited_band(rec.input, fs), excited_band(response, fs)[0] if rec.layout == "base" else None))
+    read = {}
+
+    def excited():
+        """excited_band of the input and (base layout) the response's f_lo, the spectra kept in `read`."""
+        nper = welch_length(n, fs)
+        f, p_in = welch_psd(rec.input, fs, nper, np.float32)
+        if rec.layout != "base":
+            return band_from_psd(f, p_in, n, nper), None
+        p_resp = welch_psd(response, fs, nper, np.float32)[1]
+        read["spectra"] = BandSpectra(f, p_in, p_resp, welch_segments(n, nper))
+        return band_from_psd(f, p_in, n, nper), band_from_psd(f, p_resp, n, nper)[0]
+
+    (lo, hi), taper_n, live_guard = band_and_taper(fs, n, rec.layout, band_hz, harmonics, taper_s, excited)
     overall = _rms_about_mean(response)
     trims = [taper_n + (live_guard if _edge_is_live(response, edge, taper_n, overall) else taper_n // 2 + 1)
              for edge in ("start", "end")]
@@ -373,7 +396,8 @@ def reconstruct_states(rec: Recording, band_hz: tuple[float, float] | None = Non
     (q1, q2, q1_dot, u), exact = _spectral_ops([response, rec.input], fs, band, STATE_REQUESTS[rec.layout],
                                                taper_n)
     return StateSignals(q1, q2, q1_dot, u, fs, band, slice(trims[0], rec.n_samples - trims[1]),
-                        "zdd" if rec.layout == "base" else "u", taper_n, input_spectrum=exact[3])
+                        "zdd" if rec.layout == "base" else "u", taper_n, input_spectrum=exact[3],
+                        spectra=read.get("spectra"))
 
 
 def _rms_about_mean(x: np.ndarray) -> float:

@@ -49,6 +49,18 @@ def welch_psd(x: np.ndarray, fs_hz: float, nperseg: int, dtype=np.float64) -> tu
     return f, (p[0] if x.ndim == 1 else p)
 
 
+def welch_segments(n: int, nper: int) -> int:
+    """How many segments (50 % overlap) welch_psd averages over a record of n samples."""
+    return 1 + max(n - nper, 0) // (nper - nper // 2)
+
+
+def welch_dof(segments: int) -> float:
+    """Degrees of freedom of a bin of white noise in a Welch estimate over `segments` Hann segments of
+    50 % overlap: ~2K / (1 + 2 c^2 (K - 1) / K), c = 0.167 (the overlapping segments are correlated)."""
+    k = segments
+    return 2 * k / (1 + 2 * 0.167**2 * (k - 1) / k)
+
+
 def bin_weights(n_bins: int, nfft: int) -> np.ndarray:
     """w_k of an nfft-point rfft's bins 0 .. n_bins - 1 in a sum over the whole spectrum (Parseval, the
     inverse transform): 2, a bin and its negative frequency, except the bins that are their own twin, DC

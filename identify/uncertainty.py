@@ -37,14 +37,15 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from scipy.stats import chi2
 
-from .chain import STATE_REQUESTS, spectral_ops
+from .chain import STATE_REQUESTS, BandSpectra, spectral_ops
 from .chain_noise import BandLimitedNoise
 from .corrected import CorrectedSums, analytic_bias, gram_moments, term_exponents
 from .gram import BlockGram, scaled_pinv
 from .noise_spread import noise_variance
 from .optimizers.base import least_squares
-from .spectral import welch_psd
+from .spectral import welch_dof, welch_psd, welch_segments
 
 #: Random held-out placements for the inclusion probabilities (a probability to +-0.1 at worst).
 N_PLACEMENTS = 24
@@ -96,17 +97,26 @@ def refit_all_rows(gram: BlockGram, support: np.ndarray, eq: int, covariance: bo
 def white_noise_std(x: np.ndarray, fs_hz: float, band_hz, spectrum=None) -> float | None:
     """Std of a channel's white noise from its Welch spectrum above the integration band (median over
     NOISE_FLOOR_ABOVE f_hi .. NOISE_FLOOR_BELOW Nyquist, robust to a stray harmonic). None when the band
-    leaves less than a tenth of the spectrum above it to read the floor from. `spectrum`: (f, psd)
-    already computed (welch_psd of x)."""
+    leaves less than a tenth of the spectrum above it to read the floor from. `spectrum`: (f, psd,
+    segments averaged) already computed (welch_psd of x).
+
+    A noise bin of a Welch estimate is chi-square distributed, whose median lies below its mean (the
+    level): by 0.3 % of the variance over the ~120 segments of a million-sample record in the band
+    search's 16384-sample segments, by 11 % over the 3 of a 15 s record. The median is divided by
+    that ratio (spectral.welch_dof)."""
     nyq = fs_hz / 2
     lo, hi = NOISE_FLOOR_ABOVE * band_hz[1], NOISE_FLOOR_BELOW * nyq
     if hi - lo < 0.1 * nyq:
         return None
-    f, p = spectrum if spectrum is not None else welch_psd(x, fs_hz, int(min(1024, max(x.size // 8, 64))))
+    if spectrum is None:
+        nper = int(min(1024, max(x.size // 8, 64)))
+        spectrum = (*welch_psd(x, fs_hz, nper), welch_segments(x.size, nper))
+    f, p, segments = spectrum
     sel = (f >= lo) & (f <= hi)
     if np.count_nonzero(sel) < 8:
         return None
-    return float(np.sqrt(np.median(p[sel]) * nyq))
+    dof = welch_dof(segments)
+    return float(np.sqrt(np.median(p[sel]) / (chi2.ppf(0.5, dof) / dof) * nyq))
 
 
 class NoiseChain:
@@ -161,7 +171,7 @@ def chain_bias(recording, sig, supports: dict, coefs: dict, gram_of, n_replicate
     pairs = list(zip(recording, sig)) if several else [(recording, sig)]
     if n_replicates is None:
         n_replicates = replicates_for(sum(r.input.size for r, _ in pairs))
-    floors = [noise_floors(r, s.band_hz) for r, s in pairs]
+    floors = [noise_floors(r, s.band_hz, s.spectra) for r, s in pairs]
     if any(f is None for fl in floors for f in fl) or n_replicates < 2:
         return None
     rng = np.random.default_rng(seed)
@@ -212,7 +222,7 @@ def analytic_chain_bias(recording, sig, gram: BlockGram, library, supports: dict
     col_exps = [term_exponents(t, pairs[0][1].input_name) for t in library.terms]
     if any(col_exps[j] is None for sup in supports.values() for j in np.flatnonzero(sup)):
         return None
-    floors = [noise_floors(r, s.band_hz) for r, s in pairs]
+    floors = [noise_floors(r, s.band_hz, s.spectra) for r, s in pairs]
     if any(f is None for fl in floors for f in fl):
         return None
     parts, covs, spread_parts = [], [], []
@@ -247,20 +257,35 @@ def estimate_chain_bias(method: str, recording, sig, gram: BlockGram, library, s
 FLOOR_STRETCHES, FLOOR_STRETCH = 64, 4
 
 
-def noise_floors(recording, band_hz) -> tuple[float | None, float | None]:
-    """White-noise std of the input and output channels (white_noise_std), from one batched Welch (on
-    FLOOR_STRETCHES stretches spread over a long record, averaged: white noise is stationary)."""
+def noise_floors(recording, band_hz, spectra: BandSpectra | None = None) -> tuple[float | None, float | None]:
+    """White-noise std of the input and output channels (white_noise_std).
+
+    From the spectra the chain's band search read (StateSignals.spectra: base layout, the input's and
+    the response's, output - input) when given: the sensors' noises are independent, so the output's
+    variance is the response's less the input's (and the response's, which the chain integrates, is
+    what the noise covariance uses: chain_noise.BandLimitedNoise.white_covariance). Otherwise one batched
+    Welch of the two channels (on FLOOR_STRETCHES stretches spread over a long record, averaged: white
+    noise is stationary)."""
+    fs = recording.fs_hz
+    if spectra is not None:
+        s_in = white_noise_std(recording.input, fs, band_hz, (spectra.f_hz, spectra.input, spectra.segments))
+        s_resp = white_noise_std(recording.input, fs, band_hz, (spectra.f_hz, spectra.response, spectra.segments))
+        if s_in is None or s_resp is None:
+            return s_in, s_resp
+        return s_in, float(np.sqrt(max(s_resp**2 - s_in**2, 0.0)))
     nper = int(min(1024, max(recording.input.size // 8, 64)))
     x = np.vstack([recording.input, recording.output])
     length = FLOOR_STRETCH * nper
     if x.shape[1] > 2 * FLOOR_STRETCHES * length:
         starts = np.linspace(0, x.shape[1] - length, FLOOR_STRETCHES).astype(int)
-        f, p = welch_psd(np.concatenate([x[:, a:a + length] for a in starts]), recording.fs_hz, nper)
+        f, p = welch_psd(np.concatenate([x[:, a:a + length] for a in starts]), fs, nper)
         p = p.reshape(FLOOR_STRETCHES, 2, -1).mean(0)
+        segments = FLOOR_STRETCHES * welch_segments(length, nper)
     else:
-        f, p = welch_psd(x, recording.fs_hz, nper)
-    return (white_noise_std(recording.input, recording.fs_hz, band_hz, (f, p[0])),
-            white_noise_std(recording.output, recording.fs_hz, band_hz, (f, p[1])))
+        f, p = welch_psd(x, fs, nper)
+        segments = welch_segments(x.shape[1], nper)
+    return (white_noise_std(recording.input, fs, band_hz, (f, p[0], segments)),
+            white_noise_std(recording.output, fs, band_hz, (f, p[1], segments)))
 
 
 def placements(held: np.ndarray, n: int, seed: int = 0) -> list[np.ndarray]:

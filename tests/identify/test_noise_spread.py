@@ -128,7 +128,8 @@ def test_noise_variance_is_the_formula_evaluated_directly(noise_fraction, monkey
     col_exps = [term_exponents(t, sig.input_name) for t in ident.library_.terms]
     v = sig.valid
     parts = [((sig.q1[v], sig.q2[v], sig.q1_dot[v], sig.input[v]),
-              BandLimitedNoise(rec.input.size, sig.fs_hz, sig.band_hz, rec.layout), unc.noise_floors(rec, sig.band_hz))]
+              BandLimitedNoise(rec.input.size, sig.fs_hz, sig.band_hz, rec.layout),
+              unc.noise_floors(rec, sig.band_hz, sig.spectra))]
     G = gram.equations(np.ones(gram.n_blocks, dtype=bool)).G
     fast = noise_variance(parts, {0: sups[0]}, coefs, G, col_exps, unc.TARGET_EXPONENTS)[0]
     direct = _direct(parts, {0: sups[0]}, coefs, G, col_exps, unc.TARGET_EXPONENTS)[0]
