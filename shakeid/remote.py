@@ -120,9 +120,15 @@ def cmd_sweep_remote(args) -> int:
 def _rig_label(client: ServiceClient, state: str) -> str:
     """The progress line's label: the sweep's state with the PLC's frequency and table position, as a local
     sweep shows them (GET /api/rig, which the service answers from a status at most 0.1 s old); the state
-    alone when the rig's status cannot be read."""
+    alone when the rig's status cannot be read or says nothing of this sweep (queued: the PLC may still
+    run another). The PLC finishes a poll or two before the service has closed the recording: its
+    frequency then reads 0, and the line says the sweep is finishing instead."""
+    if state != "running":
+        return state
     try:
         plc = client.request("GET", "/api/rig").get("plc", {})
+        if plc["state"] != "running":
+            return f"finishing: the PLC is {plc['state']}, the recording is being closed"
         return rig_label(state, float(plc["frequency_hz"]), float(plc["position_mm"]))
     except (ShakeidError, KeyError, TypeError, ValueError):
         return state

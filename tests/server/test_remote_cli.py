@@ -30,6 +30,9 @@ def test_sweep_through_the_service_downloads_the_file_and_prints_the_model(servi
     # the progress lines say what a local sweep's say: the frequency and the table's position
     assert re.search(r"^sweep \d+ % \(.* s of 30 s\)  running +\d+\.\d\d Hz  table +[+-]\d+\.\d\d mm$", p.stderr, re.M), \
         p.stderr
+    # the PLC is done a poll or two before the service closes the recording: those lines say so, not
+    # "running 0.00 Hz" (which the PLC's frequency after its sweep would give; seen whenever a poll fell there)
+    assert not re.search(r"running +0\.00 Hz", p.stderr), p.stderr
     rec_id = re.search(r"recording ([0-9a-f]{12})", p.stdout).group(1)
     assert f"plots and report: {service.url}/#/recording/{rec_id}" in p.stdout
 
