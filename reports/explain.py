@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .html import Page
+from .html import Page, report_folder
 from .identification import RESIDUAL, _save, plt
 from .text import gap_closed_text
 
@@ -26,9 +26,9 @@ CLIP = -0.5  # candidates.png: shooting-gap bars below this are drawn cut here, 
 
 
 def write_explain_report(analysis, out_dir) -> Path:
-    """Write the report of a fitted DiscrepancyAnalysis into `out_dir` (created). Returns the folder."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    """Write the report of a fitted DiscrepancyAnalysis into `out_dir` (created; an earlier report's
+    files there are replaced, none left behind: html.report_folder). Returns the folder."""
+    out = report_folder(out_dir, (*FIGURES, "explain.json"))
     result = analysis.result()
     (out / "explain.json").write_text(json.dumps(result, indent=2))
     base = analysis.layout_ == "base"

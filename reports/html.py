@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import html
 import re
+import time
+from pathlib import Path
 
 #: a cell that is a number: "-3.7291", "1.2e+06", "-970.96 ± 0.089", "99.90 %"
 _NUMBER = re.compile(r"[-+−]?\d[\d.]*(e[-+]?\d+)?( ± \d[\d.]*(e[-+]?\d+)?)?( %)?")
@@ -15,6 +17,26 @@ STYLE = ("body{font-family:sans-serif;max-width:1100px;margin:1em auto;padding:0
          "caption{caption-side:bottom;text-align:left;font-size:.9em;color:#333;padding-top:.3em}"
          "figure{margin:1.5em 0}figure img{max-width:100%}figcaption{font-size:.9em;color:#333}"
          ".note{font-size:.9em;color:#333}")
+
+
+def report_folder(out_dir, files) -> Path:
+    """The report folder `out_dir`, created, with the `files` an earlier report wrote there removed (and
+    its index.html): a figure the new report does not draw, e.g. validation.png of a fit that was not
+    validated, must not be left from another recording's report."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    for name in ("index.html", *files):
+        (out / name).unlink(missing_ok=True)
+    return out
+
+
+def earlier_report(out_dir) -> str | None:
+    """When `out_dir` holds a report (its index.html), when it was written, as the operator is told before
+    a new one replaces it: "the report written there at 2026-11-24 08:41:02"; else None."""
+    page = Path(out_dir) / "index.html"
+    if not page.is_file():
+        return None
+    return "the report written there at " + time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(page.stat().st_mtime))
 
 
 def esc(text) -> str:

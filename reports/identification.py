@@ -22,17 +22,18 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
-from .html import Page  # noqa: E402
+from .html import Page, report_folder  # noqa: E402
 from .text import DESIGN_K3_NOTE, coefficient_rows, coefficient_table, fit_text, physical_rows, plural, unit  # noqa: E402
 
 FIGURES = ("input.png", "output.png", "lambda_path.png", "validation.png")
+DOCUMENTS = ("model.json", "coefficients.md")
 RESIDUAL = "#c0392b"  # the residual traces' colour, the same in every panel
 
 
 def write_report(ident, out_dir) -> Path:
-    """Write the report of a fitted SparseIdentifier into `out_dir` (created). Returns the folder."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    """Write the report of a fitted SparseIdentifier into `out_dir` (created; an earlier report's files
+    there are replaced, none left behind: html.report_folder). Returns the folder."""
+    out = report_folder(out_dir, (*FIGURES, *DOCUMENTS))
     result = ident.result()
     (out / "model.json").write_text(json.dumps(result, indent=2))
     (out / "coefficients.md").write_text(coefficient_table(result))

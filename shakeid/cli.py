@@ -138,16 +138,13 @@ def cmd_identify(args) -> int:
     except ValueError as exc:  # library/term specification problems
         raise ShakeidError(str(exc)) from None
     result = {**ident.result(), **data}
-    if args.report:
-        from reports.identification import write_report
-
-        write_report(ident, args.report)
+    replaced = _write_report("identification", ident, args.report)
     if args.json:
         print(json.dumps(result))
     else:
         print(summary(result, rec.source))
         if args.report:
-            print(f"report: {Path(args.report) / 'index.html'}")
+            print(f"report: {Path(args.report) / 'index.html'}{replaced}")
     if result["status"] == "failed":
         print(f"shakeid: identification failed: {args.file}: {result['reason']}", file=sys.stderr)
         return 1
@@ -166,10 +163,7 @@ def cmd_explain(args) -> int:
                               "use --accept-faulty to analyse it anyway")
     analysis = DiscrepancyAnalysis(baseline=baseline, band_hz=tuple(args.band) if args.band else None).fit(rec)
     result = {**analysis.result(), **data}
-    if args.report:
-        from reports.explain import write_explain_report
-
-        write_explain_report(analysis, args.report)
+    replaced = _write_report("explain", analysis, args.report)
     if args.json:
         print(json.dumps(result))
         return 0
@@ -204,8 +198,27 @@ def cmd_explain(args) -> int:
         print(f"still missed most at t = {top['t_start_s']:.1f}-{top['t_end_s']:.1f} s "
               f"(excitation {top['excitation_hz']:.1f} Hz, {100 * top['share_of_error']:.0f} % of the error)")
     if args.report:
-        print(f"report: {Path(args.report) / 'index.html'}")
+        print(f"report: {Path(args.report) / 'index.html'}{replaced}")
     return 0
+
+
+def _write_report(kind: str, fitted, out_dir) -> str:
+    """Write the identification or explain report of `fitted` into out_dir (nothing when it is None);
+    returns what the operator is told it replaced: " (replaces the report written there at ...)" or ""."""
+    if not out_dir:
+        return ""
+    from reports.html import earlier_report
+
+    earlier = earlier_report(out_dir)
+    if kind == "identification":
+        from reports.identification import write_report
+
+        write_report(fitted, out_dir)
+    else:
+        from reports.explain import write_explain_report
+
+        write_explain_report(fitted, out_dir)
+    return f" (replaces {earlier})" if earlier else ""
 
 
 def _add_sweep_options(p: argparse.ArgumentParser) -> None:

@@ -176,6 +176,8 @@ def test_every_readme_command_runs_verbatim(tmp_path):
     with h5py.File(clone / "sweep.h5") as f:
         assert f["entry"].attrs["status"] == "complete" and "processed" in f["entry"]
     assert len(list((clone / "levels").glob("quick-*.h5"))) == 2
+    # the second `identify ... --report report/` (of sweep.h5) says it replaced the first (of sweep.csv)
+    assert "report: report/index.html (replaces the report written there at 20" in output
     assert "free-run fit" in output and "sweep 100 %" in output  # the service's sweep printed its model
     # nothing the commands wrote is left for git (the .venv link is this test's, not the README's)
     status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=all"], cwd=clone,

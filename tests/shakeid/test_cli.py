@@ -35,6 +35,12 @@ def test_identify_options_and_report(table1_csv, tmp_path):
     assert doc["method"] == "stlsq" and doc["selection"]["rule"] == "paper" and len(doc["library"]["terms"]) == 11
     chosen = doc["selection"]["q1_dot"]  # the path's threshold and the rule's tolerance, both kept
     assert chosen["threshold"] > 0 and chosen["score_tolerance"] > 0 and chosen["threshold"] != chosen["score_tolerance"]
+    assert "replaces" not in proc.stdout
+    # a second report into the same folder replaces the first, and the operator is told so
+    again = run("identify", table1_csv, "--method", "stlsq", "--degree", "3", "--report", out)
+    assert again.returncode == 0, again.stderr
+    assert f"report: {out / 'index.html'} (replaces the report written there at 20" in again.stdout
+    assert json.loads((out / "model.json").read_text())["selection"]["rule"] == "heldout"
 
 
 def test_identify_budget_option(table1_csv, table1_truth):
