@@ -14,7 +14,7 @@ import numpy as np
 
 from identify.errors import RecordingError
 
-from .recorder import check_h5_path
+from .recorder import DEFAULT_CHANNELS, check_h5_path
 
 #: Rows of the time axis read at a time when looking for gaps (8 MB).
 TIME_CHUNK_ROWS = 1 << 20
@@ -28,7 +28,7 @@ class H5ChunkSource:
 
     layout = "base"
 
-    def __init__(self, path, input: str = "table_acc", output: str = "mass_acc",
+    def __init__(self, path, input: str = DEFAULT_CHANNELS[0], output: str = DEFAULT_CHANNELS[1],
                  samples: tuple[int, int] | None = None):
         self.path = str(Path(path).resolve())
         self.input_name, self.output_name = input, output

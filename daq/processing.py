@@ -23,12 +23,12 @@ from identify.chain import reconstruct_states
 from identify.errors import IdentificationError, RecordingError
 from identify.recording import Recording
 
-from .recorder import describe, segments
+from .recorder import DEFAULT_CHANNELS, describe, segments
 
 SIGNALS = (("relative_acc", "m/s^2"), ("relative_vel", "m/s"), ("relative_disp", "m"))
 
 
-def add_processed(path, input: str = "table_acc", output: str = "mass_acc",
+def add_processed(path, input: str = DEFAULT_CHANNELS[0], output: str = DEFAULT_CHANNELS[1],
                   band_hz: tuple[float, float] | None = None) -> dict:
     """Compute and store the processed signals; returns {band_hz, segments, valid_fraction}.
     band_hz: integration band (Hz); default from the recording's own spectrum (as `identify`)."""

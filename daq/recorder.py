@@ -33,7 +33,11 @@ import numpy as np
 
 from identify.errors import RecordingError
 from identify.quality import QualityMonitor, clip_level, verdict
-from identify.recording import CSV_SUFFIXES, MAT_SUFFIXES, Recording, check_file
+from identify.recording import CSV_SUFFIXES, LAYOUTS, MAT_SUFFIXES, Recording, check_file
+
+#: The channels a sweep records, and the (input, output) pair identification reads from a recording
+#: unless told otherwise: the table's and the mass's accelerometers (the base layout's names).
+DEFAULT_CHANNELS = (LAYOUTS["base"]["input"], LAYOUTS["base"]["output"])
 
 STATUSES = ("running", "complete", "aborted", "fault")
 
@@ -75,7 +79,7 @@ class Recorder:
     (identify/quality.py) are computed while recording and written at every flush and at close; their
     verdict is for pair = (input, output) channels (default table_acc, mass_acc, else the first two)."""
 
-    def __init__(self, path, channels=("table_acc", "mass_acc"), fs_hz: float = 2048.0, operator: str = "",
+    def __init__(self, path, channels=DEFAULT_CHANNELS, fs_hz: float = 2048.0, operator: str = "",
                  sweep: dict | None = None, rig_config: dict | None = None, sensors: dict | None = None,
                  units: str = "m/s^2", min_free_bytes: int = 0, pair: tuple[str, str] | None = None):
         self.path = Path(path)
@@ -103,7 +107,7 @@ class Recorder:
                            position=str(meta.get("position", ch.split("_")[0])))
             levels[ch] = clip_level(sens)  # int16 counts at +-32767
         if pair is None:
-            pair = ("table_acc", "mass_acc") if {"table_acc", "mass_acc"} <= set(self.channels) else self.channels[:2]
+            pair = DEFAULT_CHANNELS if set(DEFAULT_CHANNELS) <= set(self.channels) else self.channels[:2]
         self.pair = tuple(pair) if len(pair) == 2 else None
         self.quality_monitor = QualityMonitor(self.channels, self.fs_hz, levels, self.pair)
         self._pending: list[np.ndarray] = []  # appended rows the detectors have not seen yet
@@ -268,10 +272,8 @@ def recover_directory(directory) -> list[Path]:
     return [p for p in sorted(Path(directory).glob("*.h5")) if recover(p)]
 
 
-#: The DAQ's recordings, and the (input, output) channels identification reads from one unless told
-#: otherwise: the table's and the mass's accelerometers.
+#: The DAQ's recordings.
 H5_SUFFIXES = (".h5", ".hdf5")
-DEFAULT_CHANNELS = ("table_acc", "mass_acc")
 
 
 def check_h5_path(path) -> None:
@@ -310,7 +312,7 @@ def segments(time_s: np.ndarray, fs_hz: float) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
-def read_h5_recording(path, input: str = "table_acc", output: str = "mass_acc",
+def read_h5_recording(path, input: str = DEFAULT_CHANNELS[0], output: str = DEFAULT_CHANNELS[1],
                       samples: tuple[int, int] | None = None) -> Recording:
     """The recording (or rows samples=[a, b)) as identify's Recording. Samples are never spliced: a
     stretch that spans a gap is refused, naming the gap-free stretches to choose from."""

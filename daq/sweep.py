@@ -22,7 +22,7 @@ from sim.sweep import SineSweep
 from .devices import PLC, DeviceError
 from .realtime import HEARTBEAT_PRIORITY, make_realtime
 from .sources import AccelerometerSource
-from .recorder import DiskFull, Recorder, quality_summary
+from .recorder import DEFAULT_CHANNELS, DiskFull, Recorder, quality_summary
 
 
 class SweepRefused(ShakeidError):
@@ -81,7 +81,7 @@ class SweepRunner:
     the recording must leave (a sweep that would not fit is refused, one that reaches it is stopped)."""
 
     def __init__(self, plc: PLC, source: AccelerometerSource, limits: Limits, sensitivity: float,
-                 channels=("table_acc", "mass_acc"), heartbeat_s: float = 0.05, on_progress=None,
+                 channels=DEFAULT_CHANNELS, heartbeat_s: float = 0.05, on_progress=None,
                  rig_config: dict | None = None, on_samples=None, disk_reserve_mb: float = 100.0,
                  heartbeat_plc: PLC | None = None):
         self.plc, self.source, self.limits = plc, source, limits

@@ -86,6 +86,7 @@ def identify_out_of_core(args, ident) -> int:
     import json
 
     from daq.h5source import H5ChunkSource
+    from daq.recorder import DEFAULT_CHANNELS
     from identify.identifier import SparseIdentifier
     from identify.out_of_core import ChunkedIdentifier
 
@@ -101,7 +102,7 @@ def identify_out_of_core(args, ident) -> int:
             raise ShakeidError("--chunk-samples must be at least 4096")
         chunked.chunk_samples = args.chunk_samples
     samples = getattr(args, "samples", None)
-    src = H5ChunkSource(path, args.input or "table_acc", args.output or "mass_acc",
+    src = H5ChunkSource(path, args.input or DEFAULT_CHANNELS[0], args.output or DEFAULT_CHANNELS[1],
                         tuple(samples) if samples else None)
     problems = [] if src.status() == "complete" else [f"status is {src.status()}, not complete"]
     quality = src.quality()
