@@ -33,7 +33,7 @@ from .optimizers.base import least_squares
 from .physical import RigConstants, physical_parameters
 from .recording import Recording
 from .refine import refine_free_run
-from .selection import DEFAULT_TOLERANCE, select
+from .selection import DEFAULT_TOLERANCE, heldout_supports, select
 from .validation import fit_verdict, validate
 
 N_BLOCKS = 50
@@ -305,6 +305,9 @@ class SparseIdentifier:
         choose on its training and held-out normal equations; the paths run as one batch, started from
         the fit's own path (a placement moves a few blocks: its solutions are near the fit's)."""
         paths = self._optimizer().fit_paths(trains, start=self.path_)
+        if self.selection == "heldout" and self.max_terms is None:  # the default: all placements at once
+            by_eq = [heldout_supports(paths, e, trains, heldouts, self.tolerance) for e in range(2)]
+            return [list(supports) for supports in zip(*by_eq)]
         return [[s.support for s in self._select(path, train, heldout, n_eff).values()]
                 for path, train, heldout in zip(paths, trains, heldouts)]
 

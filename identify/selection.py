@@ -118,3 +118,65 @@ def _backward_eliminate(support, coef, train, heldout, eq, rule, thr, current, n
         else:
             break
     return support, coef
+
+
+def heldout_supports(paths, eq: int, trains, heldouts, tolerance: float | None = None) -> list[np.ndarray]:
+    """The supports `select` with rule "heldout" (no max_terms) chooses for equation `eq` on each of
+    several paths, each with its own training and held-out sums (the inclusion probabilities' held-out
+    placements, identify.uncertainty), computed together: every refit of all placements in one batched
+    solve per step (the paths' distinct supports, then each backward-elimination round of the placements
+    still eliminating). The same decisions as `select` per placement, whose refits are the same solves
+    one placement at a time (tests/identify/test_selection.py)."""
+    tol = DEFAULT_TOLERANCE["heldout"] if tolerance is None else float(tolerance)
+    n = len(paths)
+    if any(h is None or h.n == 0 for h in heldouts):
+        raise IdentificationError("selection 'heldout' needs held-out samples (holdout fraction > 0)")
+    G_tr = np.stack([t.G for t in trains])
+    b_tr = np.stack([t.B[:, eq] for t in trains])
+    G_h = np.stack([h.G for h in heldouts])
+    b_h = np.stack([h.B[:, eq] for h in heldouts])
+    yy_h = np.array([h.yy[eq] for h in heldouts])
+    n_h = np.array([h.n for h in heldouts], dtype=float)
+
+    def refit_and_score(owner: np.ndarray, rows: np.ndarray):
+        """Least-squares refits of support rows (r, m), row i on placement owner[i]'s training sums, and
+        their held-out MSE (NormalEquations.mse, row by row)."""
+        x = least_squares_many(G_tr[owner], b_tr[owner], rows)
+        gx = np.einsum("rij,rj->ri", G_h[owner], x)
+        return x, (yy_h[owner] - 2 * (b_h[owner] * x).sum(1) + (x * gx).sum(1)) / n_h[owner]
+
+    supports = [p.coefs[:, :, eq] != 0 for p in paths]
+    distinct = [distinct_rows(s) for s in supports]
+    owner = np.concatenate([np.full(first.size, i) for i, (first, _) in enumerate(distinct)])
+    _, score_all = refit_and_score(owner, np.concatenate([s[first] for s, (first, _) in zip(supports, distinct)]))
+    chosen, thresholds, offset = [], np.empty(n), 0
+    for i, (s, (first, which)) in enumerate(zip(supports, distinct)):
+        score = score_all[offset:offset + first.size][which]
+        offset += first.size
+        floor = 1e-13 * trains[i].yy[eq] / max(trains[i].n, 1)
+        thresholds[i] = (1 + tol) * score.min() + floor
+        ok = np.flatnonzero(score <= thresholds[i])
+        nnz = s.sum(1)
+        chosen.append(s[ok[np.lexsort((score[ok], nnz[ok]))[0]]].copy())
+    # backward elimination (_backward_eliminate), every placement still eliminating in one round
+    active = [i for i in range(n) if chosen[i].any()]
+    while active:
+        trials = []
+        for i in active:
+            dropped = np.flatnonzero(chosen[i])
+            s2 = np.repeat(chosen[i][None], dropped.size, axis=0)
+            s2[np.arange(dropped.size), dropped] = False
+            trials.append(s2)
+        owner = np.concatenate([np.full(t.shape[0], i) for i, t in zip(active, trials)])
+        _, score_all = refit_and_score(owner, np.concatenate(trials))
+        still, offset = [], 0
+        for i, s2 in zip(active, trials):
+            score = score_all[offset:offset + s2.shape[0]]
+            offset += s2.shape[0]
+            j = int(np.argmin(score))
+            if score[j] <= thresholds[i]:
+                chosen[i] = s2[j]
+                if chosen[i].any():
+                    still.append(i)
+        active = still
+    return chosen

@@ -88,7 +88,9 @@ def least_squares(G: np.ndarray, b: np.ndarray, support: np.ndarray) -> np.ndarr
 
 
 def least_squares_many(G: np.ndarray, b: np.ndarray, supports: np.ndarray) -> np.ndarray:
-    """least_squares on each row of `supports` (k, m), as one batch: (k, m) coefficients.
+    """least_squares on each row of `supports` (k, m), as one batch: (k, m) coefficients. G (m, m) and
+    b (m,) are shared by every row, or given per row: G (k, m, m), b (k, m) (the inclusion
+    probabilities' placements, each with its own training sums, in one batch).
 
     Each RMS-scaled subsystem is embedded in an m x m system (identity off its support), and all are
     inverted together: well conditioned after scaling, so the inverse's error is the solve's. A row
@@ -96,19 +98,21 @@ def least_squares_many(G: np.ndarray, b: np.ndarray, supports: np.ndarray) -> np
     trace of the inverse, not clearly above lstsq's cut-off of 1e-12 x the largest) falls back to
     least_squares' minimum-norm lstsq, so the results are the same to rounding. The selection rule
     refits every distinct support of a path and every backward-elimination trial; one batch replaces a
-    loop of small lstsq calls (the inclusion probabilities' 24 placements run 48 such selections)."""
+    loop of small lstsq calls."""
     supports = np.asarray(supports, dtype=bool)
     k, m = supports.shape
     out = np.zeros((k, m))
     if k == 0:
         return out
-    d = np.sqrt(np.maximum(np.diag(G), 1e-300))
-    Gs = G / np.outer(d, d)
+    per_row = G.ndim == 3
+    Gk, bk = (G, b) if per_row else (G[None], b[None])
+    d = np.sqrt(np.maximum(np.diagonal(Gk, axis1=1, axis2=2), 1e-300))  # (k, m), or (1, m) shared
+    Gs = Gk / (d[:, :, None] * d[:, None, :])
     both = supports[:, :, None] & supports[:, None, :]
-    A = np.where(both, Gs[None], 0.0)
+    A = np.where(both, Gs, 0.0)
     diag = np.arange(m)
     A[:, diag, diag] = np.where(supports, A[:, diag, diag], 1.0)
-    rhs = np.where(supports, (b / d)[None], 0.0)
+    rhs = np.where(supports, bk / d, 0.0)
     n_s = supports.sum(1)
     try:
         inv = np.linalg.inv(A)
@@ -117,9 +121,9 @@ def least_squares_many(G: np.ndarray, b: np.ndarray, supports: np.ndarray) -> np
         ok = np.isfinite(x).all(1) & (trace_inv > 0) & (1.0 / np.maximum(trace_inv, 1e-300) > 1e-10 * n_s)
     except np.linalg.LinAlgError:  # an exactly singular subsystem: every row the slow way
         x, ok = np.zeros((k, m)), np.zeros(k, dtype=bool)
-    out[ok] = x[ok] * supports[ok] / d
+    out[ok] = (x * supports / d)[ok]
     for i in np.flatnonzero(~ok):
-        out[i] = least_squares(G, b, supports[i])
+        out[i] = least_squares(Gk[i if per_row else 0], bk[i if per_row else 0], supports[i])
     return out
 
 
