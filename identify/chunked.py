@@ -11,7 +11,7 @@ L = OVERLAP_PERIODS periods of f_lo, the same tail the whole-record chain loses 
 What the whole-record chain reads from the whole record comes from one scan (`ChunkedChain.scan`):
 - the band: excited_band's Welch PSD, accumulated over the very segments the whole-record Welch
   estimate averages (segments never straddle two reads), then the same rule (chain.band_from_psd);
-- the detrending: the channel means (integration) and the end samples (the line through them),
+- the detrending (chain.by_mean_alone): the channel means and the end samples (the line through them),
 - whether each edge is at rest (its RMS against the record's), hence the trims and the valid rows.
 Memory is O(chunk + 2 L) whatever the record's length (tests/identify/test_chunked_chain.py).
 
@@ -29,7 +29,7 @@ import numpy as np
 from scipy.fft import next_fast_len
 
 from .chain import (EDGE_FRACTION, AT_REST_FRACTION, PAD_PERIODS, STATE_REQUESTS, StateSignals, band_and_taper,
-                    band_bins, band_filter, band_from_psd, taper_ramp, welch_length)
+                    band_bins, band_filter, band_from_psd, by_mean_alone, taper_ramp, welch_length)
 from .errors import IdentificationError
 from .spectral import BandLimitedSignal, lowband_irfft, lowband_rfft, welch_psd
 
@@ -150,7 +150,8 @@ class ChunkedChain:
         x = _regressed(self.layout, *source.read(s0, s1))
         idx = np.arange(s0, s1, dtype=float)
         requests = STATE_REQUESTS[self.layout]
-        rows = sorted({(i, p < 0) for i, p in requests})
+        mean_alone = by_mean_alone(requests, band)  # the chain's detrending, request by request
+        rows = sorted({(i, alone) for (i, _), alone in zip(requests, mean_alone)})
         length = (b - a) + 2 * L
         nfft = next_fast_len(length, real=True)
         off = s0 - (a - L)  # zeros before the record's start
@@ -162,8 +163,8 @@ class ChunkedChain:
             head, tail = idx < taper, idx >= n - taper
             w[head] = taper_ramp(idx[head], taper)
             w[tail] = taper_ramp(n - 1 - idx[tail], taper)
-        for r, (i, integrating) in enumerate(rows):
-            trend = self.means[i] if integrating else self._line(i, idx)
+        for r, (i, alone) in enumerate(rows):
+            trend = self.means[i] if alone else self._line(i, idx)
             xd[r, off:] = x[i] - trend
             if w is not None:
                 xd[r, off:] *= w
@@ -171,7 +172,8 @@ class ChunkedChain:
         f, g = band_bins(nfft, fs, band)
         spectra = lowband_rfft(xd, nfft, f.size - 1)
         del xd
-        out = band_filter([(spectra[rows.index((i, p < 0))], p) for i, p in requests], f, g, band)
+        out = band_filter([(spectra[rows.index((i, alone))], p) for (i, p), alone in zip(requests, mean_alone)],
+                          f, g, band)
         del spectra
         y = lowband_irfft(out, nfft, L + (b - a))[:, L:]
         results = []

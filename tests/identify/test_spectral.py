@@ -29,9 +29,11 @@ def _band_gain_before(f, band, fs_hz):
 
 
 def _spectral_op_before(x, fs_hz, band, power, taper_n):
+    """The chain's operator as first written, signal by signal on the whole spectrum, with today's
+    detrending (chain.by_mean_alone: the mean alone also for a signal filtered with DC outside the band)."""
     x = np.asarray(x, dtype=float)
     n = x.size
-    if power < 0:
+    if power < 0 or (power == 0 and band[0] > 0):
         line = np.full(n, x.mean())
     else:
         line = x[0] + (x[-1] - x[0]) * np.arange(n) / max(n - 1, 1)
