@@ -29,6 +29,34 @@ def fit_metrics(measured: np.ndarray, simulated: np.ndarray) -> dict:
     return {"nrmse": nrmse, "fit_percent": 100.0 * (1.0 - nrmse), "rmse": rmse}
 
 
+def heldout_and_all_metrics(measured: np.ndarray, simulated: np.ndarray, runs) -> tuple[dict, dict]:
+    """fit_metrics on the rows of `runs` (slices: the held-out blocks) and on all rows, from one error
+    array and one centred copy of the measurement (validate scores three signals a million samples long
+    both ways): the held-out sums are sums over the runs' slices, no concatenated copies. The held-out
+    spread is about the held-out mean: sum (y - mean_all)^2 over the runs less n_h (mean_h - mean_all)^2.
+    The same figures as fit_metrics on the concatenated rows to rounding (tests/identify/test_validation.py);
+    a simulation not finite on the held-out rows has no held-out figures, one not finite anywhere none
+    on all rows."""
+    none = {"nrmse": None, "fit_percent": None, "rmse": None}
+    n, n_h = measured.size, sum(r.stop - r.start for r in runs)
+    err = measured - simulated
+    sse = float(np.dot(err, err))
+    sse_h = float(sum(np.dot(err[r], err[r]) for r in runs))
+    np.subtract(measured, measured.mean() if n else 0.0, out=err)
+    spread = float(np.dot(err, err))
+    shift = float(sum(err[r].sum() for r in runs))
+    spread_h = float(sum(np.dot(err[r], err[r]) for r in runs)) - (shift * shift / n_h if n_h else 0.0)
+
+    def metrics(sse_, spread_, count):
+        if count == 0 or not np.isfinite(sse_):
+            return dict(none)
+        rmse = float(np.sqrt(sse_ / count))
+        std = float(np.sqrt(max(spread_, 0.0) / count))
+        nrmse = rmse / std if std > 0 else float("inf")
+        return {"nrmse": nrmse, "fit_percent": 100.0 * (1.0 - nrmse), "rmse": rmse}
+    return metrics(sse_h, spread_h, n_h), metrics(sse, spread, n)
+
+
 def free_run(model: SparseModel, sig: StateSignals, substeps: int | None = None):
     """Simulate over the valid rows from the measured state at their start.
 
@@ -78,10 +106,10 @@ def validate(model: SparseModel, sig: StateSignals, heldout_rows: np.ndarray, su
     simulated = {"q1_dot": sim_qdot, "q1": sim_states[:, 0], "q2": sim_states[:, 1]}
     out = {"diverged": bool(diverged), "substeps": int(used), "samples_per_step": int(stride), "heldout": {}, "all": {},
            "heldout_samples": int(np.count_nonzero(heldout_rows))}
+    runs = _runs(heldout_rows)
     held = _runs_of(heldout_rows)
     for name in measured:
-        out["heldout"][name] = fit_metrics(held(measured[name]), held(simulated[name]))
-        out["all"][name] = fit_metrics(measured[name], simulated[name])
+        out["heldout"][name], out["all"][name] = heldout_and_all_metrics(measured[name], simulated[name], runs)
     # one step: the model's acceleration from the measured states and input, on the same held-out rows
     # (only there: the other rows' one-step prediction is not reported)
     q1, q2 = sig.state_columns(v)
@@ -90,13 +118,17 @@ def validate(model: SparseModel, sig: StateSignals, heldout_rows: np.ndarray, su
     return out, sim_states, sim_qdot
 
 
-def _runs_of(rows: np.ndarray):
-    """x -> x[rows] for a boolean mask made of runs (the held-out blocks), as one concatenation of the
-    runs' slices: a memory copy of the rows taken, where a mask reads every row of x and the mask (a
-    million-sample validation takes nine such subsets)."""
+def _runs(rows: np.ndarray) -> list[slice]:
+    """The runs of True of a boolean mask (the held-out blocks), as slices."""
     rows = np.asarray(rows, dtype=bool)
     edges = np.flatnonzero(np.diff(rows.view(np.int8), prepend=0, append=0))
-    runs = [slice(a, b) for a, b in zip(edges[::2], edges[1::2])]
+    return [slice(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
+
+
+def _runs_of(rows: np.ndarray):
+    """x -> x[rows] for a boolean mask made of runs (the held-out blocks), as one concatenation of the
+    runs' slices: a memory copy of the rows taken, where a mask reads every row of x and the mask."""
+    runs = _runs(rows)
     return lambda x: np.concatenate([x[r] for r in runs]) if runs else x[:0]
 
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from identify.validation import _runs_of, fit_metrics
+from identify.validation import _runs, _runs_of, fit_metrics, heldout_and_all_metrics
 
 
 @pytest.mark.parametrize("mask", [
@@ -13,6 +13,31 @@ from identify.validation import _runs_of, fit_metrics
 def test_held_out_runs_are_the_masked_rows(mask):
     x = np.random.default_rng(0).standard_normal(mask.size)
     np.testing.assert_array_equal(_runs_of(mask)(x), x[mask])
+
+
+@pytest.mark.parametrize("mask", [
+    np.repeat([False, True, False, False, True, True, False, True], [50, 30, 40, 20, 60, 10, 30, 70]).astype(bool),
+    np.ones(200, dtype=bool), np.zeros(200, dtype=bool), np.arange(300) % 3 == 0,
+])
+def test_heldout_and_all_metrics_in_one_pass_equal_fit_metrics_on_the_subsets(mask):
+    """validate scores the held-out rows and all rows from one error array: the figures of fit_metrics on
+    the concatenated held-out rows and on all rows, to rounding; a non-finite simulated sample outside
+    the held-out rows leaves the held-out figures, one inside takes them away."""
+    rng = np.random.default_rng(2)
+    y = 5.0 + np.cumsum(rng.standard_normal(mask.size))  # offset and drift: the held-out mean is not the mean
+    s = y + 0.3 * rng.standard_normal(mask.size)
+    held, whole = heldout_and_all_metrics(y, s, _runs(mask))
+    for got, want in ((held, fit_metrics(y[mask], s[mask])), (whole, fit_metrics(y, s))):
+        for k in want:
+            assert (got[k] is None and want[k] is None) or got[k] == pytest.approx(want[k], rel=1e-11), (k, got, want)
+    if mask.any() and not mask.all():
+        for inside in (True, False):
+            s2 = s.copy()
+            s2[np.flatnonzero(mask == inside)[0]] = np.nan
+            held, whole = heldout_and_all_metrics(y, s2, _runs(mask))
+            assert whole["nrmse"] is None and (held["nrmse"] is None) == inside
+            if not inside:
+                assert held["nrmse"] == pytest.approx(fit_metrics(y[mask], s[mask])["nrmse"], rel=1e-11)
 
 
 def test_fit_metrics_follow_their_definitions_and_refuse_a_non_finite_simulation():
