@@ -72,9 +72,7 @@ def select(path: SparsePath, eq: int, train: NormalEquations, heldout: NormalEqu
         k = ok[np.lexsort((ok, nnz[ok]))[0]]  # fewest terms, then largest lambda (earliest point)
     elif rule == "heldout":
         score = heldout.mse(coef_k.T, eq)
-        thr = (1 + tol) * score.min() + floor
-        ok = np.flatnonzero(score <= thr)
-        k = ok[np.lexsort((score[ok], nnz[ok]))[0]]  # fewest terms, then lowest held-out error
+        k, thr = _sparsest_under_the_line(score, nnz, tol, floor)
     else:
         n_eff = float(n_eff or train.n)
         mse = np.maximum(train.mse(coef_k.T, eq), floor)
@@ -106,9 +104,7 @@ def _backward_eliminate(support, coef, train, heldout, eq, rule, thr, current, n
         return n_eff * np.log(np.maximum(train.mse(X.T, eq), floor)) + k * np.log(n_eff)
 
     while support.any():
-        dropped = np.flatnonzero(support)
-        s2 = np.repeat(support[None], dropped.size, axis=0)
-        s2[np.arange(dropped.size), dropped] = False          # row i: support without its i-th term
+        s2 = _without_one_term(support)
         x2 = least_squares_many(train.G, b, s2)
         score = crit(x2, s2.sum(1))
         i = int(np.argmin(score))                               # the first of equal scores, as before
@@ -118,6 +114,22 @@ def _backward_eliminate(support, coef, train, heldout, eq, rule, thr, current, n
         else:
             break
     return support, coef
+
+
+def _sparsest_under_the_line(score: np.ndarray, nnz: np.ndarray, tol: float, floor: float) -> tuple[int, float]:
+    """The heldout rule's choice on a path: the tolerance line (1 + tol) x the lowest held-out MSE (+ the
+    numerical floor), and under it the fewest terms, then the lowest held-out error. (index, line)."""
+    thr = (1 + tol) * score.min() + floor
+    ok = np.flatnonzero(score <= thr)
+    return int(ok[np.lexsort((score[ok], nnz[ok]))[0]]), float(thr)
+
+
+def _without_one_term(support: np.ndarray) -> np.ndarray:
+    """(|S|, m): row i is `support` without its i-th term (one backward-elimination round's trials)."""
+    dropped = np.flatnonzero(support)
+    s2 = np.repeat(support[None], dropped.size, axis=0)
+    s2[np.arange(dropped.size), dropped] = False
+    return s2
 
 
 def heldout_supports(paths, eq: int, trains, heldouts, tolerance: float | None = None) -> list[np.ndarray]:
@@ -154,19 +166,12 @@ def heldout_supports(paths, eq: int, trains, heldouts, tolerance: float | None =
         score = score_all[offset:offset + first.size][which]
         offset += first.size
         floor = 1e-13 * trains[i].yy[eq] / max(trains[i].n, 1)
-        thresholds[i] = (1 + tol) * score.min() + floor
-        ok = np.flatnonzero(score <= thresholds[i])
-        nnz = s.sum(1)
-        chosen.append(s[ok[np.lexsort((score[ok], nnz[ok]))[0]]].copy())
+        k, thresholds[i] = _sparsest_under_the_line(score, s.sum(1), tol, floor)
+        chosen.append(s[k].copy())
     # backward elimination (_backward_eliminate), every placement still eliminating in one round
     active = [i for i in range(n) if chosen[i].any()]
     while active:
-        trials = []
-        for i in active:
-            dropped = np.flatnonzero(chosen[i])
-            s2 = np.repeat(chosen[i][None], dropped.size, axis=0)
-            s2[np.arange(dropped.size), dropped] = False
-            trials.append(s2)
+        trials = [_without_one_term(chosen[i]) for i in active]
         owner = np.concatenate([np.full(t.shape[0], i) for i, t in zip(active, trials)])
         _, score_all = refit_and_score(owner, np.concatenate(trials))
         still, offset = [], 0
