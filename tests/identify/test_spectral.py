@@ -228,8 +228,9 @@ def test_forward_and_inverse_transforms_share_their_twiddles():
 
 
 def test_twiddles_by_recurrence_match_the_exponentials():
-    """The twiddles are built as powers of one row (w^(k r) = (w^k)^r); on a million-sample record's
-    transform (M = 8, ~59,000 bins) they stay within rounding of exp(-2 pi i (k r mod nfft) / nfft)."""
+    """The twiddles are built as powers of one row (w^(k r) = (w^k)^r), that row as products of two short
+    tables of exponentials; on a million-sample record's transform (M = 8, ~59,000 bins) they stay
+    within rounding of exp(-2 pi i (k r mod nfft) / nfft)."""
     from identify.spectral import _twiddles
     nfft, m, k_max = 1_105_920, 8, 58_860
     kr = np.outer(np.arange(m), np.arange(k_max + 1)) % nfft
