@@ -22,7 +22,8 @@ Everything runs on one thread (BLAS limited to one unless OPENBLAS_NUM_THREADS /
 scipy.fft uses one worker by default), and each figure is given as wall time and as the process's CPU
 time: on a shared machine the CPU-time ratios are the ones a load spike does not move. Every timed call
 starts with shakeid's twiddle cache empty (identify.spectral), so a repeat of the same record pays what a
-user's first call on a new recording does (0.02-0.04 s of a million-sample fit); scipy's own FFT
+user's first call on a new recording does (~1 ms of a million-sample fit; 0.02-0.04 s before the first
+row of twiddles came from two short tables of exponentials); scipy's own FFT
 plan cache, which cannot be cleared, is warm for the anchor and the calls alike.
 
 Then free-run simulation of a 60 s sweep against scipy solve_ivp (RK45, rtol 1e-8) at equal accuracy:
