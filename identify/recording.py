@@ -134,8 +134,11 @@ def read_recording(path, layout: str = "base", input: str | None = None, output:
     if missing:
         raise RecordingError(f"{path}: missing column(s) {', '.join(map(repr, missing))}; "
                              f"found {', '.join(map(repr, columns)) or 'none'}")
-    if time in columns and fs_hz is None:
+    if time in columns:
         fs = _sample_rate_from_time(columns[time], str(path), time)
+        if fs_hz is not None and abs(float(fs_hz) / fs - 1) > 1e-3:  # a wrong rate scales every coefficient
+            raise RecordingError(f"{path}: the sample rate given ({float(fs_hz):g} Hz, --fs) disagrees with the "
+                                 f"time column {time!r} ({fs:.6g} Hz); the sample rate is for a file without one")
     elif fs_hz is not None:
         fs = float(fs_hz)
     else:

@@ -22,13 +22,14 @@ from .identification import RESIDUAL, _save, plt
 from .text import gap_closed_text
 
 FIGURES = ("residual_time.png", "residual_state.png", "candidates.png", "gap.png")
+DOCUMENTS = ("explain.json",)
 CLIP = -0.5  # candidates.png: shooting-gap bars below this are drawn cut here, their value written on them
 
 
 def write_explain_report(analysis, out_dir) -> Path:
     """Write the report of a fitted DiscrepancyAnalysis into `out_dir` (created; an earlier report's
     files there are replaced, none left behind: html.report_folder). Returns the folder."""
-    out = report_folder(out_dir, (*FIGURES, "explain.json"))
+    out = report_folder(out_dir)
     result = analysis.result()
     (out / "explain.json").write_text(json.dumps(result, indent=2))
     base = analysis.layout_ == "base"

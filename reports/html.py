@@ -19,13 +19,17 @@ STYLE = ("body{font-family:sans-serif;max-width:1100px;margin:1em auto;padding:0
          ".note{font-size:.9em;color:#333}")
 
 
-def report_folder(out_dir, files) -> Path:
-    """The report folder `out_dir`, created, with the `files` an earlier report wrote there removed (and
-    its index.html): a figure the new report does not draw, e.g. validation.png of a fit that was not
-    validated, must not be left from another recording's report."""
+def report_folder(out_dir) -> Path:
+    """The report folder `out_dir`, created, with every file an earlier report (identification or
+    explain) wrote there removed: a folder holds one report, and a figure or document the new one does
+    not write (validation.png of a fit that was not validated; model.json under an explain report) must
+    not be left beside its page."""
+    from .explain import DOCUMENTS as EXPLAIN_DOCUMENTS, FIGURES as EXPLAIN_FIGURES
+    from .identification import DOCUMENTS, FIGURES
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    for name in ("index.html", *files):
+    for name in {"index.html", *FIGURES, *DOCUMENTS, *EXPLAIN_FIGURES, *EXPLAIN_DOCUMENTS}:
         (out / name).unlink(missing_ok=True)
     return out
 

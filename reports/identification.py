@@ -33,7 +33,7 @@ RESIDUAL = "#c0392b"  # the residual traces' colour, the same in every panel
 def write_report(ident, out_dir) -> Path:
     """Write the report of a fitted SparseIdentifier into `out_dir` (created; an earlier report's files
     there are replaced, none left behind: html.report_folder). Returns the folder."""
-    out = report_folder(out_dir, (*FIGURES, *DOCUMENTS))
+    out = report_folder(out_dir)
     result = ident.result()
     (out / "model.json").write_text(json.dumps(result, indent=2))
     (out / "coefficients.md").write_text(coefficient_table(result))

@@ -157,14 +157,34 @@ def cmd_batch(args) -> int:
     doc = {"models": {k: models[k] for k in names if k in models},
            "failed": {k: failed[k] for k in names if k in failed},
            "scheduler": args.scheduler or "local"}
+    kept = 0
     if out:
-        (out / "batch.json").write_text(json.dumps(doc, indent=2))
+        index, kept = _merged_index(out / "batch.json", doc)
+        (out / "batch.json").write_text(json.dumps(index, indent=2))
     if args.json:
         print(json.dumps(doc))
     else:
         print(f"{len(models) - sum(m['status'] == 'failed' for m in models.values())} of {len(names)} "
-              f"file(s) identified on {doc['scheduler']}" + (f"; models in {out}" if out else ""))
+              f"file(s) identified on {doc['scheduler']}" + (f"; models in {out}" if out else "")
+              + (f" (batch.json also lists {kept} file(s) of earlier batches there)" if kept else ""))
     return status
+
+
+def _merged_index(path: Path, doc: dict) -> tuple[dict, int]:
+    """batch.json for a folder that earlier batches may have written into: each file's latest outcome,
+    this run's replacing an earlier one of the same name, the others kept (their models are still in the
+    folder). Returns the index and how many files it kept from earlier batches."""
+    try:
+        old = json.loads(path.read_text())
+        earlier = {k: dict(old[k]) for k in ("models", "failed")}
+    except (OSError, ValueError, KeyError, TypeError):  # none yet (or not one of ours): this run alone
+        return doc, 0
+    now = set(doc["models"]) | set(doc["failed"])
+    for k in earlier:
+        earlier[k] = {name: v for name, v in earlier[k].items() if name not in now}
+    index = {"models": {**earlier["models"], **doc["models"]}, "failed": {**earlier["failed"], **doc["failed"]},
+             "scheduler": doc["scheduler"]}
+    return index, len(earlier["models"]) + len(earlier["failed"])
 
 
 def add_batch_parser(sub, add_identify_options, make_identifier, read_recording) -> None:

@@ -28,6 +28,9 @@ def cmd_demo(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     h5 = out / "recording.h5"
     if h5.exists():
+        if _operator(h5) != "demo":  # an operator's recording in the folder given: never replaced
+            raise ShakeidError(f"{h5} exists and is not an earlier demo's recording; it is never overwritten: "
+                               "give the demo another --out folder")
         h5.unlink()  # the demo's own file from an earlier run
     speed = 10.0
     # at 10x the client's 50 ms heartbeat is 0.5 s of rig time: the demo rig's watchdog allows 2 s
@@ -331,3 +334,13 @@ def cmd_controller(args) -> int:
     from server.run_controller import run
 
     return run(args.config, args.data_dir, args.sim_speed, args.address, args.parent_pid)
+
+
+def _operator(h5: Path) -> str | None:
+    """The operator a shakeid recording names (the demo's own: "demo"); None when the file is not one."""
+    from daq.recorder import describe
+
+    try:
+        return describe(h5).get("operator")
+    except (ShakeidError, OSError):
+        return None

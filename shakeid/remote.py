@@ -29,6 +29,8 @@ class ServiceError(ShakeidError):
 
 class ServiceClient:
     def __init__(self, url: str, token: str, timeout_s: float = 10.0):
+        if not url.startswith(("http://", "https://")):
+            raise ShakeidError(f"--server {url}: give the service's URL with its scheme, e.g. http://{url}")
         self.url, self.token, self.timeout_s = url.rstrip("/"), token, timeout_s
 
     def request(self, method: str, path: str, body: dict | None = None, raw: bool = False):
@@ -74,6 +76,8 @@ def cmd_sweep_remote(args) -> int:
     token = args.token or os.environ.get("SHAKEID_TOKEN", "")
     if not token:
         raise ShakeidError("--server needs a token: --token or SHAKEID_TOKEN (an operator's)")
+    if args.out and Path(args.out).exists():  # before the table moves: the download would replace it
+        raise ShakeidError(f"{args.out}: exists already; a recording is never overwritten (give --out a new name)")
     client = ServiceClient(args.server, token)
     body = {"f_start_hz": args.f_start_hz, "f_end_hz": args.f_end_hz, "duration_s": args.duration_s,
             "amplitude_mm": args.amplitude_mm, "settle_s": args.settle_s, "note": args.note}

@@ -34,6 +34,17 @@ def test_mat_with_variable_mapping_and_sample_rate(tmp_path):
     assert rec.layout == "force" and rec.fs_hz == 610.35 and rec.n_samples == 400
 
 
+def test_a_sample_rate_given_must_agree_with_the_time_column(tmp_path, table1_run):
+    """--fs is for a file without a time column: one that disagrees with the file's own time column would
+    scale every coefficient (1000 Hz for a 2048 Hz sweep gave a stiffness of 113 N/m against 476) and is
+    refused; one that agrees is accepted."""
+    path = tmp_path / "r.csv"
+    write_csv(path, table1_run.recording)
+    with pytest.raises(RecordingError, match=r"sample rate given \(1000 Hz, --fs\) disagrees with the time column"):
+        read_recording(path, fs_hz=1000.0)
+    assert read_recording(path, fs_hz=2048.0).fs_hz == pytest.approx(2048.0, rel=1e-9)
+
+
 @pytest.mark.parametrize("case,match", [
     ("missing_column", "missing column.*'mass_acc'"),
     ("nan", "column 'mass_acc' has 1 NaN"),

@@ -105,6 +105,20 @@ def test_files_differing_only_in_extension_keep_one_model_each(recordings, tmp_p
     assert doc["models"]["sweep0.csv"]["model"] != doc["models"]["sweep0.h5"]["model"]  # two fits, two models
 
 
+def test_a_second_batch_into_the_same_folder_keeps_the_first_in_its_index(recordings, tmp_path, capsys):
+    """batch.json indexes every model in the folder: a later batch adds its files (and replaces the entries
+    of files it identifies again) instead of rewriting the index with its own files alone."""
+    good, bad = recordings
+    out = tmp_path / "models"
+    assert main(["batch", str(good[0]), str(bad), "--workers", "1", "--out", str(out)]) == 2
+    capsys.readouterr()
+    assert main(["batch", str(good[1]), str(bad), "--workers", "1", "--out", str(out)]) == 2
+    assert "(batch.json also lists 1 file(s) of earlier batches there)" in capsys.readouterr().out
+    doc = json.loads((out / "batch.json").read_text())
+    assert sorted(doc["models"]) == ["sweep0.csv", "sweep1.csv"] and sorted(doc["failed"]) == ["bad.csv"]
+    assert sorted(p.name for p in out.iterdir()) == ["batch.json", "sweep0.csv.model.json", "sweep1.csv.model.json"]
+
+
 def test_option_errors_refuse_before_any_work(recordings, tmp_path, capsys):
     good, _ = recordings
     twin = tmp_path / good[0].name

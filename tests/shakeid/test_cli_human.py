@@ -175,3 +175,28 @@ def test_explain_on_a_short_record_prints_no_unreadable_shares(tmp_path):
     for f in figures:
         assert f == "n/a" or f.startswith("worse: gap x") or -1.0 <= float(f) <= 1.0, (f, p.stdout)
     assert any(f.startswith("worse: gap x") for f in figures), p.stdout  # the case this is about, reached
+
+
+def test_nothing_of_the_operators_is_overwritten_or_sent_without_a_scheme(tmp_path):
+    """The demo's --out folder may hold an operator's recording.h5: refused, not replaced (an earlier
+    demo's own file is replaced). A sweep through the service refuses an --out that exists before it
+    asks for the sweep, and a --server without http:// says so instead of 'unknown url type'."""
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    theirs = Recorder(folder / "recording.h5", fs_hz=100.0, operator="alice")
+    theirs.append(0, np.ones((200, 2)))
+    theirs.close("complete")
+    before = (folder / "recording.h5").read_bytes()
+    p = subprocess.run([SHAKEID, "demo", "--out", str(folder)], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and "is not an earlier demo's recording; it is never overwritten" in p.stderr, p.stderr
+    assert (folder / "recording.h5").read_bytes() == before
+    kept = tmp_path / "kept.h5"
+    kept.write_bytes(b"an operator's notes")
+    shape = ["--f-start-hz", "1", "--f-end-hz", "20", "--duration-s", "10", "--amplitude-mm", "1"]
+    p = subprocess.run([SHAKEID, "sweep", "--server", "http://127.0.0.1:9", "--token", "t", "--out", str(kept), *shape],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2 and "exists already; a recording is never overwritten" in p.stderr, p.stderr
+    assert kept.read_bytes() == b"an operator's notes"  # and no request was made: port 9 answers nothing
+    p = subprocess.run([SHAKEID, "sweep", "--server", "127.0.0.1:8000", "--token", "t", *shape],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2 and "give the service's URL with its scheme, e.g. http://127.0.0.1:8000" in p.stderr

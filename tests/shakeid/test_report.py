@@ -8,6 +8,7 @@ import pytest
 
 import reports.identification as idrep
 from identify.identifier import SparseIdentifier
+from reports.explain import FIGURES as EXPLAIN_FIGURES
 from reports.html import earlier_report
 from reports.identification import FIGURES, write_report
 from reports.text import coefficient_table
@@ -129,16 +130,19 @@ def test_lambda_path_figure_reads(figures):
 def test_a_new_report_leaves_nothing_of_the_earlier_one(report_dir, table1_run, tmp_path):
     """A report written into a folder that holds one replaces it whole: a fit without validation draws no
     validation.png, and the earlier fit's must not be left beside the new page (it would show another
-    model's free run)."""
+    model's free run); nor an explain report's files, when the folder held one of those."""
     out, _ = report_dir
     folder = tmp_path / "shared"
     for f in (*FIGURES, "index.html", "model.json", "coefficients.md"):
         (folder / f).parent.mkdir(exist_ok=True)
         (folder / f).write_bytes((out / f).read_bytes())
+    for f in (*EXPLAIN_FIGURES, "explain.json"):  # as an explain report into the same folder leaves them
+        (folder / f).write_bytes(b"from an earlier explain report")
     assert earlier_report(folder).startswith("the report written there at 20")
     unvalidated = SparseIdentifier(validate=False).fit(table1_run.recording)
     write_report(unvalidated, folder)
     assert not (folder / "validation.png").exists()
     assert all((folder / f).exists() for f in FIGURES if f != "validation.png")
+    assert not any((folder / f).exists() for f in (*EXPLAIN_FIGURES, "explain.json"))
     assert json.loads((folder / "model.json").read_text())["validation"] is None
     assert earlier_report(tmp_path / "empty") is None
