@@ -80,6 +80,12 @@ def test_one_recording_twice_is_refused(files, capsys, tmp_path):
         assert main(["identify", str(files[0]), str(files[1]), second]) == 2
         err = capsys.readouterr().err
         assert f"{second}: the same recording as {files[0]}" in err and "standard errors" in err, err
+    # a copy of the file, by another name: the same samples, refused as well (identify.joint)
+    copy = tmp_path / "copy.h5"
+    copy.write_bytes(files[0].read_bytes())
+    assert main(["identify", str(files[0]), str(copy)]) == 2
+    err = capsys.readouterr().err
+    assert f"{copy} holds the same samples as {files[0]} (a copy?)" in err and "standard errors" in err, err
 
 
 def test_chunked_is_refused_for_several_files(files, capsys):
