@@ -8,6 +8,8 @@ import re
 import time
 from pathlib import Path
 
+from identify.errors import ShakeidError
+
 #: a cell that is a number: "-3.7291", "1.2e+06", "-970.96 ± 0.089", "99.90 %"
 _NUMBER = re.compile(r"[-+−]?\d[\d.]*(e[-+]?\d+)?( ± \d[\d.]*(e[-+]?\d+)?)?( %)?")
 
@@ -27,10 +29,22 @@ def report_folder(out_dir) -> Path:
     from .explain import DOCUMENTS as EXPLAIN_DOCUMENTS, FIGURES as EXPLAIN_FIGURES
     from .identification import DOCUMENTS, FIGURES
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = check_report_folder(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ShakeidError(f"{out}: cannot create the report folder: {exc.strerror or exc}") from None
     for name in {"index.html", *FIGURES, *DOCUMENTS, *EXPLAIN_FIGURES, *EXPLAIN_DOCUMENTS}:
         (out / name).unlink(missing_ok=True)
+    return out
+
+
+def check_report_folder(out_dir) -> Path:
+    """out_dir as a Path; ShakeidError when it is a file (checked before any work: a fit is not wasted)."""
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ShakeidError(f"{out}: is a file, not a folder; a report is a folder of files (give a new or "
+                           "existing folder)")
     return out
 
 

@@ -131,6 +131,10 @@ def cmd_identify(args) -> int:
 
     if wants_out_of_core(args):  # a long HDF5 recording: read and identified chunk by chunk
         return identify_out_of_core(args, ident)
+    if args.report:
+        from reports.html import check_report_folder
+
+        check_report_folder(args.report)  # before the fit: a mistyped --report costs nothing
     rec = _read(args)
     data = check_identifiable(rec, args.file, args.accept_faulty)
     try:
@@ -158,6 +162,10 @@ def cmd_explain(args) -> int:
     from identify.quality import check_identifiable
 
     baseline = SparseModel.load(args.model) if args.model else None
+    if args.report:
+        from reports.html import check_report_folder
+
+        check_report_folder(args.report)  # before the analysis
     rec = _read(args)
     data = check_identifiable(rec, args.file, args.accept_faulty,  # as identify: no analysis of unusable data
                               "use --accept-faulty to analyse it anyway")
@@ -268,8 +276,10 @@ def cmd_simulate(args) -> int:
     truth = out.with_suffix(".truth.json")
     existing = [str(p) for p in (out, truth) if p.exists()]
     if existing and not args.overwrite:  # checked before the run: a mistyped --out costs nothing
-        raise ShakeidError(f"{' and '.join(existing)} exist(s) already; a recording is never overwritten "
-                           "(another --out, or --overwrite to replace a synthetic one)")
+        raise ShakeidError(f"{' and '.join(existing)} {'exists' if len(existing) == 1 else 'exist'} already; a "
+                           "recording is never overwritten (another --out, or --overwrite to replace a synthetic one)")
+    if not out.parent.is_dir():
+        raise ShakeidError(f"{out}: no folder {out.parent} to write it in")
     run = _synthesize(args)
     write_csv(out, run.recording)
     truth.write_text(json.dumps(run.truth, indent=2))
@@ -345,6 +355,10 @@ def main(argv=None) -> int:
         return args.func(args)
     except ShakeidError as exc:
         print(f"shakeid: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as exc:  # a file or folder the command was given (a missing folder, no permission): one line
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"shakeid: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("shakeid: interrupted", file=sys.stderr)

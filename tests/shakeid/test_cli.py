@@ -130,3 +130,18 @@ def test_version_is_the_packages():
     declared = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml").read_text())["project"]["version"]
     out = run("--version")
     assert out.returncode == 0 and out.stdout.strip() == f"shakeid {declared}"
+
+
+def test_paths_that_cannot_be_written_are_one_line_errors(table1_csv, tmp_path):
+    """A report folder that is a file, a folder that cannot be made, a recording into a folder that does
+    not exist: one line naming the path, exit 2, no traceback (they were FileExistsError and
+    FileNotFoundError tracebacks)."""
+    a_file = tmp_path / "notes.json"
+    a_file.write_text("{}")
+    for target, words in ((a_file, "is a file, not a folder"), ("/proc/shakeid-report/", "cannot create the report")):
+        proc = run("identify", table1_csv, "--report", target)
+        assert proc.returncode == 2 and words in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+        assert len(proc.stderr.strip().splitlines()) == 1
+    assert a_file.read_text() == "{}"
+    proc = run("simulate", "--out", tmp_path / "nodir" / "x.csv", "--duration-s", "5")
+    assert proc.returncode == 2 and "no folder" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
