@@ -10,7 +10,7 @@ import json
 import sys
 from pathlib import Path
 
-from identify.errors import ShakeidError
+from identify.errors import IdentificationError, ShakeidError
 from reports.text import gap_closed_text, summary
 
 from .batch_cmd import add_batch_parser
@@ -141,6 +141,8 @@ def cmd_identify(args) -> int:
         ident.fit(rec)
     except ValueError as exc:  # library/term specification problems
         raise ShakeidError(str(exc)) from None
+    except IdentificationError as exc:  # what the data cannot give (no excited band, too short): name the file
+        raise _naming(args.file, exc) from None
     result = {**ident.result(), **data}
     replaced = _write_report("identification", ident, args.report)
     if args.json:
@@ -169,7 +171,10 @@ def cmd_explain(args) -> int:
     rec = _read(args)
     data = check_identifiable(rec, args.file, args.accept_faulty,  # as identify: no analysis of unusable data
                               "use --accept-faulty to analyse it anyway")
-    analysis = DiscrepancyAnalysis(baseline=baseline, band_hz=tuple(args.band) if args.band else None).fit(rec)
+    try:
+        analysis = DiscrepancyAnalysis(baseline=baseline, band_hz=tuple(args.band) if args.band else None).fit(rec)
+    except IdentificationError as exc:
+        raise _naming(args.file, exc) from None
     result = {**analysis.result(), **data}
     replaced = _write_report("explain", analysis, args.report)
     if args.json:
@@ -208,6 +213,12 @@ def cmd_explain(args) -> int:
     if args.report:
         print(f"report: {Path(args.report) / 'index.html'}{replaced}")
     return 0
+
+
+def _naming(path, exc: Exception) -> ShakeidError:
+    """The error with the file it is about in front, unless it names it already."""
+    text = str(exc)
+    return ShakeidError(text if str(path) in text else f"{path}: {text}")
 
 
 def _write_report(kind: str, fitted, out_dir) -> str:

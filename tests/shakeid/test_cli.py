@@ -4,6 +4,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
@@ -67,6 +68,10 @@ def test_identify_budget_option(table1_csv, table1_truth):
     ("t,u,y\n1,2,3\n", ["--lambdas", "1"], "--lambdas"),
     ("t,table_acc,mass_acc\n" + "".join(f"{i / 100},{i % 7},{i % 5}\n" for i in range(400)),
      ["--extra-terms", "cos(q1)"], "unknown term"),
+    # white noise on both channels excites no band: what the data cannot give names the file too
+    ("t,table_acc,mass_acc\n" + "".join(f"{i / 100},{a:.6f},{b:.6f}\n" for i, (a, b) in
+                                        enumerate(np.random.default_rng(0).standard_normal((4000, 2)))), [],
+     "rec.csv: the input shows no excited frequency band"),
 ])
 def test_errors_are_one_clear_line(tmp_path, content, args, message):
     path = tmp_path / "rec.csv"
