@@ -301,6 +301,9 @@ def describe(path) -> dict:
                     "processed": [k for k in e["processed"] if k != "time"] if "processed" in e else [],
                     "quality": read_quality(f)}
     except (OSError, KeyError) as exc:
+        if "unable to lock file" in str(exc):  # HDF5's lock: a writer has it open
+            raise RecordingError(f"{path}: is open for writing by another process (a sweep still recording it?); "
+                                 "read it when that has ended") from None
         raise RecordingError(f"{path}: not a shakeid HDF5 recording ({exc})") from None
 
 

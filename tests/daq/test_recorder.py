@@ -102,3 +102,16 @@ def test_identify_reads_hdf5_directly(tmp_path, table1_run, table1_truth):
     bad.write_bytes(b"not hdf5 at all" * 10)
     proc = subprocess.run([SHAKEID, "identify", str(bad)], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and proc.stderr.startswith("shakeid: error:") and "Traceback" not in proc.stderr
+
+
+def test_a_recording_being_written_is_said_to_be_in_use(tmp_path):
+    """While a sweep writes its file (HDF5 locks it), reading it says so: it is not 'not a shakeid
+    recording'. Once closed it reads."""
+    path = tmp_path / "live.h5"
+    rec = Recorder(path, fs_hz=100.0)
+    rec.append(0, np.ones((50, 2)))
+    script = f"from daq.recorder import describe\ndescribe({str(path)!r})"
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert "is open for writing by another process (a sweep still recording it?)" in proc.stderr, proc.stderr
+    rec.close("complete")
+    assert describe(path)["status"] == "complete"
