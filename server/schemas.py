@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictFloat, field_validator
 
 from daq.campaign import MAX_SWEEPS, NAME_PATTERN
 
@@ -17,6 +17,10 @@ class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
+#: A number in a request that moves the table: a JSON number only. Pydantic's lax mode turned true and "1"
+#: into 1.0, and a sweep with "amplitude_mm": true ran at 1 mm.
+Number = StrictFloat
+
 #: Upper bounds of the request schemas' frequencies (Hz) and amplitudes (mm): numbers beyond any rig, so
 #: that a request above the rig's own limits is refused by those limits, in their words ("amplitude
 #: 2000 mm above the stroke limit 5 mm"), not by the schema ("less than or equal to 1000").
@@ -24,11 +28,11 @@ MAX_HZ, MAX_MM = 1e6, 1e6
 
 
 class SweepIn(Strict):
-    f_start_hz: float = Field(gt=0, le=MAX_HZ, description="start frequency, Hz")
-    f_end_hz: float = Field(gt=0, le=MAX_HZ, description="end frequency, Hz")
-    duration_s: float = Field(gt=0, le=1e5, description="sweep duration, s")
-    amplitude_mm: float = Field(gt=0, le=MAX_MM, description="table displacement amplitude, mm")
-    settle_s: float = Field(2.0, ge=0, le=60, description="recording after the sweep ends, s")
+    f_start_hz: Number = Field(gt=0, le=MAX_HZ, description="start frequency, Hz")
+    f_end_hz: Number = Field(gt=0, le=MAX_HZ, description="end frequency, Hz")
+    duration_s: Number = Field(gt=0, le=1e5, description="sweep duration, s")
+    amplitude_mm: Number = Field(gt=0, le=MAX_MM, description="table displacement amplitude, mm")
+    settle_s: Number = Field(2.0, ge=0, le=60, description="recording after the sweep ends, s")
     note: str = Field("", max_length=500)
 
 
@@ -138,17 +142,17 @@ class JobOut(BaseModel):
 
 class CampaignSweepDefaults(Strict):
     """Every sweep of a campaign: an "up" sweep goes f_start_hz -> f_end_hz, a "down" one back."""
-    f_start_hz: float = Field(gt=0, le=MAX_HZ, description="the lower frequency, Hz (below f_end_hz)")
-    f_end_hz: float = Field(gt=0, le=MAX_HZ, description="the upper frequency, Hz")
-    duration_s: float = Field(gt=0, le=1e5, description="each sweep's duration, s")
-    settle_s: float = Field(2.0, ge=0, le=60, description="recording after each sweep ends, s")
+    f_start_hz: Number = Field(gt=0, le=MAX_HZ, description="the lower frequency, Hz (below f_end_hz)")
+    f_end_hz: Number = Field(gt=0, le=MAX_HZ, description="the upper frequency, Hz")
+    duration_s: Number = Field(gt=0, le=1e5, description="each sweep's duration, s")
+    settle_s: Number = Field(2.0, ge=0, le=60, description="recording after each sweep ends, s")
 
 
 class AmplitudeRange(Strict):
     """Amplitudes start, start + step, ... up to stop (included when it is on the grid), mm."""
-    start: float = Field(gt=0, le=MAX_MM)
-    stop: float = Field(gt=0, le=MAX_MM)
-    step: float = Field(gt=0, le=MAX_MM)
+    start: Number = Field(gt=0, le=MAX_MM)
+    stop: Number = Field(gt=0, le=MAX_MM)
+    step: Number = Field(gt=0, le=MAX_MM)
 
 
 class CampaignIn(Strict):
@@ -156,11 +160,11 @@ class CampaignIn(Strict):
     amplitude, for each direction, one sweep; `rest_between_s` of wall time with the table at rest between two."""
     name: str = Field(pattern=NAME_PATTERN, description="letters, digits, . _ - (1-64)")
     sweep: CampaignSweepDefaults
-    amplitudes_mm: list[Annotated[float, Field(gt=0, le=MAX_MM)]] | AmplitudeRange = Field(
+    amplitudes_mm: list[Annotated[Number, Field(gt=0, le=MAX_MM)]] | AmplitudeRange = Field(
         description="table displacement amplitudes, mm: a list or {start, stop, step}")
     directions: list[Literal["up", "down"]] = Field(["up"], min_length=1, max_length=2)
     repeats: int = Field(1, ge=1, le=MAX_SWEEPS)
-    rest_between_s: float = Field(0.0, ge=0, le=86400, description="table at rest between two sweeps, s")
+    rest_between_s: Number = Field(0.0, ge=0, le=86400, description="table at rest between two sweeps, s")
     note: str = Field("", max_length=500)
 
 

@@ -42,6 +42,10 @@ def test_sweep_live_model_and_the_rules_around_it(service):
     assert viewer.post("/api/sweeps", json=SWEEP).status_code == 403
     unsafe = op.post("/api/sweeps", json={**SWEEP, "amplitude_mm": 9.0})
     assert unsafe.status_code == 422 and "stroke limit 5 mm" in unsafe.json()["detail"]
+    # a request that moves the table takes JSON numbers only: true and "1" were read as 1.0 and a sweep ran
+    for loose in (True, "1"):
+        r = op.post("/api/sweeps", json={**SWEEP, "amplitude_mm": loose})
+        assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "amplitude_mm"], r.text
     r = op.post("/api/sweeps", json=SWEEP)
     assert r.status_code == 202, r.text
     sweep_id = r.json()["id"]
