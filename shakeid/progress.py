@@ -71,5 +71,8 @@ class Progress:
 
 def rig_label(state: str, frequency_hz: float, position_mm: float) -> str:
     """A sweep's progress label: its state, the PLC's frequency and the table's position (local sweeps and
-    sweeps through the service print the same)."""
+    sweeps through the service print the same). The frequency only while the PLC runs a sweep: done or
+    idle, it reads 0, which is no frequency of the sweep."""
+    if state != "running":
+        return f"{state:8s}  table {position_mm:+6.2f} mm"
     return f"{state:8s} {frequency_hz:6.2f} Hz  table {position_mm:+6.2f} mm"

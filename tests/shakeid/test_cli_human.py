@@ -97,9 +97,11 @@ def test_recordings_gives_identifys_verdict_not_only_the_signals(tmp_path):
 
 
 class Status:
-    """A PLC status as SweepRunner hands it to on_progress."""
+    """A PLC status as SweepRunner hands it to on_progress: running (1) through the sweep, done (2) at its
+    end, where the PLC's frequency reads 0."""
     def __init__(self, frac):
-        self.state, self.frequency_hz, self.position_mm = 1, 1 + 19 * frac, 0.5
+        done = frac >= 1
+        self.state, self.frequency_hz, self.position_mm = (2, 0.0, 0.0) if done else (1, 1 + 19 * frac, 0.5)
 
 
 def test_progress_without_a_tty_prints_plain_lines():
@@ -111,8 +113,8 @@ def test_progress_without_a_tty_prints_plain_lines():
     lines = out.getvalue().splitlines()
     assert "\r" not in out.getvalue()
     assert len(lines) == 11  # 0, 10, ..., 100 %: one line each tenth
-    assert lines[4].startswith("sweep 40 % (12.0 s of 30 s)  running")
-    assert lines[-1].startswith("sweep 100 % (30.0 s of 30 s)")
+    assert lines[4] == "sweep 40 % (12.0 s of 30 s)  running    8.60 Hz  table  +0.50 mm"
+    assert lines[-1] == "sweep 100 % (30.0 s of 30 s)  done      table  +0.00 mm"  # no "done 0.00 Hz"
 
 
 def test_progress_without_a_tty_says_where_an_aborted_sweep_ended():
