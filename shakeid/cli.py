@@ -164,6 +164,8 @@ def cmd_explain(args) -> int:
     from identify.quality import check_identifiable
 
     baseline = SparseModel.load(args.model) if args.model else None
+    if args.model:
+        _warn_if_failed(args.model)
     if args.report:
         from reports.html import check_report_folder
 
@@ -213,6 +215,18 @@ def cmd_explain(args) -> int:
     if args.report:
         print(f"report: {Path(args.report) / 'index.html'}{replaced}")
     return 0
+
+
+def _warn_if_failed(model_path) -> None:
+    """A baseline whose own identification failed (its `status` in an identify --json / model.json) is
+    analysed as asked, with a warning first: its misfit is as much the fit's failure as missing physics."""
+    try:
+        doc = json.loads(Path(model_path).read_text())
+    except (OSError, ValueError):
+        return
+    if isinstance(doc, dict) and doc.get("status") == "failed":
+        print(f"shakeid: warning: {model_path} is a model whose identification failed ({doc.get('reason', '')}); "
+              "its misfit is as much that failure as any missing effect", file=sys.stderr)
 
 
 def _naming(path, exc: Exception) -> ShakeidError:

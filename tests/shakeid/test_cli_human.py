@@ -202,3 +202,21 @@ def test_nothing_of_the_operators_is_overwritten_or_sent_without_a_scheme(tmp_pa
     p = subprocess.run([SHAKEID, "sweep", "--server", "127.0.0.1:8000", "--token", "t", *shape],
                        capture_output=True, text=True, timeout=60)
     assert p.returncode == 2 and "give the service's URL with its scheme, e.g. http://127.0.0.1:8000" in p.stderr
+
+
+def test_explain_warns_of_a_baseline_whose_identification_failed(tmp_path, capsys):
+    """A model.json whose own status is failed is analysed as asked, with a warning first (its misfit is
+    the failure as much as missing physics); a model that did not fail gets none."""
+    from shakeid.cli import main
+    from sim.rig import RigParameters
+
+    doc = {**RigParameters.paper_table1().model().to_dict(), "status": "failed", "reason": "the free-run fit diverged"}
+    failed = tmp_path / "failed.json"
+    failed.write_text(json.dumps(doc))
+    assert main(["explain", str(tmp_path / "nosuch.csv"), "--model", str(failed)]) == 2  # the file: after the warning
+    err = capsys.readouterr().err
+    assert f"warning: {failed} is a model whose identification failed (the free-run fit diverged)" in err, err
+    fine = tmp_path / "fine.json"
+    fine.write_text(json.dumps({**doc, "status": "ok"}))
+    assert main(["explain", str(tmp_path / "nosuch.csv"), "--model", str(fine)]) == 2
+    assert "warning" not in capsys.readouterr().err
