@@ -86,9 +86,19 @@ def fit_text(metric: dict) -> str:
 def summary(result: dict, source: str) -> str:
     """What `shakeid identify` prints: the coefficient table, the held-out fit, the physical parameters."""
     lines = [f"identified {source}: method {result['method']}, selection {result['selection']['rule']}", ""]
+    failed = result.get("status") == "failed"
+    if failed:  # first, before any figure of the fit is read as the rig's
+        lines += [f"MODEL FAILED: {result['reason']}", "  (what follows is the fit that failed, not a model of the rig)",
+                  ""]
     if result.get("accepted_faulty"):
         lines += ["accepted faulty data (--accept-faulty): " + "; ".join(result["accepted_faulty"]), ""]
     lines.append(coefficient_table(result))
+    unsettled = unsettled_terms(result)
+    if unsettled:
+        lines.append("unsettled selection: " + "; ".join(
+            f"{term} ({eq}) {'kept' if kept else 'left out'} though P(kept) {p:.2f}" for eq, term, kept, p in unsettled)
+            + ": the held-out placements disagree on these terms, so the model is not settled by this record "
+              "(a longer sweep, or a stronger one, carries more of them)")
     val = result.get("validation")
     if val:
         h = val["heldout"]
@@ -105,6 +115,19 @@ def summary(result: dict, source: str) -> str:
                                               for name, v, _, u in physical_rows(phys)))
         lines.append(f"  design k3 = {phys['design']['cubic_stiffness_n_per_m3']:.4g} N/m³, for comparison: what the "
                      "rig's springs and cam profile give on paper (identify/physical.py)")
-    if result.get("status") == "failed":
+    if failed:
         lines.append(f"MODEL FAILED: {result['reason']}")
     return "\n".join(lines)
+
+
+def unsettled_terms(result: dict) -> list[tuple[str, str, bool, float]]:
+    """(equation, term, kept, inclusion probability) of every term the selection decided against most of
+    its held-out placements: kept with P(kept) < 0.5, or left out with P(kept) >= 0.5."""
+    out = []
+    for eq, probs in (result.get("inclusion_probability") or {}).items():
+        model = result["model"].get(eq, {})
+        for term, p in probs.items():
+            kept = term in model
+            if (kept and p < 0.5) or (not kept and p >= 0.5):
+                out.append((eq, term, kept, float(p)))
+    return out

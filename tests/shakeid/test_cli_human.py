@@ -220,3 +220,22 @@ def test_explain_warns_of_a_baseline_whose_identification_failed(tmp_path, capsy
     fine.write_text(json.dumps({**doc, "status": "ok"}))
     assert main(["explain", str(tmp_path / "nosuch.csv"), "--model", str(fine)]) == 2
     assert "warning" not in capsys.readouterr().err
+
+
+def test_a_selection_the_placements_disagree_with_is_said_to_be_unsettled(make_run):
+    """3.9 s cut from the middle of a sweep (7-10 Hz of it) carries no settled model: the fit keeps q2^2
+    and q2^4, which most held-out placements leave out (P(kept) ~0.3), and drops terms most keep. The
+    summary says the selection is unsettled, term by term; a full sweep's summary does not."""
+    from identify.identifier import SparseIdentifier
+    from reports.text import summary, unsettled_terms
+    from sim.sweep import SineSweep
+
+    rec = make_run(sweep=SineSweep(1, 20, 30, 1.3), noise=0.005, seed=0).recording
+    short = SparseIdentifier().fit(rec.slice(20000, 28000)).result()
+    flagged = {(eq, term): (kept, p) for eq, term, kept, p in unsettled_terms(short)}
+    assert flagged[("q1_dot", "q2^2")][0] and flagged[("q1_dot", "q2^2")][1] < 0.5
+    assert all(kept == (term in short["model"][eq]) for (eq, term), (kept, _) in flagged.items())
+    assert "unsettled selection: " in summary(short, "short.csv") and "q2^2 (q1_dot) kept though P(kept) 0.33" in \
+        summary(short, "short.csv")
+    full = SparseIdentifier().fit(rec).result()
+    assert unsettled_terms(full) == [] and "unsettled" not in summary(full, "sweep.csv")
