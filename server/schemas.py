@@ -97,7 +97,7 @@ class ReadOptions(Strict):
 
 class IdentifyIn(ReadOptions):
     """The options of `shakeid identify`; all optional."""
-    degree: int | None = Field(None, ge=1, le=7)
+    degree: int | None = Field(None, ge=1, le=8)  # the library's range, as the CLI's
     method: Literal["admm", "stlsq"] | None = None
     selection: Literal["heldout", "paper", "bic"] | None = None
     tolerance: float | None = Field(None, gt=0, le=10)

@@ -152,7 +152,8 @@ def cmd_identify(args) -> int:
         if args.report:
             print(f"report: {Path(args.report) / 'index.html'}{replaced}")
     if result["status"] == "failed":
-        print(f"shakeid: identification failed: {args.file}: {result['reason']}", file=sys.stderr)
+        print(f"shakeid: identification failed: {args.file}: {result['reason']} (`shakeid explain {args.file}` "
+              "looks for the effect the library misses)", file=sys.stderr)
         return 1
     return 0
 

@@ -90,7 +90,8 @@ def test_a_model_that_is_not_a_model_exits_1_while_the_default_fit_is_ok(table1_
     doc = json.loads(bad.stdout)
     assert bad.returncode == 1 and doc["status"] == "failed" and "one-step fit" in doc["reason"]
     assert doc["model"]["q1_dot"].keys() == {"zdd"}
-    assert bad.stderr.strip() == f"shakeid: identification failed: {table1_csv}: {doc['reason']}"
+    assert bad.stderr.strip() == (f"shakeid: identification failed: {table1_csv}: {doc['reason']} "
+                                  f"(`shakeid explain {table1_csv}` looks for the effect the library misses)")
     human = subprocess.run([SHAKEID, "identify", str(table1_csv), "--max-terms", "3"], capture_output=True, text=True,
                            timeout=300)
     assert human.returncode == 1 and "MODEL FAILED: held-out free-run fit of the acceleration is -4" in human.stdout
