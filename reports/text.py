@@ -131,3 +131,13 @@ def unsettled_terms(result: dict) -> list[tuple[str, str, bool, float]]:
             if (kept and p < 0.5) or (not kept and p >= 0.5):
                 out.append((eq, term, kept, float(p)))
     return out
+
+
+def model_text(model: dict) -> str:
+    """A model's equations on one line, coefficients to 5 significant digits: "q1_dot = -3.7291 q1 - 971.03
+    q2 + ...; q2_dot = q1" (the JSON carries them in full)."""
+    def term(k: int, name: str, c: float) -> str:
+        sign = ("-" if c < 0 else "") if k == 0 else (" - " if c < 0 else " + ")
+        return f"{sign}{name}" if abs(c) == 1 else f"{sign}{abs(c):.5g} {name}"
+    return "; ".join(f"{eq} = " + ("".join(term(k, n, c) for k, (n, c) in enumerate(terms.items())) or "0")
+                     for eq, terms in model.items())

@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from identify.errors import IdentificationError, ShakeidError
-from reports.text import gap_closed_text, summary
+from reports.text import gap_closed_text, model_text, summary
 
 from .batch_cmd import add_batch_parser
 from .campaign_cmd import add_campaign_parser
@@ -208,7 +208,7 @@ def cmd_explain(args) -> int:
             if e.get("evidence"):
                 print(f"  {e['evidence']}")
         print(f"gap {f(result['gap_before'])} -> {f(result['gap_after'])}")
-        print("model: " + json.dumps(result["model"]))
+        print("model: " + model_text(result["model"]) + " (in full: --json)")
     if result.get("remaining"):
         top = result["remaining"]["segments"][0]
         print(f"still missed most at t = {top['t_start_s']:.1f}-{top['t_end_s']:.1f} s "

@@ -239,3 +239,14 @@ def test_a_selection_the_placements_disagree_with_is_said_to_be_unsettled(make_r
         summary(short, "short.csv")
     full = SparseIdentifier().fit(rec).result()
     assert unsettled_terms(full) == [] and "unsettled" not in summary(full, "sweep.csv")
+
+
+def test_a_model_reads_as_equations_not_json():
+    """explain prints its model as equations with 5 significant digits (it printed the JSON, 17 digits)."""
+    from reports.text import model_text
+
+    model = {"q1_dot": {"q1": -3.72914, "q2": -971.0312, "q1*q2^2": 11616.25, "q2^3": -2503100.4, "zdd": -1.0243},
+             "q2_dot": {"q1": 1.0}}
+    assert model_text(model) == ("q1_dot = -3.7291 q1 - 971.03 q2 + 11616 q1*q2^2 - 2.5031e+06 q2^3 - 1.0243 zdd; "
+                                 "q2_dot = q1")
+    assert model_text({"q1_dot": {}, "q2_dot": {"q1": -1.0}}) == "q1_dot = 0; q2_dot = -q1"
