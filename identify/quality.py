@@ -279,13 +279,13 @@ def verdict(report: dict, input: str, output: str) -> tuple[bool, list[str]]:
             what = ("reads exactly 0" if kind == "dead" else f"is stuck at {f['value']:.6g}" if kind == "stuck"
                     else f"has {sum(h['samples'] for h in hits)} non-finite samples")
             more = f" (and {len(hits) - 1} more stretch(es))" if len(hits) > 1 else ""
-            reasons.append(f"{ch} {what} from t = {f['t_start_s']:.3f} s for {f['count']} samples "
+            reasons.append(f"{ch} {what} from t = {f['t_start_s']:.3f} s{_into(f, report)} for {f['count']} samples "
                            f"({f['count'] / report['fs_hz']:.3g} s, rows {f['first']}-{f['first'] + f['count']}){more}")
         share = report["clipped_share"].get(ch, 0.0)
         if share > MAX_CLIPPED_SHARE:
             first = next(f for f in flags if f["channel"] == ch and f["kind"] == "clipped")
             reasons.append(f"{ch} clipped at full scale in {100 * share:.3g} % of the samples (limit "
-                           f"{100 * MAX_CLIPPED_SHARE:g} %), from t = {first['t_start_s']:.3f} s")
+                           f"{100 * MAX_CLIPPED_SHARE:g} %), from t = {first['t_start_s']:.3f} s{_into(first, report)}")
     ratio = report.get("mass_table_rms_ratio")
     if report.get("pair") == [input, output] and ratio is not None and not RATIO_RANGE[0] <= ratio <= RATIO_RANGE[1]:
         reasons.append(f"RMS ratio {output}/{input} = {ratio:.3g}, outside the physically plausible "
@@ -335,6 +335,13 @@ def assess_recording(rec) -> dict:
         f["t_end_s"] += t0
     usable, reasons = verdict(report, rec.input_name, rec.output_name)
     return {**report, "usable_for_identification": usable, "reasons": reasons}
+
+
+def _into(flag: dict, report: dict) -> str:
+    """" (24.9 s into the recording)" where the file's time axis does not start at 0 (a DAQ file's is the
+    rig's clock), so a time on it is not how far into the recording the flag is; "" where it is."""
+    into = flag["first"] / report["fs_hz"]
+    return f" ({into:.1f} s into the recording)" if abs(flag["t_start_s"] - into) > 0.5 else ""
 
 
 def status_problem(status: str | None, reason: str | None = None) -> str | None:

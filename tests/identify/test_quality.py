@@ -36,6 +36,11 @@ def test_a_channel_dead_from_sample_k_is_flagged_from_k_with_its_count(block):
     assert rep["flags"][0]["t_start_s"] == pytest.approx(k / FS)
     usable, reasons = verdict(rep, "table_acc", "mass_acc")
     assert not usable and "mass_acc reads exactly 0 from t = 6.028 s for 27655 samples" in reasons[0]
+    # a DAQ file's time axis is the rig's clock: a time on it is also said as how far into the recording
+    for f in rep["flags"]:
+        f["t_start_s"] += 508.44
+    usable, reasons = verdict(rep, "table_acc", "mass_acc")
+    assert "mass_acc reads exactly 0 from t = 514.468 s (6.0 s into the recording) for 27655 samples" in reasons[0]
 
 
 def test_stuck_value_flagged_only_from_the_minimum_length():
