@@ -187,8 +187,7 @@ def cmd_explain(args) -> int:
     print(f"baseline: {result['baseline']['source']}; {result['metric']}: {f(result['gap_before'])}"
           f" (sensor-noise floor <= {f(result['noise_floor_upper'])})")
     worst = result["localisation"]["time"]["worst_window"]
-    print(f"largest misfit: t = {worst['t_start_s']:.1f}-{worst['t_end_s']:.1f} s, excitation "
-          f"{worst['excitation_hz']:.1f} Hz")
+    print(f"largest misfit: {_span(worst)} into the recording, excitation {worst['excitation_hz']:.1f} Hz")
     for c in result["candidates"]:
         closed = c.get("gap_share_closed")
         p = "not tested" if c.get("kind") == "measurement" else f"{c['p_value']:.1e}"  # searched, no Wald test
@@ -211,11 +210,19 @@ def cmd_explain(args) -> int:
         print("model: " + model_text(result["model"]) + " (in full: --json)")
     if result.get("remaining"):
         top = result["remaining"]["segments"][0]
-        print(f"still missed most at t = {top['t_start_s']:.1f}-{top['t_end_s']:.1f} s "
+        print(f"still missed most at {_span(top)} "
               f"(excitation {top['excitation_hz']:.1f} Hz, {100 * top['share_of_error']:.0f} % of the error)")
     if args.report:
         print(f"report: {Path(args.report) / 'index.html'}{replaced}")
     return 0
+
+
+def _span(window: dict) -> str:
+    """"t = 16.4-17.9 s" of a window (t_start_s, t_end_s), to 0.01 s when it is shorter than a second (a
+    short record's windows read "2.2-2.2 s" to 0.1 s)."""
+    a, b = window["t_start_s"], window["t_end_s"]
+    digits = 1 if b - a >= 1 else 2
+    return f"t = {a:.{digits}f}-{b:.{digits}f} s"
 
 
 def _warn_if_failed(model_path) -> None:

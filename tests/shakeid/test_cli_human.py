@@ -177,6 +177,11 @@ def test_explain_on_a_short_record_prints_no_unreadable_shares(tmp_path):
     for f in figures:
         assert f == "n/a" or f.startswith("worse: gap x") or -1.0 <= float(f) <= 1.0, (f, p.stdout)
     assert any(f.startswith("worse: gap x") for f in figures), p.stdout  # the case this is about, reached
+    # where it misses most: a window of ~0.2 s, to 0.01 s, at a frequency the 1-10 Hz sweep has (a window's
+    # own FFT read 27.3 Hz on a 4 s record: its first bin)
+    m = re.search(r"largest misfit: t = (\d+\.\d\d)-(\d+\.\d\d) s into the recording, excitation (\S+) Hz",
+                  p.stdout)
+    assert m and 0.9 <= float(m.group(3)) <= 10.5, p.stdout
 
 
 def test_nothing_of_the_operators_is_overwritten_or_sent_without_a_scheme(tmp_path):
