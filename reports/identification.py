@@ -30,11 +30,12 @@ DOCUMENTS = ("model.json", "coefficients.md")
 RESIDUAL = "#c0392b"  # the residual traces' colour, the same in every panel
 
 
-def write_report(ident, out_dir) -> Path:
+def write_report(ident, out_dir, result: dict | None = None) -> Path:
     """Write the report of a fitted SparseIdentifier into `out_dir` (created; an earlier report's files
-    there are replaced, none left behind: html.report_folder). Returns the folder."""
+    there are replaced, none left behind: html.report_folder). Returns the folder. `result`: the document
+    to write as model.json, when the caller has more than ident.result() (the CLI's data_quality)."""
     out = report_folder(out_dir)
-    result = ident.result()
+    result = ident.result() if result is None else result
     (out / "model.json").write_text(json.dumps(result, indent=2))
     (out / "coefficients.md").write_text(coefficient_table(result))
     sig, rec = ident.states_, ident.recording_
@@ -225,7 +226,8 @@ def _index_html(out: Path, ident, result: dict) -> str:
     srows = []
     for e, (eq, s) in enumerate(ident.selections_.items()):  # the path's own parameter (lambda or threshold)
         srows.append([eq, str(s.index + 1), f"{ident.path_.params[s.index, e]:.3g}", plural(int(s.support.sum()), "term"),
-                      f"{s.score[s.index]:.3g}", "-" if np.isnan(s.threshold) else f"{s.threshold:.3g}"])
+                      # an exactly fitting equation's MSE is rounding, which can fall below 0
+                      f"{max(s.score[s.index], 0.0):.3g}", "-" if np.isnan(s.threshold) else f"{s.threshold:.3g}"])
     if srows:
         page.heading("Selection")
         n_path = ident.path_.params.shape[0]
@@ -233,7 +235,7 @@ def _index_html(out: Path, ident, result: dict) -> str:
                     "tolerance (MSE)"],
                    srows, f"Where on the path each equation's model was chosen, by the {sel.get('rule')} rule "
                           f"({result.get('method')}, {plural(n_path, 'path point')}): the sparsest point whose score is "
-                          "within the tolerance (Figure 3).")
+                          "within the tolerance (Figure 3). Points are counted from 1 (the JSON's index from 0).")
     page.heading("Figures")
     captions = {
         "input.png": "Input: " + ("the table acceleration over the whole record, as the accelerometer on the table "

@@ -144,7 +144,7 @@ def cmd_identify(args) -> int:
     except IdentificationError as exc:  # what the data cannot give (no excited band, too short): name the file
         raise _naming(args.file, exc) from None
     result = {**ident.result(), **data}
-    replaced = _write_report("identification", ident, args.report)
+    replaced = _write_report("identification", ident, args.report, result)
     if args.json:
         print(json.dumps(result))
     else:
@@ -243,9 +243,10 @@ def _naming(path, exc: Exception) -> ShakeidError:
     return ShakeidError(text if str(path) in text else f"{path}: {text}")
 
 
-def _write_report(kind: str, fitted, out_dir) -> str:
-    """Write the identification or explain report of `fitted` into out_dir (nothing when it is None);
-    returns what the operator is told it replaced: " (replaces the report written there at ...)" or ""."""
+def _write_report(kind: str, fitted, out_dir, result: dict | None = None) -> str:
+    """Write the identification or explain report of `fitted` into out_dir (nothing when it is None;
+    `result`: the identification's document as --json prints it, for model.json); returns what the
+    operator is told it replaced: " (replaces the report written there at ...)" or ""."""
     if not out_dir:
         return ""
     from reports.html import earlier_report
@@ -254,7 +255,7 @@ def _write_report(kind: str, fitted, out_dir) -> str:
     if kind == "identification":
         from reports.identification import write_report
 
-        write_report(fitted, out_dir)
+        write_report(fitted, out_dir, result)
     else:
         from reports.explain import write_explain_report
 

@@ -34,6 +34,7 @@ def test_identify_options_and_report(table1_csv, tmp_path):
     assert (out / "model.json").exists() and (out / "lambda_path.png").exists()
     doc = json.loads((out / "model.json").read_text())
     assert doc["method"] == "stlsq" and doc["selection"]["rule"] == "paper" and len(doc["library"]["terms"]) == 11
+    assert "data_quality" in doc  # the report's model.json is the whole result, as --json prints it
     chosen = doc["selection"]["q1_dot"]  # the path's threshold and the rule's tolerance, both kept
     assert chosen["threshold"] > 0 and chosen["score_tolerance"] > 0 and chosen["threshold"] != chosen["score_tolerance"]
     assert "replaces" not in proc.stdout
