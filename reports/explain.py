@@ -17,12 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .html import Page, report_folder
+from .html import EXPLAIN_DOCUMENTS, EXPLAIN_FIGURES, Page, report_folder
 from .identification import RESIDUAL, _save, plt
 from .text import gap_closed_text
 
-FIGURES = ("residual_time.png", "residual_state.png", "candidates.png", "gap.png")
-DOCUMENTS = ("explain.json",)
+FIGURES, DOCUMENTS = EXPLAIN_FIGURES, EXPLAIN_DOCUMENTS
 CLIP = -0.5  # candidates.png: shooting-gap bars below this are drawn cut here, their value written on them
 
 

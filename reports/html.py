@@ -21,20 +21,26 @@ STYLE = ("body{font-family:sans-serif;max-width:1100px;margin:1em auto;padding:0
          ".note{font-size:.9em;color:#333}")
 
 
+#: What each kind of report writes beside its index.html (reports.identification, reports.explain take
+#: theirs from here): a folder holds one report, and report_folder clears both kinds.
+IDENTIFICATION_FIGURES = ("input.png", "output.png", "lambda_path.png", "validation.png")
+IDENTIFICATION_DOCUMENTS = ("model.json", "coefficients.md")
+EXPLAIN_FIGURES = ("residual_time.png", "residual_state.png", "candidates.png", "gap.png")
+EXPLAIN_DOCUMENTS = ("explain.json",)
+
+
 def report_folder(out_dir) -> Path:
     """The report folder `out_dir`, created, with every file an earlier report (identification or
     explain) wrote there removed: a folder holds one report, and a figure or document the new one does
     not write (validation.png of a fit that was not validated; model.json under an explain report) must
     not be left beside its page."""
-    from .explain import DOCUMENTS as EXPLAIN_DOCUMENTS, FIGURES as EXPLAIN_FIGURES
-    from .identification import DOCUMENTS, FIGURES
-
     out = check_report_folder(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ShakeidError(f"{out}: cannot create the report folder: {exc.strerror or exc}") from None
-    for name in {"index.html", *FIGURES, *DOCUMENTS, *EXPLAIN_FIGURES, *EXPLAIN_DOCUMENTS}:
+    every = ("index.html", *IDENTIFICATION_FIGURES, *IDENTIFICATION_DOCUMENTS, *EXPLAIN_FIGURES, *EXPLAIN_DOCUMENTS)
+    for name in every:
         (out / name).unlink(missing_ok=True)
     return out
 

@@ -22,11 +22,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
-from .html import Page, report_folder  # noqa: E402
+from .html import IDENTIFICATION_DOCUMENTS, IDENTIFICATION_FIGURES, Page, report_folder  # noqa: E402
 from .text import DESIGN_K3_NOTE, coefficient_rows, coefficient_table, fit_text, physical_rows, plural, unit  # noqa: E402
 
-FIGURES = ("input.png", "output.png", "lambda_path.png", "validation.png")
-DOCUMENTS = ("model.json", "coefficients.md")
+FIGURES, DOCUMENTS = IDENTIFICATION_FIGURES, IDENTIFICATION_DOCUMENTS
 RESIDUAL = "#c0392b"  # the residual traces' colour, the same in every panel
 
 

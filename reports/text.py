@@ -88,8 +88,8 @@ def summary(result: dict, source: str) -> str:
     lines = [f"identified {source}: method {result['method']}, selection {result['selection']['rule']}", ""]
     failed = result.get("status") == "failed"
     if failed:  # first, before any figure of the fit is read as the rig's
-        lines += [f"MODEL FAILED: {result['reason']}", "  (what follows is the fit that failed, not a model of the rig)",
-                  ""]
+        lines += [f"MODEL FAILED: {result['reason']}",
+                  "  (what follows is the fit that failed, not a model of the rig)", ""]
     if result.get("accepted_faulty"):
         lines += ["accepted faulty data (--accept-faulty): " + "; ".join(result["accepted_faulty"]), ""]
     lines.append(coefficient_table(result))

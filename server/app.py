@@ -42,26 +42,6 @@ def Id():  # noqa: N802 - a fresh parameter object per route (FastAPI binds each
     return Path(pattern=ID_PATTERN, description="12 hex digits")
 
 
-#: What a pattern asks for, in words, by the parameter's name: pydantic's message quotes the regex.
-PATTERN_WORDS = {
-    "filename": "a recording's file name: letters, digits, '.', '-' and '_' (up to 100), ending in .csv, .mat, .h5 "
-                "or .hdf5",
-    "name": "a plot's file name: lower-case letters, digits and '_', ending in .png",
-}
-
-
-def _in_words(err: dict) -> str:
-    """A validation error's message, a pattern mismatch said in words (PATTERN_WORDS; an id: 12 hex digits)."""
-    loc = err.get("loc", ())
-    if err.get("type") == "string_pattern_mismatch" and loc:
-        field = str(loc[-1])
-        if field in PATTERN_WORDS:
-            return f"should be {PATTERN_WORDS[field]}"
-        if field.endswith("id"):
-            return "should be an id: 12 hex digits"
-    return err.get("msg", "")
-
-
 def create_app(settings: Settings) -> FastAPI:
     settings.prepare()
     state: dict = {}
@@ -109,7 +89,7 @@ def create_app(settings: Settings) -> FastAPI:
     async def invalid_request(request: Request, exc: RequestValidationError):
         """422 naming each field; inputs echoed only as text, so NaN, Infinity or 1e400 in a body get a
         422 like any other bad value (JSON cannot carry them back, and a 500 would drop the connection)."""
-        detail = [{"loc": list(err.get("loc", ())), "msg": _in_words(err), "type": err.get("type", ""),
+        detail = [{"loc": list(err.get("loc", ())), "msg": schemas.in_words(err), "type": err.get("type", ""),
                    **({"input": _text(err["input"])} if "input" in err else {})} for err in exc.errors()]
         return JSONResponse({"detail": detail}, status_code=422)
 

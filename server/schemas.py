@@ -220,3 +220,23 @@ class ResetOut(BaseModel):
 class Problem(BaseModel):
     """An error: `detail` says what is wrong (a list of field errors when the request did not validate)."""
     detail: str | list[dict]
+
+
+#: What a pattern asks for, in words, by the parameter's name: pydantic's message quotes the regex.
+PATTERN_WORDS = {
+    "filename": "a recording's file name: letters, digits, '.', '-' and '_' (up to 100), ending in .csv, .mat, .h5 "
+                "or .hdf5",
+    "name": "a plot's file name: lower-case letters, digits and '_', ending in .png",
+}
+
+
+def in_words(err: dict) -> str:
+    """A validation error's message, a pattern mismatch said in words (PATTERN_WORDS; an id: 12 hex digits)."""
+    loc = err.get("loc", ())
+    if err.get("type") == "string_pattern_mismatch" and loc:
+        field = str(loc[-1])
+        if field in PATTERN_WORDS:
+            return f"should be {PATTERN_WORDS[field]}"
+        if field.endswith("id"):
+            return "should be an id: 12 hex digits"
+    return err.get("msg", "")
