@@ -72,7 +72,7 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
         from identify.quality import check_identifiable
 
         # data that cannot carry a model is refused, as by the CLI (the job fails, saying why)
-        data = check_identifiable(rec, Path(path).name, bool(options.get("accept_faulty")),
+        data = check_identifiable(rec, _label(path, options), bool(options.get("accept_faulty")),
                                   f"set accept_faulty to {'identify' if kind == 'identify' else 'analyse'} it anyway")
         if kind == "identify":
             from identify.identifier import SparseIdentifier
@@ -84,7 +84,7 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
             ident = SparseIdentifier(**params)
             result = {**ident.fit(rec).result(), **data}
             if result["status"] == "failed":  # no model.json: what was fitted is not a model of the rig
-                raise ShakeidError(f"{Path(path).name}: identification failed: {result['reason']}")
+                raise ShakeidError(f"{_label(path, options)}: identification failed: {result['reason']}")
             _write_json(out / "model.json", result)
             write_report(ident, out / "report")
             val = (result.get("validation") or {}).get("heldout", {}).get("q1_dot", {})
@@ -116,9 +116,9 @@ def _run_joint(paths: list, options: dict, out: Path) -> dict:
         stored = options.get("read_options_by_recording") or [{}] * len(paths)
         for p, own in zip(paths, stored):
             rec = read(p, {**own, **options})  # as uploaded, the request's read options over that
-            check_identifiable(rec, Path(p).name, bool(options.get("accept_faulty")),
+            rec.source = _label(p, options)
+            check_identifiable(rec, rec.source, bool(options.get("accept_faulty")),
                                "set accept_faulty to identify it anyway")
-            rec.source = Path(p).name
             recs.append(rec)
         params = {k: options[k] for k in IDENTIFY_KEYS if options.get(k) is not None}
         if options.get("band_hz"):
@@ -134,11 +134,15 @@ def _run_joint(paths: list, options: dict, out: Path) -> dict:
         raise ShakeidError(_public(str(exc), paths, options)) from None
 
 
+def _label(path, options: dict) -> str:
+    """A recording as the operator knows it: the name the queue gave it (options["display_names"],
+    {path: name}: an upload as uploaded, "short.csv (recording 470613d7dd6e)"), else its file name in the
+    store, never the server's absolute path."""
+    return (options.get("display_names") or {}).get(str(path), Path(path).name)
+
+
 def _public(message: str, paths, options: dict) -> str:
-    """A job's error as the operator sees it: each recording by the name the queue gave it
-    (options["display_names"], {path: name}: an upload as uploaded, "short.csv (recording 470613d7dd6e)"),
-    else by its file name in the store, never by the server's absolute path."""
-    names = options.get("display_names") or {}
+    """A job's error as the operator sees it: each recording's absolute path replaced by its _label."""
     for p in paths:
-        message = message.replace(str(p), names.get(str(p), Path(p).name))
+        message = message.replace(str(p), _label(p, options))
     return message

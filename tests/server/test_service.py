@@ -313,7 +313,8 @@ def test_dashboard_is_served_and_calls_only_real_endpoints(service):
 
 def test_joint_and_job_requests_are_checked_when_made(service, tmp_path, table1_run):
     """What a job would fail on is refused with the request: a recording given twice to a joint fit (its
-    evidence counted twice, every standard error shrunk by sqrt(2)), a band or rows out of order. A joint fit
+    evidence counted twice, every standard error shrunk by sqrt(2); a copy uploaded under another id fails
+    its job, naming both uploads), a band or rows out of order. A joint fit
     reads each recording as it was uploaded (a MAT file with its own variable names); explain needs no body;
     the dashboard's recordings carry no server path."""
     from scipy.io import savemat
@@ -331,6 +332,14 @@ def test_joint_and_job_requests_are_checked_when_made(service, tmp_path, table1_
                              "fs_hz": rec.fs_hz}).json()["id"]
     twice = op.post("/api/identify", json={"recording_ids": [csv_id, csv_id]})
     assert twice.status_code == 422 and twice.json()["detail"].startswith(f"recording(s) {csv_id} given more than once")
+    # the same file uploaded twice (two ids): the job refuses it, naming both uploads as uploaded
+    copy_id = op.post("/api/recordings", params={"filename": "again.csv"},
+                      content=(tmp_path / "sweep.csv").read_bytes()).json()["id"]
+    copied = op.post("/api/identify", json={"recording_ids": [csv_id, copy_id], "placements": 0}).json()
+    failed = wait_for(lambda: (j := op.get(f"/api/jobs/{copied['id']}").json())["state"] in ("completed", "failed")
+                      and j, 180, "joint job of a copy")
+    assert failed["state"] == "failed" and failed["error"].startswith(
+        f"again.csv (recording {copy_id}) holds the same samples as sweep.csv (recording {csv_id}) (a copy?)"), failed
     for body in ({"band_hz": [20, 1]}, {"samples": [500, 100]}):
         bad = op.post(f"/api/recordings/{csv_id}/identify", json=body)
         assert bad.status_code == 422 and "must satisfy" in bad.text, bad.text
