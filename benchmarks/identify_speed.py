@@ -195,7 +195,8 @@ def validation_parts(n: int, repeat: int) -> dict:
     res = simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine, substeps=subs, n_samples=u.shape[0], bound=1e3,
                    stride=stride)
     signals = [res.states[:, 0], res.states[:, 1], qdot]
-    runs, held = _runs(rows), _runs_of(rows)
+    runs = _runs(rows)
+    held = _runs_of(runs)
 
     def cpu(fn):
         return best_of(fn, repeat)[0][1]

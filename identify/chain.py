@@ -145,13 +145,18 @@ class StateSignals:
 
 def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARGIN_DB) -> tuple[float, float]:
     """Frequency range (Hz) where the signal's PSD stands `margin_db` above its noise floor."""
-    n = x.size
-    nper = welch_length(n, fs_hz)
-    # = scipy.signal.welch(..., detrend="linear"), the segments transformed in single precision: a
-    # threshold 8 dB over the noise floor does not see the 1.4e-5 it moves a noisy bin by, and its own
-    # floor, ~157 dB below the peak, lies under any sensor's noise (welch_psd)
+    f, p, nper = excitation_spectrum(x, fs_hz)
+    return band_from_psd(f, p, x.size, nper, margin_db)
+
+
+def excitation_spectrum(x: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """(f Hz, PSD, segment length) of x that excited_band reads: scipy.signal.welch(..., detrend="linear")
+    in segments of welch_length, transformed in single precision: a threshold 8 dB over the noise floor
+    does not see the 1.4e-5 it moves a noisy bin by, and its own floor, ~157 dB below the peak, lies under
+    any sensor's noise (welch_psd)."""
+    nper = welch_length(x.size, fs_hz)
     f, p = welch_psd(x, fs_hz, nper, np.float32)
-    return band_from_psd(f, p, n, nper, margin_db)
+    return f, p, nper
 
 
 def welch_length(n: int, fs_hz: float) -> int:
@@ -280,8 +285,7 @@ def _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype=np.float64):
     # the displacement, which leaks into the band; the taper alone makes the edges continuous.
     # Differentiating/filtering with DC in the band: the straight line through the end samples, whose
     # own derivative is known exactly and is restored below (by_mean_alone).
-    mean_alone = by_mean_alone(requests, band)
-    rows = sorted({(i, alone) for (i, _), alone in zip(requests, mean_alone)})
+    rows, row_of = detrend_rows(requests, band)
     lines = {}  # the end-point lines, kept only when DC is in the band (restored below)
     xd = np.empty((len(rows), n))
     ramp = taper_ramp(np.arange(taper_n), taper_n) if taper_n > 0 else None
@@ -306,8 +310,7 @@ def _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype=np.float64):
     f, g = band_bins(nfft, fs_hz, band)
     spectra = lowband_rfft(xd, nfft, f.size - 1, dtype)
     del xd
-    out = band_filter([(spectra[rows.index((i, alone))], power) for (i, power), alone in zip(requests, mean_alone)],
-                      f, g, band, spectra.dtype)
+    out = band_filter([(spectra[r], power) for r, (_, power) in zip(row_of, requests)], f, g, band, spectra.dtype)
     del spectra
     y = lowband_irfft(out, nfft, n)
     results, exact = [], []
@@ -334,8 +337,17 @@ def by_mean_alone(requests, band: tuple[float, float]) -> list[bool]:
     whose line would not be restored and would only take its image in the band out of the signal. The
     base layout's q1_dot is then exactly the derivative of q1 on the band's bins, both from one
     transform of the response: two forward transforms for its states, not three (the line moved the
-    Table 1 fit's coefficients by < 1e-7 of themselves, its free-run fits by < 4e-7 %)."""
+    Table 1 fits' coefficients by < 7e-8 of themselves, their free-run fits by < 4e-5 percentage points,
+    docs/identification.md section 1)."""
     return [p < 0 or (p == 0 and band[0] > 0) for _, p in requests]
+
+
+def detrend_rows(requests, band: tuple[float, float]) -> tuple[list[tuple[int, bool]], list[int]]:
+    """The distinct detrended signals the requests need, as sorted (signal, by mean alone) rows (one
+    forward transform each), and per request the index of its row (by_mean_alone)."""
+    keys = [(i, alone) for (i, _), alone in zip(requests, by_mean_alone(requests, band))]
+    rows = sorted(set(keys))
+    return rows, [rows.index(k) for k in keys]
 
 
 def _band_response(f: np.ndarray, g: np.ndarray, band: tuple[float, float], power: int) -> np.ndarray:
@@ -393,11 +405,10 @@ def reconstruct_states(rec: Recording, band_hz: tuple[float, float] | None = Non
 
     def excited():
         """excited_band of the input and (base layout) the response's f_lo, the spectra kept in `read`."""
-        nper = welch_length(n, fs)
-        f, p_in = welch_psd(rec.input, fs, nper, np.float32)
+        f, p_in, nper = excitation_spectrum(rec.input, fs)
         if rec.layout != "base":
             return band_from_psd(f, p_in, n, nper), None
-        p_resp = welch_psd(response, fs, nper, np.float32)[1]
+        p_resp = excitation_spectrum(response, fs)[1]
         read["spectra"] = BandSpectra(f, p_in, p_resp, welch_segments(n, nper))
         return band_from_psd(f, p_in, n, nper), band_from_psd(f, p_resp, n, nper)[0]
 

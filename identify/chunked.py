@@ -29,7 +29,7 @@ import numpy as np
 from scipy.fft import next_fast_len
 
 from .chain import (EDGE_FRACTION, AT_REST_FRACTION, PAD_PERIODS, STATE_REQUESTS, StateSignals, band_and_taper,
-                    band_bins, band_filter, band_from_psd, by_mean_alone, taper_ramp, welch_length)
+                    band_bins, band_filter, band_from_psd, detrend_rows, taper_ramp, welch_length)
 from .errors import IdentificationError
 from .spectral import BandLimitedSignal, lowband_irfft, lowband_rfft, welch_psd
 
@@ -150,8 +150,7 @@ class ChunkedChain:
         x = _regressed(self.layout, *source.read(s0, s1))
         idx = np.arange(s0, s1, dtype=float)
         requests = STATE_REQUESTS[self.layout]
-        mean_alone = by_mean_alone(requests, band)  # the chain's detrending, request by request
-        rows = sorted({(i, alone) for (i, _), alone in zip(requests, mean_alone)})
+        rows, row_of = detrend_rows(requests, band)  # the chain's detrending, request by request
         length = (b - a) + 2 * L
         nfft = next_fast_len(length, real=True)
         off = s0 - (a - L)  # zeros before the record's start
@@ -172,8 +171,7 @@ class ChunkedChain:
         f, g = band_bins(nfft, fs, band)
         spectra = lowband_rfft(xd, nfft, f.size - 1)
         del xd
-        out = band_filter([(spectra[rows.index((i, alone))], p) for (i, p), alone in zip(requests, mean_alone)],
-                          f, g, band)
+        out = band_filter([(spectra[r], p) for r, (_, p) in zip(row_of, requests)], f, g, band)
         del spectra
         y = lowband_irfft(out, nfft, L + (b - a))[:, L:]
         results = []

@@ -94,11 +94,10 @@ def refit_all_rows(gram: BlockGram, support: np.ndarray, eq: int, covariance: bo
     return coef, bread @ meat @ bread
 
 
-def white_noise_std(x: np.ndarray, fs_hz: float, band_hz, spectrum=None) -> float | None:
-    """Std of a channel's white noise from its Welch spectrum above the integration band (median over
-    NOISE_FLOOR_ABOVE f_hi .. NOISE_FLOOR_BELOW Nyquist, robust to a stray harmonic). None when the band
-    leaves less than a tenth of the spectrum above it to read the floor from. `spectrum`: (f, psd,
-    segments averaged) already computed (welch_psd of x).
+def floor_std(f: np.ndarray, p: np.ndarray, segments: int, fs_hz: float, band_hz) -> float | None:
+    """Std of white noise from a Welch spectrum p on the bins f (Hz), the mean over `segments` segments:
+    the median over NOISE_FLOOR_ABOVE f_hi .. NOISE_FLOOR_BELOW Nyquist, robust to a stray harmonic.
+    None when the band leaves less than a tenth of the spectrum above it to read the floor from.
 
     A noise bin of a Welch estimate is chi-square distributed, whose median lies below its mean (the
     level): by 0.3 % of the variance over the ~120 segments of a million-sample record in the band
@@ -108,10 +107,6 @@ def white_noise_std(x: np.ndarray, fs_hz: float, band_hz, spectrum=None) -> floa
     lo, hi = NOISE_FLOOR_ABOVE * band_hz[1], NOISE_FLOOR_BELOW * nyq
     if hi - lo < 0.1 * nyq:
         return None
-    if spectrum is None:
-        nper = int(min(1024, max(x.size // 8, 64)))
-        spectrum = (*welch_psd(x, fs_hz, nper), welch_segments(x.size, nper))
-    f, p, segments = spectrum
     sel = (f >= lo) & (f <= hi)
     if np.count_nonzero(sel) < 8:
         return None
@@ -258,7 +253,7 @@ FLOOR_STRETCHES, FLOOR_STRETCH = 64, 4
 
 
 def noise_floors(recording, band_hz, spectra: BandSpectra | None = None) -> tuple[float | None, float | None]:
-    """White-noise std of the input and output channels (white_noise_std).
+    """White-noise std of the input and output channels (floor_std).
 
     From the spectra the chain's band search read (StateSignals.spectra: base layout, the input's and
     the response's, output - input) when given: the sensors' noises are independent, so the output's
@@ -268,8 +263,8 @@ def noise_floors(recording, band_hz, spectra: BandSpectra | None = None) -> tupl
     noise is stationary)."""
     fs = recording.fs_hz
     if spectra is not None:
-        s_in = white_noise_std(recording.input, fs, band_hz, (spectra.f_hz, spectra.input, spectra.segments))
-        s_resp = white_noise_std(recording.input, fs, band_hz, (spectra.f_hz, spectra.response, spectra.segments))
+        s_in = floor_std(spectra.f_hz, spectra.input, spectra.segments, fs, band_hz)
+        s_resp = floor_std(spectra.f_hz, spectra.response, spectra.segments, fs, band_hz)
         if s_in is None or s_resp is None:
             return s_in, s_resp
         return s_in, float(np.sqrt(max(s_resp**2 - s_in**2, 0.0)))
@@ -284,8 +279,7 @@ def noise_floors(recording, band_hz, spectra: BandSpectra | None = None) -> tupl
     else:
         f, p = welch_psd(x, fs, nper)
         segments = welch_segments(x.shape[1], nper)
-    return (white_noise_std(recording.input, fs, band_hz, (f, p[0], segments)),
-            white_noise_std(recording.output, fs, band_hz, (f, p[1], segments)))
+    return floor_std(f, p[0], segments, fs, band_hz), floor_std(f, p[1], segments, fs, band_hz)
 
 
 def placements(held: np.ndarray, n: int, seed: int = 0) -> list[np.ndarray]:

@@ -17,15 +17,23 @@ def fit_metrics(measured: np.ndarray, simulated: np.ndarray) -> dict:
     that is not finite everywhere has no figures (None): its NaN or inf carries into the sum of squared
     errors, which is checked instead of every sample."""
     if measured.size == 0:
-        return {"nrmse": None, "fit_percent": None, "rmse": None}
+        return _from_sums(0.0, 0.0, 0)
     err = measured - simulated
     sse = float(np.dot(err, err))
     if not np.isfinite(sse):
-        return {"nrmse": None, "fit_percent": None, "rmse": None}
-    rmse = float(np.sqrt(sse / err.size))
+        return _from_sums(sse, 0.0, err.size)
     np.subtract(measured, measured.mean(), out=err)
-    spread = float(np.sqrt(np.dot(err, err) / err.size))
-    nrmse = rmse / spread if spread > 0 else float("inf")
+    return _from_sums(sse, float(np.dot(err, err)), err.size)
+
+
+def _from_sums(sse: float, spread: float, count: int) -> dict:
+    """fit_metrics' figures from the sum of squared errors, the measurement's sum of squares about its
+    mean and the number of samples (None when there are none, or the errors are not finite)."""
+    if count == 0 or not np.isfinite(sse):
+        return {"nrmse": None, "fit_percent": None, "rmse": None}
+    rmse = float(np.sqrt(sse / count))
+    std = float(np.sqrt(max(spread, 0.0) / count))
+    nrmse = rmse / std if std > 0 else float("inf")
     return {"nrmse": nrmse, "fit_percent": 100.0 * (1.0 - nrmse), "rmse": rmse}
 
 
@@ -37,7 +45,6 @@ def heldout_and_all_metrics(measured: np.ndarray, simulated: np.ndarray, runs) -
     The same figures as fit_metrics on the concatenated rows to rounding (tests/identify/test_validation.py);
     a simulation not finite on the held-out rows has no held-out figures, one not finite anywhere none
     on all rows."""
-    none = {"nrmse": None, "fit_percent": None, "rmse": None}
     n, n_h = measured.size, sum(r.stop - r.start for r in runs)
     err = measured - simulated
     sse = float(np.dot(err, err))
@@ -46,15 +53,7 @@ def heldout_and_all_metrics(measured: np.ndarray, simulated: np.ndarray, runs) -
     spread = float(np.dot(err, err))
     shift = float(sum(err[r].sum() for r in runs))
     spread_h = float(sum(np.dot(err[r], err[r]) for r in runs)) - (shift * shift / n_h if n_h else 0.0)
-
-    def metrics(sse_, spread_, count):
-        if count == 0 or not np.isfinite(sse_):
-            return dict(none)
-        rmse = float(np.sqrt(sse_ / count))
-        std = float(np.sqrt(max(spread_, 0.0) / count))
-        nrmse = rmse / std if std > 0 else float("inf")
-        return {"nrmse": nrmse, "fit_percent": 100.0 * (1.0 - nrmse), "rmse": rmse}
-    return metrics(sse_h, spread_h, n_h), metrics(sse, spread, n)
+    return _from_sums(sse_h, spread_h, n_h), _from_sums(sse, spread, n)
 
 
 def free_run(model: SparseModel, sig: StateSignals, substeps: int | None = None):
@@ -107,7 +106,7 @@ def validate(model: SparseModel, sig: StateSignals, heldout_rows: np.ndarray, su
     out = {"diverged": bool(diverged), "substeps": int(used), "samples_per_step": int(stride), "heldout": {}, "all": {},
            "heldout_samples": int(np.count_nonzero(heldout_rows))}
     runs = _runs(heldout_rows)
-    held = _runs_of(heldout_rows)
+    held = _runs_of(runs)
     for name in measured:
         out["heldout"][name], out["all"][name] = heldout_and_all_metrics(measured[name], simulated[name], runs)
     # one step: the model's acceleration from the measured states and input, on the same held-out rows
@@ -125,10 +124,9 @@ def _runs(rows: np.ndarray) -> list[slice]:
     return [slice(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
 
 
-def _runs_of(rows: np.ndarray):
-    """x -> x[rows] for a boolean mask made of runs (the held-out blocks), as one concatenation of the
-    runs' slices: a memory copy of the rows taken, where a mask reads every row of x and the mask."""
-    runs = _runs(rows)
+def _runs_of(runs: list[slice]):
+    """x -> x[mask] for the mask whose runs are `runs` (_runs: the held-out blocks), as one concatenation
+    of the runs' slices: a memory copy of the rows taken, where a mask reads every row of x and the mask."""
     return lambda x: np.concatenate([x[r] for r in runs]) if runs else x[:0]
 
 

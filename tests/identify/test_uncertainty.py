@@ -10,7 +10,8 @@ from identify.errors import IdentificationError
 from identify.gram import BlockGram
 from identify.identifier import SparseIdentifier, holdout_blocks
 from identify.optimizers.base import least_squares
-from identify.uncertainty import white_noise_std
+from identify.spectral import welch_psd, welch_segments
+from identify.uncertainty import floor_std
 from identify.validation import validate
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
@@ -191,8 +192,10 @@ def test_simex_where_the_closed_form_does_not_apply():
 def test_white_noise_floor_needs_room_above_the_band():
     rng = np.random.default_rng(0)
     x = 0.1 * rng.standard_normal(20000)
-    assert white_noise_std(x, 1000.0, (1.0, 100.0)) == pytest.approx(0.1, rel=0.05)
-    assert white_noise_std(x, 1000.0, (1.0, 400.0)) is None  # band top 400 Hz x 1.3 is past 0.9 Nyquist
+    f, p = welch_psd(x, 1000.0, 1024)
+    segments = welch_segments(x.size, 1024)
+    assert floor_std(f, p, segments, 1000.0, (1.0, 100.0)) == pytest.approx(0.1, rel=0.05)
+    assert floor_std(f, p, segments, 1000.0, (1.0, 400.0)) is None  # band top 400 Hz x 1.3 is past 0.9 Nyquist
 
 
 @pytest.mark.parametrize("duration_s, noise_fraction", [(15, 0.005), (60, 0.05)])

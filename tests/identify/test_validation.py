@@ -12,7 +12,7 @@ from identify.validation import _runs, _runs_of, fit_metrics, heldout_and_all_me
 ])
 def test_held_out_runs_are_the_masked_rows(mask):
     x = np.random.default_rng(0).standard_normal(mask.size)
-    np.testing.assert_array_equal(_runs_of(mask)(x), x[mask])
+    np.testing.assert_array_equal(_runs_of(_runs(mask))(x), x[mask])
 
 
 @pytest.mark.parametrize("mask", [
