@@ -93,12 +93,7 @@ def summary(result: dict, source: str) -> str:
     if result.get("accepted_faulty"):
         lines += ["accepted faulty data (--accept-faulty): " + "; ".join(result["accepted_faulty"]), ""]
     lines.append(coefficient_table(result))
-    unsettled = unsettled_terms(result)
-    if unsettled:
-        lines.append("unsettled selection: " + "; ".join(
-            f"{term} ({eq}) {'kept' if kept else 'left out'} though P(kept) {p:.2f}" for eq, term, kept, p in unsettled)
-            + ": the held-out placements disagree on these terms, so the model is not settled by this record "
-              "(a longer sweep, or a stronger one, carries more of them)")
+    lines += unsettled_lines(result)
     val = result.get("validation")
     if val:
         h = val["heldout"]
@@ -118,6 +113,18 @@ def summary(result: dict, source: str) -> str:
     if failed:
         lines.append(f"MODEL FAILED: {result['reason']}")
     return "\n".join(lines)
+
+
+def unsettled_lines(result: dict) -> list[str]:
+    """The line saying which terms the selection decided against most held-out placements (unsettled_terms),
+    or none: under the coefficient table of one recording's and of a joint fit's summary."""
+    unsettled = unsettled_terms(result)
+    if not unsettled:
+        return []
+    return ["unsettled selection: " + "; ".join(
+        f"{term} ({eq}) {'kept' if kept else 'left out'} though P(kept) {p:.2f}" for eq, term, kept, p in unsettled)
+        + ": the held-out placements disagree on these terms, so the model is not settled by this record "
+          "(a longer sweep, or a stronger one, carries more of them)"]
 
 
 def unsettled_terms(result: dict) -> list[tuple[str, str, bool, float]]:

@@ -63,7 +63,7 @@ def cmd_identify_joint(args, make_identifier, read) -> int:
 
 def summary(result: dict) -> str:
     """The joint model's table, its pooled held-out fit, and one line per recording."""
-    from reports.text import coefficient_table
+    from reports.text import coefficient_table, fit_text, unsettled_lines
 
     per = result["recordings"]
     lines = [f"identified {len(per)} recordings jointly: method {result['method']}, selection "
@@ -71,19 +71,17 @@ def summary(result: dict) -> str:
     if result.get("accepted_faulty"):
         lines += ["accepted faulty data (--accept-faulty): " + "; ".join(result["accepted_faulty"]), ""]
     lines.append(coefficient_table(result))
-
-    def fmt(m):
-        return "diverged" if m["fit_percent"] is None else f"{m['fit_percent']:.2f} %"
+    lines += unsettled_lines(result)
     val = result.get("validation")
     if val:
         h = val["heldout"]
         lines.append(f"free-run fit on {val['heldout_samples']} held-out samples of all recordings: acceleration "
-                     f"{fmt(h['q1_dot'])}, velocity {fmt(h['q1'])}, displacement {fmt(h['q2'])}")
+                     f"{fit_text(h['q1_dot'])}, velocity {fit_text(h['q1'])}, displacement {fit_text(h['q2'])}")
     lines += ["", "| recording | samples | band Hz | held-out fit acc / vel / disp | NRMSE joint/alone disp, vel | status |",
               "|---|---:|---|---|---|---|"]
     for p in per:
         v = p.get("validation")
-        fits = " / ".join(fmt(v["heldout"][k]) for k in ("q1_dot", "q1", "q2")) if v else "-"
+        fits = " / ".join(fit_text(v["heldout"][k]) for k in ("q1_dot", "q1", "q2")) if v else "-"
         ratio = p.get("nrmse_ratio_joint_to_alone") or {}
         rs = ", ".join("-" if ratio.get(k) is None else f"{ratio[k]:.2f}" for k in ("displacement", "velocity"))
         lines.append(f"| {p['source']} | {p['samples']} | {p['band_hz'][0]:.3g}-{p['band_hz'][1]:.3g} | {fits} | "
