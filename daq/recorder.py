@@ -33,7 +33,7 @@ import numpy as np
 
 from identify.errors import RecordingError
 from identify.quality import QualityMonitor, clip_level, verdict
-from identify.recording import CSV_SUFFIXES, LAYOUTS, MAT_SUFFIXES, Recording, check_file
+from identify.recording import CSV_SUFFIXES, H5_SUFFIXES, LAYOUTS, MAT_SUFFIXES, Recording, check_file
 
 #: The channels a sweep records, and the (input, output) pair identification reads from a recording
 #: unless told otherwise: the table's and the mass's accelerometers (the base layout's names).
@@ -270,10 +270,6 @@ def recover(path) -> bool:
 def recover_directory(directory) -> list[Path]:
     """recover() every .h5 file of a directory; returns the files that were marked."""
     return [p for p in sorted(Path(directory).glob("*.h5")) if recover(p)]
-
-
-#: The DAQ's recordings.
-H5_SUFFIXES = (".h5", ".hdf5")
 
 
 def check_h5_path(path) -> None:

@@ -98,8 +98,9 @@ def _sample_rate_from_time(t: np.ndarray, source: str, name: str) -> float:
     return (t.size - 1) / (t[-1] - t[0])
 
 
-#: File types read_recording reads (the DAQ's HDF5 recordings are read by daq.recorder).
-CSV_SUFFIXES, MAT_SUFFIXES = (".csv", ".txt"), (".mat",)
+#: File types read_recording reads, and the DAQ's HDF5 recordings' (read by daq.recorder, which needs h5py:
+#: named here so that a command can tell them apart without importing it).
+CSV_SUFFIXES, MAT_SUFFIXES, H5_SUFFIXES = (".csv", ".txt"), (".mat",), (".h5", ".hdf5")
 
 
 def check_file(path) -> Path:

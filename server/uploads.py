@@ -19,6 +19,7 @@ from pathlib import Path
 from fastapi import HTTPException, Request
 
 from identify.errors import ShakeidError
+from identify.recording import H5_SUFFIXES
 
 CHECKS_AT_ONCE = 2
 CHECK_TIMEOUT_S = 600.0
@@ -87,7 +88,7 @@ async def _check_in_process(path: Path, suffix: str, filename: str, options: dic
 def check(path: Path, suffix: str, filename: str, options: dict) -> dict:
     """Read the file as a job will; a RecordingError names what is wrong with it (as the client's name)."""
     try:
-        if suffix in (".h5", ".hdf5"):
+        if suffix in H5_SUFFIXES:
             from daq.recorder import DEFAULT_CHANNELS, describe
 
             d = describe(path)

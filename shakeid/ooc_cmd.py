@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 from identify.errors import RecordingError, ShakeidError
+from identify.recording import H5_SUFFIXES
 
 #: Above this many samples an HDF5 recording is identified out of core: 2^24 (2.3 h at 2048 Hz). In core,
 #: 1e7 samples peaked at 2.1 GB RSS (2.3 GB with SIMEX; benchmarks/out_of_core.py), so 2^24 needs ~3.5 GB;
@@ -43,7 +44,7 @@ def wants_out_of_core(args) -> bool:
     if getattr(args, "chunked", False) or getattr(args, "chunk_samples", None) or getattr(args, "scheduler", None):
         return True
     path = _file(args)
-    if Path(path).suffix.lower() not in (".h5", ".hdf5"):
+    if Path(path).suffix.lower() not in H5_SUFFIXES:
         return False
     from daq.h5source import recording_rows
 
@@ -91,7 +92,7 @@ def identify_out_of_core(args, ident) -> int:
     from identify.out_of_core import ChunkedIdentifier
 
     path = _file(args)
-    if Path(path).suffix.lower() not in (".h5", ".hdf5"):
+    if Path(path).suffix.lower() not in H5_SUFFIXES:
         raise ShakeidError(f"{path}: out-of-core identification reads the DAQ's HDF5 recordings (not CSV/MAT)")
     if getattr(args, "report", None):
         raise ShakeidError("--report draws the whole record's signals: not available out of core")
