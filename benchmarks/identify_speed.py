@@ -221,7 +221,8 @@ def validation_parts(n: int, repeat: int) -> dict:
 def uncertainty_parts(n: int, repeat: int) -> dict:
     """What the uncertainty step (identify.uncertainty.assess, as SparseIdentifier runs it) spends on the
     default fit, CPU seconds, best of `repeat`, its parts done alone: the all-rows refits with their
-    block-robust covariances, the noise floors (Welch), the closed-form chain bias as a whole
+    block-robust covariances, the noise floors (read from the band search's Welch spectra, whose cost is
+    the chain's: the figure is the reading alone), the closed-form chain bias as a whole
     (analytic_chain_bias: floors, corrected sums and the noise's share of the variance), the noise's
     share alone (identify.noise_spread), and the inclusion probabilities (24 held-out placements: ADMM
     paths and the selection rule) with, of them, the ADMM paths alone."""
@@ -378,7 +379,7 @@ def main(argv=None) -> int:
         up = uncertainty_parts(max(args.sizes), args.repeat)
         print(f"\nuncertainty step, n = {max(args.sizes)}, CPU s (best of {args.repeat}), parts alone: all-rows refits "
               f"and covariances {up['refits']:.3f}, closed-form chain bias {up['closed_form']:.3f} (of which noise "
-              f"floors {up['floors']:.3f}, the noise's share of the variance {up['noise_share']:.3f}), inclusion "
+              f"floors {up['floors']:.3f} (read from the chain's spectra), the noise's share of the variance {up['noise_share']:.3f}), inclusion "
               f"probabilities ({N_PLACEMENTS} placements) {up['inclusion']:.3f} (of which ADMM paths "
               f"{up['paths']:.3f})", flush=True)
     if args.padding_lever and args.sizes:
