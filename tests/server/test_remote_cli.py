@@ -53,3 +53,15 @@ def test_refusals_arrive_as_one_line_errors(service):
     nobody = subprocess.run([SHAKEID, "sweep", "--server", "http://127.0.0.1:9", "--token", OPERATOR, *ARGS],
                             capture_output=True, text=True, timeout=60)
     assert nobody.returncode == 2 and "does not answer" in nobody.stderr and "Traceback" not in nobody.stderr
+
+
+def test_the_progress_label_between_the_plcs_end_and_the_recordings_close(service):
+    """What the remote progress line says while the sweep's record still reads running but the PLC has
+    finished (the window the test above may or may not poll in): read from the real service with the
+    PLC idle, it says the sweep is finishing, not "running 0.00 Hz"; a queued sweep shows its state alone."""
+    from shakeid.remote import ServiceClient, _rig_label
+
+    client = ServiceClient(service.url, OPERATOR)
+    assert client.request("GET", "/api/rig")["plc"]["state"] in ("idle", "done")
+    assert _rig_label(client, "running").startswith("finishing: the PLC is ")
+    assert _rig_label(client, "queued") == "queued"
