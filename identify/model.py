@@ -96,13 +96,19 @@ class SparseModel:
 
     @classmethod
     def load(cls, path) -> "SparseModel":
-        try:
-            return cls.from_dict(json.loads(Path(path).read_text()))
-        except (OSError, json.JSONDecodeError) as exc:
-            raise ModelError(f"cannot read model {path}: {exc}") from None
+        return cls.from_dict(read_document(path))
 
     def __repr__(self) -> str:
         eqs = "; ".join(f"{eq} = " + " + ".join(f"{c:.5g}*{t}" for t, c in terms.items())
                         for eq, terms in self.equations.items())
         stops = f"; travel {self.travel}" if self.travel else ""
         return f"SparseModel({eqs}{stops})"
+
+
+def read_document(path) -> dict:
+    """A model file's JSON (SparseModel.save's, or a whole identify result with its status); ModelError
+    naming the file when it cannot be read."""
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ModelError(f"cannot read model {path}: {exc}") from None

@@ -160,13 +160,9 @@ def cmd_identify(args) -> int:
 
 def cmd_explain(args) -> int:
     from identify.explain import DiscrepancyAnalysis
-    from identify.model import SparseModel
-
     from identify.quality import check_identifiable
 
-    baseline = SparseModel.load(args.model) if args.model else None
-    if args.model:
-        _warn_if_failed(args.model)
+    baseline = _baseline(args.model) if args.model else None
     if args.report:
         from reports.html import check_report_folder
 
@@ -225,16 +221,18 @@ def _span(window: dict) -> str:
     return f"t = {a:.{digits}f}-{b:.{digits}f} s"
 
 
-def _warn_if_failed(model_path) -> None:
-    """A baseline whose own identification failed (its `status` in an identify --json / model.json) is
-    analysed as asked, with a warning first: its misfit is as much the fit's failure as missing physics."""
-    try:
-        doc = json.loads(Path(model_path).read_text())
-    except (OSError, ValueError):
-        return
-    if isinstance(doc, dict) and doc.get("status") == "failed":
+def _baseline(model_path):
+    """The baseline model of `explain --model`, read once. One whose own identification failed (its
+    `status` in an identify --json / model.json) is analysed as asked, with a warning first: its misfit is
+    as much the fit's failure as missing physics."""
+    from identify.model import SparseModel, read_document
+
+    doc = read_document(model_path)
+    model = SparseModel.from_dict(doc)
+    if doc.get("status") == "failed":
         print(f"shakeid: warning: {model_path} is a model whose identification failed ({doc.get('reason', '')}); "
               "its misfit is as much that failure as any missing effect", file=sys.stderr)
+    return model
 
 
 def _naming(path, exc: Exception) -> ShakeidError:
