@@ -122,13 +122,16 @@ class JobQueue:
         exc = fut.exception()
         if exc is None:
             summary = fut.result()
-            self.catalog.update("jobs", job_id, state="completed", error=None)
+            # the recording's summary first, then the job's state: whoever sees the job completed (a client
+            # polling it, then reading the recording) finds the summary there (the other order left a
+            # window, seen once under load by tests/server/test_jobs.py)
             rec = self.catalog.get("recordings", recording_id)
             if rec is not None:
                 info = dict(rec["info"])
                 info[f"last_{kind}_job"] = job_id
                 info[kind] = summary
                 self.catalog.update("recordings", recording_id, info=info)
+            self.catalog.update("jobs", job_id, state="completed", error=None)
         elif isinstance(exc, BrokenProcessPool):
             # a worker died (killed, out of memory, a crash in native code): this job fails with that
             # reason, later ones get a new pool
