@@ -9,6 +9,7 @@ never used. A missing browser fails these tests, saying how to install it.
 from __future__ import annotations
 
 import re
+from decimal import ROUND_HALF_UP, Decimal
 from pathlib import Path
 
 import pytest
@@ -17,6 +18,13 @@ from identify.recording import write_csv
 from sim.sweep import SineSweep
 
 from .conftest import OPERATOR, VIEWER, Service, wait_for
+
+
+def js_fixed(x: float, digits: int = 0) -> str:
+    """JavaScript's `x.toFixed(digits)`, as the dashboard prints numbers: the exact double rounded half up.
+    Python's `:.0f` rounds a tie to even, so a progress of 0.085 reads "9 %" on the page and "8" in Python."""
+    return str(Decimal(x).quantize(Decimal(1).scaleb(-digits), rounding=ROUND_HALF_UP))
+
 
 CHROMIUM = "/usr/bin/chromium"
 #: as root Chromium needs --no-sandbox; the rest keep it off the (closed) network: no update, sync, QUIC
@@ -142,7 +150,7 @@ def test_sweep_live_plot_moves_then_fit_shown(page, service):
         rec = identified(api, api.get(f"/api/sweeps/{sweep_id}").json()["recording_id"])
         fit = rec["info"]["identify"]["fit_percent"]
         row = page.locator(f"#recs tr[data-id='{rec['id']}']")
-        row.locator(f"td.fit:has-text('{fit:.1f} %')").wait_for()
+        row.locator(f"td.fit:has-text('{js_fixed(fit, 1)} %')").wait_for()
         assert "1–20 Hz · 60 s · 1.3 mm" in row.inner_text() and "complete" in row.inner_text()
 
 
@@ -179,7 +187,7 @@ def test_estop_shows_real_progress_and_reset_clears_it(page, service):
         truth = api.get(f"/api/sweeps/{sweep_id}").json()
         assert truth["state"] == "aborted" and truth["progress"] >= 0.05
         assert "emergency stop" in truth["error"]
-        assert f"aborted at {100 * truth['progress']:.0f} % ({truth['error']})" in status.inner_text()
+        assert f"aborted at {js_fixed(100 * truth['progress'])} % ({truth['error']})" in status.inner_text()
         page.wait_for_selector("#rig:has-text('PLC estop')")
         page.click("#start")  # refused while in emergency stop
         page.wait_for_selector(".msg.error:has-text('emergency stop')")
@@ -189,7 +197,7 @@ def test_estop_shows_real_progress_and_reset_clears_it(page, service):
         assert "estop" not in page.inner_text("#rig"), "a stale emergency stop after reset"
         row = page.locator(f"#recs tr[data-id='{truth['recording_id']}']")
         row.wait_for()
-        assert f"aborted at {100 * truth['progress']:.0f} %" in row.inner_text() and "emergency stop" in row.inner_text()
+        assert f"aborted at {js_fixed(100 * truth['progress'])} %" in row.inner_text() and "emergency stop" in row.inner_text()
 
 
 def test_upload_then_identify(page, service, make_run, tmp_path):
@@ -205,7 +213,7 @@ def test_upload_then_identify(page, service, make_run, tmp_path):
     row.locator("button.identify").click()
     with service.client() as api:
         rec = identified(api, rec_id)
-    row.locator(f"td.fit:has-text('{rec['info']['identify']['fit_percent']:.1f} %')").wait_for()
+    row.locator(f"td.fit:has-text('{js_fixed(rec['info']['identify']['fit_percent'], 1)} %')").wait_for()
 
 
 def test_recording_page(page, service, sweep_recording):
