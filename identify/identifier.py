@@ -323,6 +323,14 @@ class SparseIdentifier:
         coefs, var, info = unc.assess(gram, held, sups, bias_of, fit_and_select, self.placements)
         named = {eqs[e]: {names[j]: j for j in np.flatnonzero(sups[e])} for e in sups}
         info = unc.name_info(info, eqs, names, sups)
+        info["exact"] = {}
+        if "q2_dot" in eqs and list(named["q2_dot"]) == ["q1"]:
+            # the second target is the chain's q1, the derivative of its q2 on the band's bins: q2_dot = q1
+            # holds by construction, and its least-squares coefficient is 1 and its standard error 0 to
+            # rounding (0.9999999999999999 +- 6e-17 on a Table 1 sweep), which would read as a measurement
+            e = eqs.index("q2_dot")
+            coefs[e][named["q2_dot"]["q1"]], var[e][named["q2_dot"]["q1"]] = 1.0, 0.0
+            info["exact"]["q2_dot"] = "q2_dot = q1 by construction: the chain's velocity is the derivative of its displacement"
         return ({eq: {n: float(coefs[e][j]) for n, j in named[eq].items()} for e, eq in enumerate(eqs)},
                 {eq: {n: float(np.sqrt(var[e][j])) for n, j in named[eq].items()} for e, eq in enumerate(eqs)},
                 info)

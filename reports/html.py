@@ -10,8 +10,8 @@ from pathlib import Path
 
 from identify.errors import ShakeidError
 
-#: a cell that is a number: "-3.7291", "1.2e+06", "-970.96 ± 0.089", "99.90 %"
-_NUMBER = re.compile(r"[-+−]?\d[\d.]*(e[-+]?\d+)?( ± \d[\d.]*(e[-+]?\d+)?)?( %)?")
+#: a cell that is a number: "-3.7291", "1.2e+06", "-970.96 ± 0.089", "1 (exact)", "99.90 %"
+_NUMBER = re.compile(r"[-+−]?\d[\d.]*(e[-+]?\d+)?( ± \d[\d.]*(e[-+]?\d+)?| \(exact\))?( %)?")
 
 STYLE = ("body{font-family:sans-serif;max-width:1100px;margin:1em auto;padding:0 1em;line-height:1.4}"
          "table{border-collapse:collapse;margin:.5em 0}th,td{border:1px solid #bbb;padding:.2em .6em}"

@@ -32,9 +32,11 @@ def plural(n: int, word: str) -> str:
 
 def coefficient_rows(result: dict) -> tuple[list[str], list[list[str]]]:
     """(headers, rows) in the layout of the paper's Table 1: every library term, its coefficient per
-    equation (0 when not selected) ± its standard error, then per equation the term's inclusion
+    equation (0 when not selected) ± its standard error ("(exact)" for an equation that holds by
+    construction, q2_dot = q1), then per equation the term's inclusion
     probability: the share of random held-out placements whose selection kept it."""
     model, se = result["model"], result.get("standard_errors", {})
+    exact = (result.get("uncertainty") or {}).get("exact") or {}  # equations that hold by construction
     p_in = result.get("inclusion_probability") or {}
     eqs = list(model)
     headers = ["term"] + eqs + [f"P(kept) {eq}" for eq in eqs if eq in p_in]
@@ -47,7 +49,7 @@ def coefficient_rows(result: dict) -> tuple[list[str], list[list[str]]]:
                 cells.append("0")
             else:
                 s = se.get(eq, {}).get(term)
-                cells.append(f"{c:.5g}" + (f" ± {s:.2g}" if s else ""))
+                cells.append(f"{c:.5g}" + (" (exact)" if eq in exact and s == 0 else f" ± {s:.2g}" if s else ""))
         cells += [f"{p_in[eq].get(term, 0.0):.2f}" for eq in eqs if eq in p_in]
         rows.append(cells)
     return headers, rows

@@ -85,8 +85,10 @@ function modelSection(r, m) {
   if (pending) return pending;
   if (!m) return `<p class="bad">the result could not be read</p>`;
   const se = m.standard_errors || {}, ip = m.inclusion_probability || {};
+  const exact = (m.uncertainty || {}).exact || {};  // equations that hold by construction (q2_dot = q1)
+  const seCell = (eq, t) => exact[eq] && (se[eq] || {})[t] === 0 ? "exact" : num((se[eq] || {})[t], 2);
   const rows = Object.entries(m.model).flatMap(([eq, terms]) => Object.entries(terms).map(([t, c]) =>
-    `<tr><td>${esc(eq)}</td><td>${esc(t)}</td><td class="num">${num(c)}</td><td class="num">${num((se[eq] || {})[t], 2)}</td>` +
+    `<tr><td>${esc(eq)}</td><td>${esc(t)}</td><td class="num">${num(c)}</td><td class="num">${seCell(eq, t)}</td>` +
     `<td class="num">${(ip[eq] || {})[t] == null ? "–" : (ip[eq][t]).toFixed(2)}</td></tr>`));
   const faulty = m.accepted_faulty && m.accepted_faulty.length ?
     `<p class="bad" id="rec-faulty">identified although refused at first (accept_faulty): ${esc(m.accepted_faulty.join("; "))}; read it with care</p>` : "";

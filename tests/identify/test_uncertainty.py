@@ -279,6 +279,22 @@ def test_report_table_shows_the_inclusion_probabilities(issue_case):
     assert rows["q1^2"][2] == f"{p['q1_dot'].get('q1^2', 0.0):.2f}"
 
 
+def test_the_kinematic_equation_is_exact_not_measured(issue_case):
+    """q2_dot = q1 holds by construction of the chain: reported as coefficient 1 with no standard error,
+    not as the least squares' rounding (0.9999999999999999 +- 6e-17), and said so in the JSON and tables."""
+    from reports.text import coefficient_table
+
+    run, ident = issue_case
+    result = ident.result()
+    assert result["model"]["q2_dot"] == {"q1": 1.0} and result["standard_errors"]["q2_dot"] == {"q1": 0.0}
+    assert "by construction" in result["uncertainty"]["exact"]["q2_dot"]
+    assert "q1_dot" not in result["uncertainty"]["exact"]  # the measured equation keeps its errors
+    assert all(se > 0 for se in result["standard_errors"]["q1_dot"].values())
+    rows = {ln.split("|")[1].strip(): [c.strip() for c in ln.split("|")[2:-1]]
+            for ln in coefficient_table(result).splitlines()[2:]}
+    assert rows["q1"][1] == "1 (exact)" and " ± " in rows["q1"][0]
+
+
 @pytest.mark.parametrize("layout", ["base", "force"])
 def test_noise_chain_is_the_chain_applied_to_the_noise(layout):
     """SIMEX replicates add the chain's image of the noise to the states instead of rerunning the chain:
