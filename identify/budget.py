@@ -57,7 +57,7 @@ class BudgetChoice:
 def choose_budget(model: SparseModel, names, support: np.ndarray, max_terms: int, train: NormalEquations,
                   sig, fit_rows: np.ndarray, heldout_rows: np.ndarray | None = None, equation: str = "q1_dot",
                   eq_index: int = 0, n_refit: int = N_REFIT, max_subsets: int = MAX_SUBSETS,
-                  final_rows: np.ndarray | None = None) -> BudgetChoice:
+                  final_rows: np.ndarray | None = None, signals=("q2", "q1")) -> BudgetChoice:
     """Choose at most `max_terms` of `support` (bool over the library `names`) for `equation` of
     `model` by free-run error; the other equations of `model` are kept as they are.
 
@@ -65,7 +65,9 @@ def choose_budget(model: SparseModel, names, support: np.ndarray, max_terms: int
     fit_rows, heldout_rows : masks over the valid rows of `sig` (StateSignals); held-out rows rank the
         refit candidates when there are any.
     final_rows : mask of the rows the winner's final refit uses (None: fit_rows). The choice itself
-        never sees them beyond fit_rows and heldout_rows."""
+        never sees them beyond fit_rows and heldout_rows.
+    signals : the simulated states whose error screens, refits and ranks (FreeRunError); ("q2",) is the
+        output error alone (Silverbox: the same choice, benchmarks/silverbox_criteria.py --part output-error)."""
     t0 = time.perf_counter()
     support = np.asarray(support, dtype=bool)
     b = train.B[:, eq_index]
@@ -76,7 +78,7 @@ def choose_budget(model: SparseModel, names, support: np.ndarray, max_terms: int
         eqs[equation] = {names[j]: float(x[j]) for j in np.flatnonzero(s)}
         return SparseModel(eqs, model.states, model.inputs, travel=model.travel or None)
 
-    screen_error = FreeRunError(sig, fit_rows, model=model)
+    screen_error = FreeRunError(sig, fit_rows, signals, model=model)
 
     def screen(s: np.ndarray) -> float:
         return screen_error.cost(candidate(s))
@@ -99,15 +101,15 @@ def choose_budget(model: SparseModel, names, support: np.ndarray, max_terms: int
     screened.sort(key=lambda t: (t[0], t[1]))
     # 3. refit the best on their free-run error, rank on the held-out rows
     has_heldout = heldout_rows is not None and np.any(heldout_rows)
-    rank_error = FreeRunError(sig, heldout_rows if has_heldout else fit_rows, model=model)
+    rank_error = FreeRunError(sig, heldout_rows if has_heldout else fit_rows, signals, model=model)
     results = []
     for cost, keep, s in screened[:max(n_refit, 1)]:
-        refit, info = refine_free_run(candidate(s), sig, fit_rows, equation, ftol=REFIT_FTOL)
+        refit, info = refine_free_run(candidate(s), sig, fit_rows, equation, signals, ftol=REFIT_FTOL)
         results.append((rank_error.cost(refit), keep, s, refit, info, cost))
     results.sort(key=lambda t: (t[0], t[1]))
     best = results[0]
     final = fit_rows if final_rows is None else final_rows
-    refit, info = refine_free_run(best[3], sig, final, equation)  # the winner to the full tolerance
+    refit, info = refine_free_run(best[3], sig, final, equation, signals)  # the winner to the full tolerance
     if not info["accepted"] and final_rows is None:  # converged at the screening tolerance: that refit is it
         refit, info = best[3], best[4]
     table = [{"terms": [names[j] for j in r[1]], "screen": r[5], "refit": r[0]} for r in results]

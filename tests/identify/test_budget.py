@@ -54,13 +54,16 @@ def rig_run(make_run):
     return make_run(sweep=SineSweep(1.0, 20.0, 30.0, 1.3), fs_hz=1024.0)
 
 
-def test_budget_keeps_the_true_terms_among_spurious_ones(rig_run, table1_truth, true_q1_terms):
+@pytest.mark.parametrize("signals", [("q2", "q1"), ("q2",)], ids=["states", "output"])
+def test_budget_keeps_the_true_terms_among_spurious_ones(rig_run, table1_truth, true_q1_terms, signals):
+    """Chosen on the two states' free-run error (the default) or on the displacement's alone."""
     ident = SparseIdentifier(validate=False).fit(rig_run.recording)
     names = ident.library_.names
     train, _, held_rows = _normal_equations(ident)
     support = np.array([n in true_q1_terms or n in SPURIOUS for n in names])
     assert support.sum() == 9
-    choice = choose_budget(ident.model_, names, support, 5, train, ident.states_, ~held_rows, held_rows)
+    choice = choose_budget(ident.model_, names, support, 5, train, ident.states_, ~held_rows, held_rows,
+                           signals=signals)
     q1 = choice.model.equations["q1_dot"]
     assert set(q1) == true_q1_terms
     assert {names[j] for j in np.flatnonzero(choice.support)} == true_q1_terms
@@ -69,7 +72,9 @@ def test_budget_keeps_the_true_terms_among_spurious_ones(rig_run, table1_truth, 
         assert c == pytest.approx(truth[term], rel=0.05 if term == "q1*q2^2" else 0.01), term
     # every candidate was screened, the refit ones ranked: the winner first, rivals clearly behind
     assert len(choice.candidates) == 126 and set(choice.candidates[0]["terms"]) == true_q1_terms
-    assert choice.candidates[1]["refit"] > 1.3 * choice.candidates[0]["refit"]  # 1.64 measured
+    # 1.64x measured on the two states; 1.15x on the displacement alone, which sees the damping terms less
+    margin = 1.3 if "q1" in signals else 1.1
+    assert choice.candidates[1]["refit"] > margin * choice.candidates[0]["refit"]
     assert choice.model.equations["q2_dot"] == {"q1": pytest.approx(1.0)}
 
 
