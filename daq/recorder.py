@@ -255,11 +255,25 @@ def read_quality(f: h5py.File) -> dict:
 
 
 def recover(path) -> bool:
-    """Mark a recording left "running" by a crash as aborted (data untouched). True if it was."""
-    with h5py.File(path, "r+") as f:
-        e = f["entry"]
-        if e.attrs.get("status") != "running":
+    """Mark a recording left "running" by a crash as aborted (data untouched). True if it was.
+
+    Only a shakeid recording (an HDF5 file with /entry written by this recorder: @software_version,
+    @status, entry/data/time) that says "running" is opened for writing. Anything else is left as it is,
+    unopened for writing: a folder a sweep records into may hold the operator's own files, and a file
+    another sweep is writing right now is locked by it (HDF5's lock), which is not a crash."""
+    try:
+        if not h5py.is_hdf5(path):
             return False
+        with h5py.File(path, "r") as f:
+            e = f.get("entry")
+            if (not isinstance(e, h5py.Group) or "software_version" not in e.attrs
+                    or e.attrs.get("status") != "running" or "data/time" not in e):
+                return False
+        f = h5py.File(path, "r+")
+    except OSError:  # unreadable, or locked by the process writing it
+        return False
+    with f:
+        e = f["entry"]
         n = int(f["entry/data/time"].shape[0])
         e.attrs.update(status="aborted", samples_written=n,
                        status_reason=f"found running on the next start: the recorder stopped without closing "
@@ -268,7 +282,8 @@ def recover(path) -> bool:
 
 
 def recover_directory(directory) -> list[Path]:
-    """recover() every .h5 file of a directory; returns the files that were marked."""
+    """recover() every shakeid recording (.h5) of a directory left running; returns the files marked.
+    Other files, HDF5 or not, are not touched."""
     return [p for p in sorted(Path(directory).glob("*.h5")) if recover(p)]
 
 

@@ -115,3 +115,39 @@ def test_a_recording_being_written_is_said_to_be_in_use(tmp_path):
     assert "is open for writing by another process (a sweep still recording it?)" in proc.stderr, proc.stderr
     rec.close("complete")
     assert describe(path)["status"] == "complete"
+
+
+def test_recovery_touches_only_shakeid_recordings_left_running(tmp_path):
+    """A sweep's folder may hold the operator's own files and a recording another sweep is writing: the
+    start-up recovery marks the crashed recording aborted and opens nothing else for writing (it had
+    opened every .h5 read-write: a junk .h5 stopped every sweep into the folder, another HDF5 file gave a
+    KeyError traceback)."""
+    from daq.recorder import recover_directory
+
+    crashed = tmp_path / "crashed.h5"
+    proc = subprocess.Popen([sys.executable, "-c", WRITER, str(crashed)], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "started"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(10)
+    (tmp_path / "junk.h5").write_bytes(b"not hdf5")
+    with h5py.File(tmp_path / "mine.h5", "w") as f:  # the operator's own HDF5 file, no /entry
+        f["x"] = np.arange(5)
+    with h5py.File(tmp_path / "theirs.h5", "w") as f:  # someone's file with an /entry that says running
+        f.create_group("entry").attrs["status"] = "running"
+    done = tmp_path / "done.h5"
+    r = Recorder(done, fs_hz=100.0)
+    r.append(0, np.ones((100, 2)))
+    r.close()
+    live = tmp_path / "live.h5"
+    writer = subprocess.Popen([sys.executable, "-c", WRITER, str(live)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert writer.stdout.readline().strip() == "started"
+        before = {p.name: p.read_bytes() for p in tmp_path.glob("*.h5") if p.name not in ("crashed.h5", "live.h5")}
+        assert recover_directory(tmp_path) == [crashed]
+        assert {p.name: p.read_bytes() for p in tmp_path.glob("*.h5") if p.name in before} == before
+        assert describe(crashed)["status"] == "aborted"
+        assert writer.poll() is None  # the live sweep still writes
+    finally:
+        writer.send_signal(signal.SIGKILL)
+        writer.wait(10)
+    assert describe(live)["status"] == "running"  # not marked by the recovery; the next one will
