@@ -26,9 +26,10 @@ CLIP = -0.5  # candidates.png: shooting-gap bars below this are drawn cut here, 
 
 
 def write_explain_report(analysis, out_dir) -> Path:
-    """Write the report of a fitted DiscrepancyAnalysis into `out_dir` (created; an earlier report's
-    files there are replaced, none left behind: html.report_folder). Returns the folder."""
-    out = report_folder(out_dir)
+    """Write the report of a fitted DiscrepancyAnalysis into `out_dir` (created; an earlier explain
+    report there is replaced, none of its files left behind; a folder holding anything else is refused:
+    html.check_report_folder). Returns the folder."""
+    out = report_folder(out_dir, "explain")
     result = analysis.result()
     (out / "explain.json").write_text(json.dumps(result, indent=2))
     base = analysis.layout_ == "base"
@@ -127,7 +128,7 @@ def _f(v, fmt=".4f") -> str:
 
 
 def _index_html(out: Path, analysis, result: dict, u: str) -> str:
-    page = Page("Discrepancy report: where the model misses the rig")
+    page = Page("Discrepancy report: where the model misses the rig", "explain")
     effect = result["effect"]
     answer = {"none": "nothing is missing: the baseline's gap is within the sensor-noise floor",
               "unexplained": "something is missing, but no effect of the catalog closes enough of the gap"}

@@ -22,36 +22,83 @@ STYLE = ("body{font-family:sans-serif;max-width:1100px;margin:1em auto;padding:0
 
 
 #: What each kind of report writes beside its index.html (reports.identification, reports.explain take
-#: theirs from here): a folder holds one report, and report_folder clears both kinds.
+#: theirs from here). A folder holds one report: a new report replaces an earlier one of its own kind and
+#: refuses a folder that holds the other kind or files shakeid did not write (check_report_folder).
 IDENTIFICATION_FIGURES = ("input.png", "output.png", "lambda_path.png", "validation.png")
 IDENTIFICATION_DOCUMENTS = ("model.json", "coefficients.md")
 EXPLAIN_FIGURES = ("residual_time.png", "residual_state.png", "candidates.png", "gap.png")
 EXPLAIN_DOCUMENTS = ("explain.json",)
+KINDS = {"identification": (*IDENTIFICATION_FIGURES, *IDENTIFICATION_DOCUMENTS),
+         "explain": (*EXPLAIN_FIGURES, *EXPLAIN_DOCUMENTS)}
+#: where a report of each kind goes when the folder holds the other kind (a suggestion in the refusal)
+_SUBFOLDER = {"identification": "identify", "explain": "explain"}
+#: the page's titles before it carried the generator tag (reports written by earlier versions)
+_TITLES = {"identification": "<title>Identification report", "explain": "<title>Discrepancy report"}
 
 
-def report_folder(out_dir) -> Path:
-    """The report folder `out_dir`, created, with every file an earlier report (identification or
-    explain) wrote there removed: a folder holds one report, and a figure or document the new one does
-    not write (validation.png of a fit that was not validated; model.json under an explain report) must
-    not be left beside its page."""
-    out = check_report_folder(out_dir)
+def generator(kind: str) -> str:
+    """The tag a report page carries to say which kind of shakeid report it is."""
+    return f"shakeid {kind} report"
+
+
+def report_kind(out_dir) -> str | None:
+    """Which shakeid report the folder holds ("identification", "explain"), by its index.html; None when
+    it has no index.html; "foreign" for an index.html shakeid did not write."""
+    page = Path(out_dir) / "index.html"
+    if not page.is_file():
+        return None
+    try:
+        head = page.read_bytes()[:4096].decode("utf-8", "replace")
+    except OSError:
+        return "foreign"
+    for kind in KINDS:
+        if f"<meta name='generator' content='{generator(kind)}'>" in head or head.startswith(
+                "<!doctype html>") and _TITLES[kind] in head:
+            return kind
+    return "foreign"
+
+
+def report_folder(out_dir, kind: str) -> Path:
+    """The report folder `out_dir` for a report of `kind`, created, with every file an earlier report of
+    the same kind wrote there removed (a figure the new one does not write, validation.png of a fit that
+    was not validated, must not be left beside its page). check_report_folder refuses first what must not
+    be replaced."""
+    out = check_report_folder(out_dir, kind)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ShakeidError(f"{out}: cannot create the report folder: {exc.strerror or exc}") from None
-    every = ("index.html", *IDENTIFICATION_FIGURES, *IDENTIFICATION_DOCUMENTS, *EXPLAIN_FIGURES, *EXPLAIN_DOCUMENTS)
-    for name in every:
+    for name in ("index.html", *KINDS[kind]):
         (out / name).unlink(missing_ok=True)
     return out
 
 
-def check_report_folder(out_dir) -> Path:
-    """out_dir as a Path; ShakeidError when it is a file (checked before any work: a fit is not wasted)."""
+def check_report_folder(out_dir, kind: str) -> Path:
+    """out_dir as a Path, checked before any work (a refused folder wastes no fit): ShakeidError when it
+    is a file, when it holds the other kind of report (an explain report would delete the identification
+    report's model.json, which may be the very --model it explains), or when it holds an index.html or a
+    report's file names that shakeid did not write (the operator's own files are never overwritten)."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ShakeidError(f"{out}: is a file, not a folder; a report is a folder of files (give a new or "
                            "existing folder)")
+    if not out.is_dir():
+        return out
+    held = report_kind(out)
+    names = [n for n in ("index.html", *KINDS["identification"], *KINDS["explain"]) if (out / n).exists()]
+    if held in KINDS and held != kind:
+        theirs = [n for n in names if n == "index.html" or n in KINDS[held]]
+        raise ShakeidError(f"{out}: holds {_a(held)} report ({', '.join(theirs)}); {_a(kind)} report there would "
+                           f"replace it: give another folder, e.g. {out / _SUBFOLDER[kind]}")
+    foreign = [n for n in names if held != kind or n not in ("index.html", *KINDS[kind])]
+    if foreign:
+        raise ShakeidError(f"{out}: holds {', '.join(foreign)}, not written by a shakeid {kind} report; they are "
+                           f"never overwritten: give another folder, e.g. {out / _SUBFOLDER[kind]}")
     return out
+
+
+def _a(kind: str) -> str:
+    return f"an {kind}" if kind[0] in "aeiou" else f"a {kind}"
 
 
 def earlier_report(out_dir) -> str | None:
@@ -74,8 +121,8 @@ def _is_number(cell: str) -> bool:
 class Page:
     """One report page; tables and figures are numbered in the order they are added."""
 
-    def __init__(self, title: str):
-        self.title = title
+    def __init__(self, title: str, kind: str):
+        self.title, self.kind = title, kind  # kind: "identification" or "explain" (the generator tag)
         self.parts: list[str] = [f"<h1>{esc(title)}</h1>"]
         self.n_tables = self.n_figures = 0
 
@@ -108,4 +155,5 @@ class Page:
 
     def render(self) -> str:
         return (f"<!doctype html><html lang='en'><meta charset='utf-8'><title>{esc(self.title)}</title>"
+                f"<meta name='generator' content='{generator(self.kind)}'>"
                 f"<style>{STYLE}</style><body>" + "\n".join(self.parts) + "</body></html>\n")

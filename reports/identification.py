@@ -30,10 +30,11 @@ RESIDUAL = "#c0392b"  # the residual traces' colour, the same in every panel
 
 
 def write_report(ident, out_dir, result: dict | None = None) -> Path:
-    """Write the report of a fitted SparseIdentifier into `out_dir` (created; an earlier report's files
-    there are replaced, none left behind: html.report_folder). Returns the folder. `result`: the document
+    """Write the report of a fitted SparseIdentifier into `out_dir` (created; an earlier identification
+    report there is replaced, none of its files left behind; a folder holding anything else is refused:
+    html.check_report_folder). Returns the folder. `result`: the document
     to write as model.json, when the caller has more than ident.result() (the CLI's data_quality)."""
-    out = report_folder(out_dir)
+    out = report_folder(out_dir, "identification")
     result = ident.result() if result is None else result
     (out / "model.json").write_text(json.dumps(result, indent=2))
     (out / "coefficients.md").write_text(coefficient_table(result))
@@ -166,7 +167,7 @@ def _index_html(out: Path, ident, result: dict) -> str:
     rec, sig, labels = ident.recording_, ident.states_, _labels(ident)
     base = sig.input_name == "zdd"
     chain = result.get("chain") or {}
-    page = Page(f"Identification report: {rec.source}")
+    page = Page(f"Identification report: {rec.source}", "identification")
     if result.get("status") == "failed":
         page.paragraph(f"MODEL FAILED its validation: {result['reason']}")
     band = chain.get("band_hz") or list(sig.band_hz)

@@ -134,7 +134,7 @@ def cmd_identify(args) -> int:
     if args.report:
         from reports.html import check_report_folder
 
-        check_report_folder(args.report)  # before the fit: a mistyped --report costs nothing
+        check_report_folder(args.report, "identification")  # before the fit: a mistyped --report costs nothing
     rec = _read(args)
     data = check_identifiable(rec, args.file, args.accept_faulty)
     try:
@@ -166,7 +166,7 @@ def cmd_explain(args) -> int:
     if args.report:
         from reports.html import check_report_folder
 
-        check_report_folder(args.report)  # before the analysis
+        check_report_folder(args.report, "explain")  # before the analysis
     rec = _read(args)
     data = check_identifiable(rec, args.file, args.accept_faulty,  # as identify: no analysis of unusable data
                               "use --accept-faulty to analyse it anyway")

@@ -43,6 +43,12 @@ def test_identify_options_and_report(table1_csv, tmp_path):
     assert again.returncode == 0, again.stderr
     assert f"report: {out / 'index.html'} (replaces the report written there at 20" in again.stdout
     assert json.loads((out / "model.json").read_text())["selection"]["rule"] == "heldout"
+    # explaining that model into the same folder would delete its model.json: refused before any work
+    model = (out / "model.json").read_bytes()
+    clash = run("explain", table1_csv, "--model", out / "model.json", "--report", out)
+    assert clash.returncode == 2 and "holds an identification report" in clash.stderr, clash.stderr
+    assert f"e.g. {out / 'explain'}" in clash.stderr and "Traceback" not in clash.stderr
+    assert (out / "model.json").read_bytes() == model and (out / "index.html").exists()
 
 
 def test_identify_budget_option(table1_csv, table1_truth):

@@ -8,8 +8,8 @@ import pytest
 
 import reports.identification as idrep
 from identify.identifier import SparseIdentifier
-from reports.explain import FIGURES as EXPLAIN_FIGURES
-from reports.html import earlier_report
+from identify.errors import ShakeidError
+from reports.html import Page, check_report_folder, earlier_report, report_kind
 from reports.identification import FIGURES, write_report
 from reports.text import coefficient_table
 
@@ -128,21 +128,58 @@ def test_lambda_path_figure_reads(figures):
 
 
 def test_a_new_report_leaves_nothing_of_the_earlier_one(report_dir, table1_run, tmp_path):
-    """A report written into a folder that holds one replaces it whole: a fit without validation draws no
-    validation.png, and the earlier fit's must not be left beside the new page (it would show another
-    model's free run); nor an explain report's files, when the folder held one of those."""
+    """A report written into a folder that holds one of its kind replaces it whole: a fit without
+    validation draws no validation.png, and the earlier fit's must not be left beside the new page (it
+    would show another model's free run). Files that are no report's are left alone."""
     out, _ = report_dir
     folder = tmp_path / "shared"
+    folder.mkdir()
     for f in (*FIGURES, "index.html", "model.json", "coefficients.md"):
-        (folder / f).parent.mkdir(exist_ok=True)
         (folder / f).write_bytes((out / f).read_bytes())
-    for f in (*EXPLAIN_FIGURES, "explain.json"):  # as an explain report into the same folder leaves them
-        (folder / f).write_bytes(b"from an earlier explain report")
+    (folder / "notes.txt").write_text("the operator's notes")
     assert earlier_report(folder).startswith("the report written there at 20")
     unvalidated = SparseIdentifier(validate=False).fit(table1_run.recording)
     write_report(unvalidated, folder)
     assert not (folder / "validation.png").exists()
     assert all((folder / f).exists() for f in FIGURES if f != "validation.png")
-    assert not any((folder / f).exists() for f in (*EXPLAIN_FIGURES, "explain.json"))
     assert json.loads((folder / "model.json").read_text())["validation"] is None
+    assert (folder / "notes.txt").read_text() == "the operator's notes"
     assert earlier_report(tmp_path / "empty") is None
+
+
+def test_a_report_never_replaces_another_kind_or_the_operators_files(report_dir, tmp_path):
+    """`explain --model r2/model.json --report r2/` must not delete the identification report's model.json
+    (the very model it explains), nor an identify report an explain report; an index.html or model.json
+    shakeid did not write is never overwritten. Each refusal names the folder and what it holds, and
+    suggests a subfolder; nothing in the folder changes."""
+    out, _ = report_dir
+    assert report_kind(out) == "identification"
+    with pytest.raises(ShakeidError, match=r"holds an identification report \(index.html, .*model.json.*\); "
+                                           r"an explain report there would replace it: .*explain"):
+        check_report_folder(out, "explain")
+    assert check_report_folder(out, "identification") == out  # the same kind: replaced
+    explain_dir = tmp_path / "explain"
+    explain_dir.mkdir()
+    (explain_dir / "index.html").write_text(Page("Discrepancy report: x", "explain").render())
+    (explain_dir / "explain.json").write_text("{}")
+    assert report_kind(explain_dir) == "explain"
+    with pytest.raises(ShakeidError, match=r"holds an explain report \(index.html, explain.json\)"):
+        write_report(SparseIdentifier(), explain_dir)  # refused before it reads the (unfitted) identifier
+    assert sorted(p.name for p in explain_dir.iterdir()) == ["explain.json", "index.html"]
+    own = tmp_path / "own"
+    own.mkdir()
+    (own / "index.html").write_text("<html>the lab's own page</html>")
+    with pytest.raises(ShakeidError, match=r"own: holds index.html, not written by a shakeid identification "
+                                           r"report; they are never overwritten"):
+        check_report_folder(own, "identification")
+    (own / "index.html").unlink()
+    (own / "model.json").write_text('{"mine": 1}')  # `identify --json > own/model.json`
+    with pytest.raises(ShakeidError, match=r"holds model.json, not written"):
+        check_report_folder(own, "identification")
+    assert (own / "model.json").read_text() == '{"mine": 1}'
+    # a report written before pages carried the generator tag is still known by its title
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / "index.html").write_text((out / "index.html").read_text().replace(
+        "<meta name='generator' content='shakeid identification report'>", ""))
+    assert report_kind(old) == "identification" and report_kind(tmp_path / "none") is None
