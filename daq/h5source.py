@@ -47,7 +47,7 @@ class H5ChunkSource:
         self.units = (d[input].attrs.get("units", ""), d[output].attrs.get("units", ""))
         a, b = samples or (0, rows)
         if not 0 <= a < b <= rows:
-            raise RecordingError(f"{path}: rows {a}-{b} requested, the recording has {rows}")
+            raise RecordingError(f"{path}: samples [{a}, {b}) requested: need 0 <= start < stop <= {rows}, the recording's length")
         if len(f["entry/gaps"]) if "entry/gaps" in f else 0:
             segs = self.segments()
             if not any(sa <= a and b <= sb for sa, sb in segs):

@@ -339,7 +339,7 @@ def read_h5_recording(path, input: str = DEFAULT_CHANNELS[0], output: str = DEFA
         fs = float(f["entry"].attrs["fs_hz"])
         a, b = samples or (0, info["samples"])
         if not 0 <= a < b <= info["samples"]:
-            raise RecordingError(f"{path}: rows {a}-{b} requested, the recording has {info['samples']}")
+            raise RecordingError(f"{path}: samples [{a}, {b}) requested: need 0 <= start < stop <= {info['samples']}, the recording's length")
         if info["gaps"]:
             segs = segments(d["time"][()], fs)
             if not any(sa <= a and b <= sb for sa, sb in segs):
@@ -375,7 +375,7 @@ def open_recording(path, layout: str = "base", input: str | None = None, output:
     if samples:
         a, b = samples
         if not 0 <= a < b <= rec.n_samples:
-            raise RecordingError(f"{path}: rows {a}-{b} requested, the recording has {rec.n_samples}")
+            raise RecordingError(f"{path}: samples [{a}, {b}) requested: need 0 <= start < stop <= {rec.n_samples}, the recording's length")
         rec = rec.slice(a, b)
         Recording.__post_init__(rec)  # the cut must still be a usable recording
         rec.metadata["first_row"] = a

@@ -109,6 +109,15 @@ def read_document(path) -> dict:
     """A model file's JSON (SparseModel.save's, or a whole identify result with its status); ModelError
     naming the file when it cannot be read."""
     try:
-        return json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise ModelError(f"cannot read model {path}: {exc}") from None
+        text = Path(path).read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ModelError(f"cannot read model {path}: {getattr(exc, 'strerror', None) or exc}") from None
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ModelError(f"{path}: not a model file: a model is the JSON `shakeid identify --json` prints or a "
+                         f"report's model.json (this is not JSON: {exc.msg} at line {exc.lineno}, column "
+                         f"{exc.colno})") from None
+    if not isinstance(doc, dict):
+        raise ModelError(f"{path}: not a model file: JSON {type(doc).__name__}, not an object with a 'model'")
+    return doc

@@ -18,6 +18,10 @@ class RigConstants:
     spring_n_per_m: float = 16.7e3
     profile_per_m: float = 4.0
 
+    def __post_init__(self):
+        if not self.mass_kg > 0:  # every force is the mass times an acceleration; a stiffness divides by it
+            raise ValueError(f"rig mass must be > 0 kg, got {self.mass_kg}")
+
 
 def physical_parameters(model: SparseModel, rig: RigConstants = RigConstants()) -> dict:
     eq = "q1_dot"

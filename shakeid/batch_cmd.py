@@ -25,6 +25,8 @@ from pathlib import Path
 
 from identify.errors import ShakeidError
 
+from .argtypes import int_in, positive
+
 EXIT_OK, EXIT_MODEL_FAILED, EXIT_REFUSED = 0, 1, 2
 
 
@@ -197,8 +199,8 @@ def add_batch_parser(sub, add_identify_options, make_identifier, read_recording)
     q.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                    help="an existing Dask scheduler; the files must be at the same paths on its workers "
                         "(default: a local process pool)")
-    q.add_argument("--workers", type=int, help="local pool: processes (default: the number of CPUs)")
-    q.add_argument("--connect-timeout", type=float, default=10.0, metavar="S",
+    q.add_argument("--workers", type=int_in(1), help="local pool: processes (default: the number of CPUs)")
+    q.add_argument("--connect-timeout", type=positive, default=10.0, metavar="S",
                    help="--scheduler: seconds to wait for the scheduler, s")
     q.add_argument("--out", metavar="DIR", help="write NAME.model.json per file (NAME: the file's name with its "
                                                 "extension, e.g. sweep.h5.model.json) and batch.json here "

@@ -13,9 +13,10 @@ from pathlib import Path
 from identify.errors import IdentificationError, ShakeidError
 from reports.text import gap_closed_text, model_text, summary
 
+from .argtypes import int_in, non_negative, positive
 from .batch_cmd import add_batch_parser
 from .campaign_cmd import add_campaign_parser
-from .helpformat import HelpFormatter, Parser
+from .helpformat import Parser
 from .lab_options import add_lab_parsers, add_sweep_shape
 from .ooc_cmd import add_out_of_core_options
 
@@ -31,9 +32,9 @@ def _add_layout_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--input", metavar="NAME", help="input column/variable (default: table_acc, or u with --layout force)")
     g.add_argument("--output", metavar="NAME", help="output column/variable (default: mass_acc, or y with --layout force)")
     g.add_argument("--time", metavar="NAME", help="time column, s (default: t)")
-    g.add_argument("--fs", type=float, metavar="HZ",
+    g.add_argument("--fs", type=positive, metavar="HZ",
                    help="sample rate in Hz when the file has no time column (default: from the time column)")
-    g.add_argument("--samples", type=int, nargs=2, metavar=("START", "STOP"),
+    g.add_argument("--samples", type=int_in(0), nargs=2, metavar=("START", "STOP"),
                    help="use samples [START, STOP) only (0-based), e.g. Silverbox's estimation range "
                         "(default: all)")
     g.add_argument("--band", type=float, nargs=2, metavar=("F_LO", "F_HI"),
@@ -43,14 +44,14 @@ def _add_layout_options(p: argparse.ArgumentParser) -> None:
 def _add_identify_options(p: argparse.ArgumentParser) -> None:
     _add_layout_options(p)
     g = p.add_argument_group("identification")
-    g.add_argument("--degree", type=int, default=4, metavar="N", help="highest monomial degree of the library")
+    g.add_argument("--degree", type=int_in(1, 8), default=4, metavar="N", help="highest monomial degree of the library")
     g.add_argument("--extra-terms", default="", metavar="TERMS",
                    help="comma-separated extra terms, e.g. 'sign(q1),q1*|q1|'")
     g.add_argument("--method", choices=("admm", "stlsq"), default="admm",
                    help="admm: LASSO solved by ADMM along a lambda path (the paper); stlsq: sequentially "
                         "thresholded least squares")
-    g.add_argument("--lambdas", type=int, default=100, metavar="N", help="number of points on the lambda path")
-    g.add_argument("--threshold", type=float,
+    g.add_argument("--lambdas", type=int_in(2), default=100, metavar="N", help="number of points on the lambda path")
+    g.add_argument("--threshold", type=non_negative,
                    help="STLSQ: a single threshold on the coefficients, dimensionless (normalised unless "
                         "--raw-threshold), instead of a path (default: none, a path)")
     g.add_argument("--raw-threshold", action="store_true",
@@ -58,9 +59,9 @@ def _add_identify_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--selection", choices=("heldout", "paper", "bic"), default="heldout",
                    help="how a model is chosen on the path: held-out error of the refit (heldout), the paper's "
                         "relative-MSE tolerance (paper), or the Bayesian information criterion (bic)")
-    g.add_argument("--tolerance", type=float,
+    g.add_argument("--tolerance", type=positive,
                    help="selection tolerance, relative MSE (default: 0.25 for paper, 0.003 for heldout)")
-    g.add_argument("--max-terms", type=int, metavar="K", help="at most K terms per equation (default: no limit)")
+    g.add_argument("--max-terms", type=int_in(1), metavar="K", help="at most K terms per equation (default: no limit)")
     g.add_argument("--budget", choices=("equation-error", "free-run"), default="equation-error",
                    help="how --max-terms chooses q1_dot's terms: by one-step acceleration error or by the "
                         "free-run error of refit candidates on the data (slower; implies the refit)")
@@ -69,17 +70,17 @@ def _add_identify_options(p: argparse.ArgumentParser) -> None:
                         "included (validation figures are then not out-of-sample)")
     g.add_argument("--refine", choices=("free-run",),
                    help="refit the kept coefficients on the free-run simulation error (default: no refinement)")
-    g.add_argument("--holdout-samples", type=int, metavar="N",
+    g.add_argument("--holdout-samples", type=int_in(1), metavar="N",
                    help="hold out the first N samples, as the paper (30000) (default: --holdout-fraction)")
     g.add_argument("--holdout-fraction", type=float, default=0.2, metavar="F",
                    help="share of samples held out in interleaved blocks when --holdout-samples is not given, 0-0.9")
-    g.add_argument("--bias-replicates", type=int, default=None, metavar="N",
+    g.add_argument("--bias-replicates", type=int_in(0), default=None, metavar="N",
                    help="0: no correction of the measurement chain's bias; else SIMEX replicates where SIMEX "
                         "estimates it (the bias is in closed form when every kept term is a monomial; default: "
                         "by the record's length, 64 up to 250 000 samples, 16 from 1 000 000)")
-    g.add_argument("--placements", type=int, default=24, metavar="N",
+    g.add_argument("--placements", type=int_in(0), default=24, metavar="N",
                    help="random held-out placements for the inclusion probabilities (0: none, faster)")
-    g.add_argument("--mass-kg", type=float, default=0.49, metavar="KG",
+    g.add_argument("--mass-kg", type=positive, default=0.49, metavar="KG",
                    help="moving mass for the physical parameters, kg")
 
 
@@ -264,12 +265,12 @@ def _write_report(kind: str, fitted, out_dir, result: dict | None = None) -> str
 def _add_sweep_options(p: argparse.ArgumentParser) -> None:
     """The simulated sweep of `shakeid simulate`: the table's motion, the sensors, the rig."""
     add_sweep_shape(p, required=False)
-    p.add_argument("--fs-hz", type=float, default=2048.0, metavar="HZ",
+    p.add_argument("--fs-hz", type=positive, default=2048.0, metavar="HZ",
                    help="sample rate, Hz (2048 Hz is the paper's 0.488 ms step)")
-    p.add_argument("--noise", type=float, default=0.005, metavar="F",
+    p.add_argument("--noise", type=non_negative, default=0.005, metavar="F",
                    help="sensor noise std as a fraction of each channel's std (0.005: 0.5 %%)")
     p.add_argument("--bias-ms2", type=float, default=0.0, metavar="M/S²", help="accelerometer bias, m/s² (both sensors)")
-    p.add_argument("--lsb-ms2", type=float, default=0.0, metavar="M/S²", help="ADC quantisation step, m/s² (0: none)")
+    p.add_argument("--lsb-ms2", type=non_negative, default=0.0, metavar="M/S²", help="ADC quantisation step, m/s² (0: none)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the sensor noise")
     p.add_argument("--rig", choices=("paper-table1", "design"), default="paper-table1",
                    help="the rig's parameters: the paper's identified Table 1 model, or its design values")
@@ -293,8 +294,6 @@ def _synthesize(args):
     try:
         rig.__post_init__()
         sweep = SineSweep(args.f_start_hz, args.f_end_hz, args.duration_s, args.amplitude_mm)
-        if args.noise < 0 or args.lsb_ms2 < 0:
-            raise ShakeidError("--noise and --lsb-ms2 must be >= 0")
         sensor = Accelerometer(noise_fraction=args.noise, bias_ms2=args.bias_ms2, lsb_ms2=args.lsb_ms2)
         return run_sweep(rig, sweep, args.fs_hz, table_sensor=sensor, mass_sensor=sensor, seed=args.seed)
     except ValueError as exc:
@@ -339,8 +338,7 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="shakeid", description="Sparse nonlinear identification of shaker rigs",
-                                formatter_class=HelpFormatter)
+    p = Parser(prog="shakeid", description="Sparse nonlinear identification of shaker rigs")
     p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
     q = sub.add_parser("identify", help="identify a sparse ODE model from a recording (CSV, MAT, HDF5)")

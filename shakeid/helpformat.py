@@ -1,4 +1,5 @@
-"""How `shakeid ... --help` shows each option: its help text, its unit, and its default.
+"""How `shakeid ... --help` shows each option: its help text, its unit, and its default; and how a usage
+error is told (one line).
 
 The default is appended as "(default: X)" from the parser itself, so the help cannot drift from the
 code. Options whose default is computed (None: "the config's port, else 5020") say it in words, with
@@ -22,5 +23,13 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
         return text + " (default: %(default)s)"
 
 
+class OneLineErrors(argparse.ArgumentParser):
+    """A usage error is one line, as every other shakeid error ("shakeid: error: argument --mass-kg: must be
+    > 0, got 0"), pointing at --help rather than printing the whole usage (identify's is 16 lines)."""
+
+    def error(self, message):
+        self.exit(2, f"shakeid: error: {message} (`{self.prog} --help` lists the options)\n")
+
+
 #: the parser class of every `shakeid` subcommand (add_subparsers(parser_class=...)): defaults shown
-Parser = functools.partial(argparse.ArgumentParser, formatter_class=HelpFormatter)
+Parser = functools.partial(OneLineErrors, formatter_class=HelpFormatter)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 
+from .argtypes import non_negative, positive
 from .lab import cmd_controller, cmd_demo, cmd_recordings, cmd_serve, cmd_sim, cmd_sweep
 from .rigcmd import cmd_rig
 
@@ -17,10 +18,10 @@ def add_sweep_shape(q, required: bool) -> None:
     drives a table), defaulted for the demo."""
     d = (lambda v: {"required": True}) if required else (lambda v: {"default": v})
     need = " (required)" if required else ""
-    q.add_argument("--f-start-hz", type=float, metavar="HZ", help="frequency the sweep starts at, Hz" + need, **d(1.0))
-    q.add_argument("--f-end-hz", type=float, metavar="HZ", help="frequency the sweep ends at, Hz" + need, **d(20.0))
-    q.add_argument("--duration-s", type=float, metavar="S", help="length of the sweep, s" + need, **d(60.0))
-    q.add_argument("--amplitude-mm", type=float, metavar="MM", help="table displacement amplitude (peak), mm" + need,
+    q.add_argument("--f-start-hz", type=positive, metavar="HZ", help="frequency the sweep starts at, Hz" + need, **d(1.0))
+    q.add_argument("--f-end-hz", type=positive, metavar="HZ", help="frequency the sweep ends at, Hz" + need, **d(20.0))
+    q.add_argument("--duration-s", type=positive, metavar="S", help="length of the sweep, s" + need, **d(60.0))
+    q.add_argument("--amplitude-mm", type=non_negative, metavar="MM", help="table displacement amplitude (peak), mm" + need,
                    **d(1.3))
 
 
@@ -33,7 +34,7 @@ def add_lab_parsers(sub) -> None:
     q.add_argument("--token", help=TOKEN_HELP)
     q.add_argument("--wait-model", action="store_true", help="with --server: wait for the model and print it")
     add_sweep_shape(q, required=True)
-    q.add_argument("--settle-s", type=float, metavar="S", default=2.0,
+    q.add_argument("--settle-s", type=non_negative, metavar="S", default=2.0,
                    help="time recorded after the sweep ends (the free decay), s")
     q.add_argument("--operator", default="", help="who runs the sweep, kept in the recording")
     q.add_argument("--note", default="", help="free text kept in the recording")

@@ -54,6 +54,14 @@ def test_physical_parameters(fitted):
     # pre-stress b = k / (4 k_l a) and the design cubic stiffness 4 k_l a^2
     assert phys["prestress_b_m"]["value"] == pytest.approx(971.0169 * m / (4 * 16.7e3 * 4), rel=0.02)
     assert phys["design"]["cubic_stiffness_n_per_m3"] == pytest.approx(4 * 16.7e3 * 16)
+    # another mass scales every force; no mass (0, negative) is refused where it is given
+    from identify.physical import RigConstants, physical_parameters
+
+    heavy = physical_parameters(fitted.model_, RigConstants(mass_kg=2 * m))
+    assert heavy["stiffness_n_per_m"]["value"] == pytest.approx(2 * phys["stiffness_n_per_m"]["value"])
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="rig mass must be > 0 kg"):
+            RigConstants(mass_kg=bad)
 
 
 @pytest.mark.parametrize("case", [

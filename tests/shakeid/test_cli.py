@@ -92,6 +92,30 @@ def test_errors_are_one_clear_line(tmp_path, content, args, message):
     assert len(lines) == 1 and lines[0].startswith("shakeid: error:") and message in lines[0], proc.stderr
 
 
+@pytest.mark.parametrize("args,message", [
+    (["identify", "{csv}", "--mass-kg", "0"], "argument --mass-kg: must be > 0, got 0"),
+    (["identify", "{csv}", "--mass-kg", "nan"], "argument --mass-kg: must be a finite number"),
+    (["identify", "{csv}", "--degree", "0"], "argument --degree: must be 1..8, got 0"),
+    (["identify", "{csv}", "--max-terms", "0"], "argument --max-terms: must be >= 1, got 0"),
+    (["identify", "{csv}", "--samples", "-5", "100"], "argument --samples: must be >= 0, got -5"),
+    (["identify", "{csv}", "--samples", "100", "50"], "samples [100, 50) requested: need 0 <= start < stop <= "),
+    (["identify", "{csv}", "--budget", "aic"], "argument --budget: invalid choice: 'aic'"),
+    (["simulate", "--out", "{tmp}/s.csv", "--fs-hz", "-100"], "argument --fs-hz: must be > 0, got -100"),
+    (["simulate", "--out", "{tmp}/s.csv", "--duration-s", "-5"], "argument --duration-s: must be > 0, got -5"),
+    (["explain", "{csv}", "--model", "{csv}"], "not a model file: a model is the JSON `shakeid identify --json` "
+                                               "prints or a report's model.json (this is not JSON"),
+])
+def test_an_impossible_option_is_named_in_one_line(table1_csv, tmp_path, args, message):
+    """A value no rig has (a zero mass, a negative sample rate) is refused while the command line is read,
+    naming the option, in one line pointing at --help (not a ZeroDivisionError's traceback, not numpy's
+    "negative dimensions are not allowed", not argparse's 16-line usage); nothing is written."""
+    proc = run(*(a.format(csv=table1_csv, tmp=tmp_path) for a in args))
+    assert proc.returncode == 2 and proc.stdout == "" and "Traceback" not in proc.stderr, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("shakeid: error:") and message in lines[0], proc.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("command,name,content,message", [
     (command, name, content, message)
     for command in ("identify", "recordings")
