@@ -333,6 +333,11 @@ def main(argv=None) -> int:
     p.add_argument("--padding-lever", action="store_true",
                    help="also time the chain padded to 2n (the previous rule) against its own padding (largest size)")
     args = p.parse_args(argv)
+    if not args.no_pysindy:
+        try:
+            import pysindy  # noqa: F401 - the anchor; checked before minutes of timing, not after
+        except ImportError:
+            p.error("the PySINDy anchor is not installed: `make bench` installs it (.[bench]), or pass --no-pysindy")
     print(f"{'n':>9s} {'time':>5s} {'anchor':>8s} {'fit':>8s} {'ratio':>6s} {'fit+val':>8s} {'ratio':>6s} "
           f"{'pysindy':>8s} {'speedup':>8s}")
     print(f"{'':9s} {'':5s} {'':8s} {'':8s} {'<=' + format(TARGETS['fit'], 'g'):>6s} {'':8s} "
