@@ -19,7 +19,7 @@ import numpy as np
 
 from .html import EXPLAIN_DOCUMENTS, EXPLAIN_FIGURES, Page, report_folder
 from .identification import RESIDUAL, _save, plt
-from .text import gap_closed_text
+from .text import gap_closed_text, p_value_text
 
 FIGURES, DOCUMENTS = EXPLAIN_FIGURES, EXPLAIN_DOCUMENTS
 CLIP = -0.5  # candidates.png: shooting-gap bars below this are drawn cut here, their value written on them
@@ -156,7 +156,7 @@ def _index_html(out: Path, analysis, result: dict, u: str) -> str:
                          "probability that the effect beats both the runner-up and the explanation before it.")
     page.heading("Every candidate (first round)")
     crow = [[c["name"], c["kind"], f"{c['score']:+.3f}",
-             "-" if c.get("kind") == "measurement" else f"{c['p_value']:.1e}",
+             "-" if c.get("kind") == "measurement" else p_value_text(c["p_value"]),
              "-" if c.get("gap_share_closed") is None else gap_closed_text(c["gap_share_closed"]),
              c.get("rejected") or ("named" if c["name"] in {e["name"] for e in result["effects"]} else "")]
             for c in result["candidates"]]

@@ -20,6 +20,18 @@ def gap_closed_text(share: float | None) -> str:
     return f"worse: gap x{(1.0 - share) ** 0.5:.3g}"
 
 
+#: Below this a Wald p is printed as a bound: its tail rests on the Gaussian approximation, so "p = 0.0e+00"
+#: (an underflow) or 1e-200 would claim a precision no test has.
+P_FLOOR = 1e-10
+
+
+def p_value_text(p: float | None) -> str:
+    """A Wald p as printed: 3.2e-02, or "< 1e-10" for anything smaller (0 included)."""
+    if p is None:
+        return "n/a"
+    return f"< {P_FLOOR:.0e}" if p < P_FLOOR else f"{p:.1e}"
+
+
 def unit(text: str) -> str:
     """A unit as printed: 'm/s^2' -> 'm/s²', 'N/m^3' -> 'N/m³' (the recordings store ASCII units)."""
     return text.replace("^2", "²").replace("^3", "³")

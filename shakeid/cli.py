@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from identify.errors import IdentificationError, ShakeidError
-from reports.text import gap_closed_text, model_text, summary
+from reports.text import gap_closed_text, model_text, p_value_text, summary
 
 from .argtypes import int_in, non_negative, positive
 from .batch_cmd import add_batch_parser
@@ -187,7 +187,7 @@ def cmd_explain(args) -> int:
     print(f"largest misfit: {_span(worst)} into the recording, excitation {worst['excitation_hz']:.1f} Hz")
     for c in result["candidates"]:
         closed = c.get("gap_share_closed")
-        p = "not tested" if c.get("kind") == "measurement" else f"{c['p_value']:.1e}"  # searched, no Wald test
+        p = "not tested" if c.get("kind") == "measurement" else p_value_text(c["p_value"])  # searched, no Wald test
         print(f"  {c['name']:32s} equation-error share {c['score']:+.3f}  p = {p}  "
               f"shooting gap closed {gap_closed_text(closed)}"
               + (f"  (rejected: {c['rejected']})" if c.get("rejected") else ""))

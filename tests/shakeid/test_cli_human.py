@@ -163,6 +163,15 @@ def test_gap_closed_reads_as_a_share_or_as_how_much_worse():
     assert gap_closed_text(-3.0) == "worse: gap x2"
 
 
+def test_a_wald_p_below_what_the_test_can_say_is_printed_as_a_bound():
+    """A Wald p of 0 (an underflow: "p = 0.0e+00") or 1e-200 claims a precision the Gaussian tail
+    approximation does not have: below 1e-10 it reads as the bound."""
+    from reports.text import p_value_text
+
+    assert [p_value_text(v) for v in (None, 0.77, 0.0312, 2e-10)] == ["n/a", "7.7e-01", "3.1e-02", "2.0e-10"]
+    assert p_value_text(0.0) == p_value_text(1e-200) == p_value_text(9.9e-11) == "< 1e-10"
+
+
 def test_explain_on_a_short_record_prints_no_unreadable_shares(tmp_path):
     """The operator's case: a 10 s sweep (1-10 Hz, where candidates fitted on so little make the free run
     ~5x worse). Every candidate line's gap figure is a share within [-1, 1] or a "worse: gap xN" factor."""
