@@ -322,7 +322,8 @@ def cmd_simulate(args) -> int:
                    f"({n_contact / run.recording.fs_hz:.2f} s)")
     else:
         contact = f"end stops (+-{stops['travel_mm']:g} mm) not touched"
-    print(f"wrote {out} ({run.recording.n_samples} samples at {run.recording.fs_hz:g} Hz) and {truth}; "
+    print(f"wrote {out} ({run.recording.n_samples} samples at {run.recording.fs_hz:g} Hz: the {args.duration_s:g} s "
+          f"sweep and {run.truth['settle_s']:g} s at rest after it) and {truth}; "
           f"max |q| = {run.truth['max_abs_q_m'] * 1e3:.2f} mm, {contact}")
     return 0
 
