@@ -131,6 +131,10 @@ def read_recording(path, layout: str = "base", input: str | None = None, output:
         columns = _read_csv(path)
     else:
         raise RecordingError(f"{path}: unsupported file type {suffix!r} (csv or mat)")
+    for c in (input, output, time):
+        if isinstance(columns.get(c), TextColumn):
+            raise RecordingError(f"{path}: column {c!r} holds text, not numbers ({columns[c]})")
+    columns = {c: v for c, v in columns.items() if not isinstance(v, TextColumn)}
     missing = [c for c in (input, output) if c not in columns]
     if missing:
         raise RecordingError(f"{path}: missing column(s) {', '.join(map(repr, missing))}; "
@@ -176,33 +180,52 @@ def _parse_csv(path: Path, f) -> dict[str, np.ndarray]:
     if any(_is_number(h) for h in header):
         raise RecordingError(f"{path}: first line must be a header naming the columns, got {first[1].strip()!r}")
     chunks, numbers, rows = [], [], []
+    text: dict[str, str] = {}  # columns of words (an operator, a comment): kept out, named if asked for
+    used = list(range(len(header)))
     for k, ln in lines:
+        if not numbers and not chunks:  # the first data row says which columns are text
+            fields = _fields(ln, delim)
+            text = {header[j]: f"line {k}: {v.strip()!r}" for j, v in enumerate(fields[:len(header)])
+                    if not _is_number(v)}
+            used = [j for j, h in enumerate(header) if h not in text]
         numbers.append(k)
         rows.append(ln)
         if len(rows) == CSV_CHUNK_ROWS:
-            chunks.append(_parse_rows(path, rows, numbers, delim, len(header)))
+            chunks.append(_parse_rows(path, rows, numbers, delim, len(header), used))
             numbers, rows = [], []
     if rows:
-        chunks.append(_parse_rows(path, rows, numbers, delim, len(header)))
-    data = np.concatenate(chunks) if chunks else np.empty((0, len(header)))
-    return {h: data[:, j] for j, h in enumerate(header)}
+        chunks.append(_parse_rows(path, rows, numbers, delim, len(header), used))
+    data = np.concatenate(chunks) if chunks else np.empty((0, len(used)))
+    return {**{header[j]: data[:, i] for i, j in enumerate(used)}, **{h: TextColumn(v) for h, v in text.items()}}
 
 
-def _parse_rows(path: Path, rows: list[str], numbers: list[int], delim: str, n_cols: int) -> np.ndarray:
-    """rows (text lines, file line numbers `numbers`) -> (len(rows), n_cols) floats, or the first bad
-    line named."""
+class TextColumn(str):
+    """A CSV column of words, not numbers (where its first value is, e.g. "line 2: 'alice'"): left out of
+    the signals, and named if a signal is asked of it."""
+
+
+def _fields(line: str, delim: str) -> list[str]:
+    return line.split() if delim == " " else next(csv.reader([line], delimiter=delim))
+
+
+def _parse_rows(path: Path, rows: list[str], numbers: list[int], delim: str, n_cols: int, used: list[int]) -> np.ndarray:
+    """rows (text lines, file line numbers `numbers`) -> (len(rows), len(used)) floats of the columns
+    `used` (the numeric ones), or the first bad line named."""
     try:
-        data = np.loadtxt(rows, delimiter=None if delim == " " else delim, ndmin=2, dtype=float, comments=None)
-        if data.shape == (len(rows), n_cols):
-            return data
+        data = np.loadtxt(rows, delimiter=None if delim == " " else delim, ndmin=2, dtype=float, comments=None,
+                          usecols=used if len(used) < n_cols else None)
+        if data.shape == (len(rows), len(used)):
+            # loadtxt reads only `used`: a row with too few or too many fields is caught below
+            if len(used) == n_cols or all(len(_fields(ln, delim)) == n_cols for ln in rows):
+                return data
     except ValueError:
         pass
     for k, ln in zip(numbers, rows):  # the slow path, only to say which line is wrong
-        row = ln.split() if delim == " " else next(csv.reader([ln], delimiter=delim))
+        row = _fields(ln, delim)
         if len(row) != n_cols:
             raise RecordingError(f"{path}: line {k} has {len(row)} fields, header has {n_cols}")
         try:
-            [float(v) for v in row]
+            [float(row[j]) for j in used]
         except ValueError:
             raise RecordingError(f"{path}: line {k} has a non-numeric value: {ln.strip()[:80]!r}") from None
     raise RecordingError(f"{path}: lines {numbers[0]}-{numbers[-1]} could not be read as numbers")

@@ -102,3 +102,24 @@ def test_unreadable_files(tmp_path):
         read_recording(_csv(tmp_path, "x", "r.xlsx"))
     with pytest.raises(RecordingError, match="give the sample rate"):
         read_recording(_csv(tmp_path, "a,table_acc,mass_acc\n" + "1,2,3\n" * 300))
+
+
+def test_a_text_column_beside_the_signals_is_left_out(tmp_path, table1_run):
+    """A lab's CSV often carries words beside the signals (who ran it, a note): the signals are read as if
+    it were not there; asking a signal of it names the column and its first value; a row with a field
+    too many is still named."""
+    rec = table1_run.recording
+    plain, worded = tmp_path / "plain.csv", tmp_path / "worded.csv"
+    write_csv(plain, rec)
+    lines = plain.read_text().splitlines()
+    worded.write_text("\n".join([lines[0] + ",operator"] + [ln + ",alice" for ln in lines[1:]]) + "\n")
+    back = read_recording(worded)
+    assert np.array_equal(back.input, read_recording(plain).input)
+    assert np.array_equal(back.output, read_recording(plain).output) and back.fs_hz == rec.fs_hz
+    with pytest.raises(RecordingError, match=r"worded.csv: column 'operator' holds text, not numbers "
+                                             r"\(line 2: 'alice'\)"):
+        read_recording(worded, output="operator")
+    bad = lines[0] + ",operator\n" + "".join(ln + ",alice\n" for ln in lines[1:100]) + lines[100] + ",alice,x\n"
+    worded.write_text(bad)
+    with pytest.raises(RecordingError, match="line 101 has 5 fields, header has 4"):
+        read_recording(worded)
