@@ -185,10 +185,12 @@ def cmd_explain(args) -> int:
           f" (sensor-noise floor <= {f(result['noise_floor_upper'])})")
     worst = result["localisation"]["time"]["worst_window"]
     print(f"largest misfit: {_span(worst)} into the recording, excitation {worst['excitation_hz']:.1f} Hz")
+    print("candidates (equation-error share: of the held-out equation error it explains; shooting gap closed: "
+          "1 - gap after² / gap before²):")
     for c in result["candidates"]:
         closed = c.get("gap_share_closed")
         p = "not tested" if c.get("kind") == "measurement" else p_value_text(c["p_value"])  # searched, no Wald test
-        print(f"  {c['name']:32s} equation-error share {c['score']:+.3f}  p = {p}  "
+        print(f"  {c['name']:32s} equation-error share {c['score']:+.3f}  p {p if p[0] == '<' else '= ' + p}  "
               f"shooting gap closed {gap_closed_text(closed)}"
               + (f"  (rejected: {c['rejected']})" if c.get("rejected") else ""))
     if result["effect"] in ("none", "unexplained"):
