@@ -21,7 +21,7 @@ def add_sweep_shape(q, required: bool) -> None:
     q.add_argument("--f-start-hz", type=positive, metavar="HZ", help="frequency the sweep starts at, Hz" + need, **d(1.0))
     q.add_argument("--f-end-hz", type=positive, metavar="HZ", help="frequency the sweep ends at, Hz" + need, **d(20.0))
     q.add_argument("--duration-s", type=positive, metavar="S", help="length of the sweep, s" + need, **d(60.0))
-    q.add_argument("--amplitude-mm", type=non_negative, metavar="MM", help="table displacement amplitude (peak), mm" + need,
+    q.add_argument("--amplitude-mm", type=positive, metavar="MM", help="table displacement amplitude (peak), mm" + need,
                    **d(1.3))
 
 

@@ -43,11 +43,15 @@ def test_refusals_arrive_as_one_line_errors(service):
     # beyond any rig: still the rig's limit that refuses it, in its words (not the schema's bound)
     far = _sweep(service, "--amplitude-mm", "2000")
     assert far.returncode == 2 and "422 sweep refused: amplitude 2000 mm above the stroke limit 5 mm" in far.stderr
-    # what the request schema refuses, field by field in words, not as FastAPI's JSON list
+    # what no rig has is refused by the command line itself, naming the option
     negative = _sweep(service, "--amplitude-mm", "-1")
     assert negative.returncode == 2 and "Traceback" not in negative.stderr
-    assert "422 amplitude_mm: Input should be greater than 0 (got -1.0)" in negative.stderr, negative.stderr
-    assert '"loc"' not in negative.stderr and "[{" not in negative.stderr
+    assert "argument --amplitude-mm: must be > 0, got -1" in negative.stderr, negative.stderr
+    # what the request schema refuses, field by field in words, not as FastAPI's JSON list
+    long_settle = _sweep(service, "--settle-s", "100")
+    assert long_settle.returncode == 2 and "Traceback" not in long_settle.stderr
+    assert "422 settle_s: Input should be less than or equal to 60 (got 100.0)" in long_settle.stderr, long_settle.stderr
+    assert '"loc"' not in long_settle.stderr and "[{" not in long_settle.stderr
     viewer = _sweep(service, token=VIEWER)
     assert viewer.returncode == 2 and "403" in viewer.stderr and "operator role" in viewer.stderr
     nobody = subprocess.run([SHAKEID, "sweep", "--server", "http://127.0.0.1:9", "--token", OPERATOR, *ARGS],
