@@ -173,8 +173,13 @@ class SimulatedRig:
     async def _main(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._stopping = asyncio.Event()
-        self._start_modbus()
-        stream = await asyncio.start_server(self._on_stream_client, self.stream_host, self.stream_port)
+        await self._open_modbus()
+        try:
+            stream = await asyncio.start_server(self._on_stream_client, self.stream_host, self.stream_port)
+        except OSError as exc:
+            await self._modbus.shutdown()
+            raise RuntimeError(f"the accelerometer stream cannot listen on {self.stream_host}:{self.stream_port}: "
+                               f"{exc.strerror or exc}") from None
         if self.can_interface:
             import can
 
@@ -198,6 +203,19 @@ class SimulatedRig:
             self.ads.stop()
         if self.can_bus is not None:
             self.can_bus.shutdown()
+
+    async def _open_modbus(self) -> None:
+        """The PLC's Modbus TCP server, listening when this returns: a port already taken (another sim, a
+        real PLC's gateway) is an error here, not a rig that says it serves on a port something else
+        answers on (pymodbus's serve_forever only logs it, from a task nobody awaits)."""
+        self._modbus = make_server(self.plc, self.host, self.modbus_port,
+                                   on_access=lambda *a: self.fault_injection["drop_plc_link"])
+        try:
+            await self._modbus.serve_forever(background=True)
+        except RuntimeError:
+            raise RuntimeError(f"the PLC's Modbus TCP server cannot listen on {self.host}:{self.modbus_port}: "
+                               "the port is in use (another simulated rig or service?) or the address is not "
+                               "this machine's") from None
 
     def _start_modbus(self) -> None:
         self._modbus = make_server(self.plc, self.host, self.modbus_port,
