@@ -32,7 +32,7 @@ import h5py
 import numpy as np
 
 from identify.errors import RecordingError
-from identify.quality import QualityMonitor, clip_level, verdict
+from identify.quality import QualityMonitor, clip_level, verdict, with_status
 from identify.recording import CSV_SUFFIXES, H5_SUFFIXES, LAYOUTS, MAT_SUFFIXES, Recording, check_file
 
 #: The channels a sweep records, and the (input, output) pair identification reads from a recording
@@ -276,8 +276,9 @@ def recover(path) -> bool:
         e = f["entry"]
         n = int(f["entry/data/time"].shape[0])
         e.attrs.update(status="aborted", samples_written=n,
-                       status_reason=f"found running on the next start: the recorder stopped without closing "
-                                     f"the file ({n} samples up to its last flush are intact)")
+                       status_reason=f"found running by a recovery (a service's start or `shakeid recordings "
+                                     f"--recover`): the recorder stopped without closing the file ({n} samples "
+                                     f"up to its last flush are intact)")
         return True
 
 
@@ -306,11 +307,13 @@ def describe(path) -> dict:
     try:
         with h5py.File(path, "r") as f:
             e = f["entry"]
-            return {"path": str(path), **{k: (v.item() if hasattr(v, "item") else v) for k, v in e.attrs.items()},
+            attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in e.attrs.items()}
+            return {"path": str(path), **attrs,
                     "sweep": dict(e["sweep"].attrs), "channels": [k for k in e["data"] if k != "time"],
                     "samples": int(e["data/time"].shape[0]), "gaps": e["gaps"][()].tolist(),
                     "processed": [k for k in e["processed"] if k != "time"] if "processed" in e else [],
-                    "quality": read_quality(f)}
+                    # the verdict with the status in it: an aborted recording is not usable, whatever its signals
+                    "quality": with_status(read_quality(f), attrs.get("status"), attrs.get("status_reason"))}
     except (OSError, KeyError) as exc:
         if "unable to lock file" in str(exc):  # HDF5's lock: a writer has it open
             raise RecordingError(f"{path}: is open for writing by another process (a sweep still recording it?); "

@@ -352,6 +352,18 @@ def status_problem(status: str | None, reason: str | None = None) -> str | None:
     return f"status is {status}" + (f" ({reason})" if reason else "") + ", not complete"
 
 
+def with_status(quality: dict | None, status: str | None, reason: str | None = None) -> dict | None:
+    """A recording's quality verdict with its status in it: the detectors judge the signals only, so an
+    aborted or failed recording's report can read usable while identify refuses it. Its
+    usable_for_identification is then False, the status problem first among the reasons; a running
+    recording (not judged yet) and a complete one are returned as they are."""
+    problem = None if status == "running" else status_problem(status, reason)
+    if not quality or not problem:
+        return quality
+    reasons = [problem] + [r for r in quality.get("reasons") or [] if r != problem]
+    return {**quality, "usable_for_identification": False, "reasons": reasons}
+
+
 def identification_problems(rec) -> tuple[list[str], dict]:
     """Why a recording cannot carry a model (empty: it can), and its quality report: a status other than
     complete (the DAQ's files; CSV/MAT have none), then the verdict of assess_recording()."""

@@ -22,6 +22,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, StreamingResponse
 
 from daq.recorder import software_version
+from identify.quality import with_status
 
 from . import schemas
 from .auth import require
@@ -98,6 +99,15 @@ def create_app(settings: Settings) -> FastAPI:
         if rec is None:
             raise HTTPException(404, f"no recording {rec_id}")
         return rec
+
+    def with_verdict(rec: dict) -> dict:
+        """The recording as served: its quality verdict says unusable when its status does (an aborted
+        sweep's signals may be clean; identify refuses it all the same)."""
+        info = rec.get("info") or {}
+        if not isinstance(info.get("quality"), dict):
+            return rec
+        quality = with_status(info["quality"], rec.get("status"), info.get("reason"))
+        return {**rec, "info": {**info, "quality": quality}}
 
     # -- health, rig ----------------------------------------------------------------------------------
     @app.get("/api/health", response_model=schemas.Health, tags=["service"])
@@ -229,12 +239,12 @@ def create_app(settings: Settings) -> FastAPI:
     @app.get("/api/recordings", response_model=list[schemas.RecordingOut], tags=["recordings"],
              dependencies=[viewer], responses=errors)
     def list_recordings(limit: int = Query(50, ge=1, le=500)):
-        return catalog().list("recordings", limit=limit)
+        return [with_verdict(rec) for rec in catalog().list("recordings", limit=limit)]
 
     @app.get("/api/recordings/{rec_id}", response_model=schemas.RecordingOut, tags=["recordings"],
              dependencies=[viewer], responses={**errors, 404: {"model": schemas.Problem}})
     def get_recording(rec_id: str = Id()):
-        return recording_or_404(rec_id)
+        return with_verdict(recording_or_404(rec_id))
 
     @app.get("/api/recordings/{rec_id}/file", tags=["recordings"], dependencies=[viewer],
              response_class=FileResponse, responses={**errors, 404: {"model": schemas.Problem},
@@ -311,9 +321,10 @@ def create_app(settings: Settings) -> FastAPI:
     @app.post("/api/recordings/{rec_id}/identify", status_code=202, response_model=schemas.JobOut,
               tags=["jobs"], dependencies=[operator],
               responses={**errors, 404: {"model": schemas.Problem}, 409: {"model": schemas.Problem}})
-    def identify(body: schemas.IdentifyIn, rec_id: str = Id()):
-        """Queue an identification with the CLI's options; poll GET /api/jobs/{id}."""
-        return _submit("identify", rec_id, body.model_dump(exclude_none=True))
+    def identify(body: schemas.IdentifyIn | None = None, rec_id: str = Id()):
+        """Queue an identification with the CLI's options (no body: its defaults, as explain); poll
+        GET /api/jobs/{id}."""
+        return _submit("identify", rec_id, body.model_dump(exclude_none=True) if body is not None else {})
 
     @app.post("/api/identify", status_code=202, response_model=schemas.JobOut, tags=["jobs"],
               dependencies=[operator], responses={**errors, 404: {"model": schemas.Problem},

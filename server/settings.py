@@ -110,7 +110,7 @@ class Settings:
         short = [t for t in s.tokens if len(t) < 8]
         if short:
             raise SettingsError(f"{len(short)} token(s) shorter than 8 characters: use long random tokens")
-        if s.sim_speed <= 0 or s.identify_workers < 1:
+        if not 0 < s.sim_speed < float("inf") or s.identify_workers < 1:
             raise SettingsError("sim_speed must be positive and identify_workers at least 1")
         return s
 

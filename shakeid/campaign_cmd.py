@@ -66,8 +66,11 @@ def _load(args, plan, out: Path):
     saved = json.loads(path.read_text())
     done = sum(1 for it in saved["sweeps"] if it["status"] == "complete")
     if not args.resume:
+        ended = saved["state"] in ("completed", "aborted")  # nothing to resume: only a new name or folder helps
         raise ShakeidError(f"campaign {plan.name} is already in {out} ({saved['state']}, {done} of "
-                           f"{len(saved['sweeps'])} sweeps done): --resume to go on, or another name or --out")
+                           f"{len(saved['sweeps'])} sweeps done): "
+                           + ("give the plan another name or another --out" if ended else
+                              "--resume to go on, or another name or --out"))
     if saved["state"] in ("completed", "aborted"):
         raise ShakeidError(f"campaign {plan.name} in {out} is {saved['state']}: nothing to resume")
     if saved["plan"] != plan.to_dict():

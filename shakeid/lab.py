@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 from identify.errors import ShakeidError
@@ -196,17 +197,18 @@ def cmd_recordings(args) -> int:
     """Metadata, status, gaps and quality flags of HDF5 recordings; --recover marks crashed ones as aborted."""
     from daq.recorder import describe, recover
 
+    said = sys.stderr if args.json else sys.stdout  # with --json, stdout is one JSON object per file, nothing else
     for path in args.files:
         if args.recover:
             print(f"{path}: was left running by a crash; marked aborted" if recover(path) else
-                  f"{path}: not left running by a crash; nothing to recover")
+                  f"{path}: not left running by a crash; nothing to recover", file=said)
         if args.process:
             from daq.processing import add_processed
 
             p = add_processed(path)
             print(f"{path}: processed signals added (/entry/processed: relative acceleration, velocity, "
                   f"displacement; band {p['band_hz'][0]:.3g}-{p['band_hz'][1]:.3g} Hz, {p['segments']} segment(s), "
-                  f"{100 * p['valid_fraction']:.1f} % of rows valid)")
+                  f"{100 * p['valid_fraction']:.1f} % of rows valid)", file=said)
         info = describe(path)
         reasons = identification_reasons(info)
         if args.json:  # with `shakeid identify`'s verdict: its refusals and the signals' quality together
@@ -243,8 +245,9 @@ def identification_reasons(info: dict) -> list[str]:
     status = status_problem(info.get("status") or "unknown", info.get("status_reason"))
     missing = [c for c in DEFAULT_CHANNELS if c not in info.get("channels", [])]
     q = info.get("quality") or {}
-    return (([status] if status else []) + ([f"missing channel(s) {missing}"] if missing else [])
-            + ([] if q.get("usable_for_identification", True) else list(q.get("reasons") or [])))
+    reasons = (([status] if status else []) + ([f"missing channel(s) {missing}"] if missing else [])
+               + ([] if q.get("usable_for_identification", True) else list(q.get("reasons") or [])))
+    return list(dict.fromkeys(reasons))  # the quality verdict carries the status too (describe): said once
 
 
 def when(iso) -> str:

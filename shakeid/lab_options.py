@@ -63,7 +63,7 @@ def add_lab_parsers(sub) -> None:
                                                                    "(default: the config's [plc] port, else 5020)")
     q.add_argument("--stream-port", type=int, metavar="PORT", help="TCP port of the accelerometer stream "
                                                                    "(default: the config's [stream] url port, else 5021)")
-    q.add_argument("--speed", type=float, metavar="X", help="rig seconds per wall-clock second, for the PLC and the "
+    q.add_argument("--speed", type=positive, metavar="X", help="rig seconds per wall-clock second, for the PLC and the "
                                                             "streams (default: the config's [sim] speed, else 1)")
     q.set_defaults(func=cmd_sim)
     q = sub.add_parser("serve", help="the HTTP service: sweeps, recordings, models (FastAPI + uvicorn)")
@@ -73,7 +73,7 @@ def add_lab_parsers(sub) -> None:
     q.add_argument("--port", type=int, default=8000, help="TCP port")
     q.add_argument("--data-dir", metavar="DIR", help="recordings, models, catalog, token (default: "
                                                      "$SHAKEID_DATA_DIR, else [server] data_dir, else ./shakeid-data)")
-    q.add_argument("--sim-speed", type=float, metavar="X",
+    q.add_argument("--sim-speed", type=positive, metavar="X",
                    help="embedded simulated rig: rig seconds per wall-clock second (default: $SHAKEID_SIM_SPEED, "
                         "else [server] sim_speed, else 1)")
     q.add_argument("--log-level", default="warning", choices=("debug", "info", "warning", "error"),
@@ -89,7 +89,7 @@ def add_lab_parsers(sub) -> None:
                                                      "serve's)")
     q.add_argument("--address", help="where to listen, unix:PATH or tcp:HOST:PORT (default: "
                                      "unix:DATA_DIR/controller.sock)")
-    q.add_argument("--sim-speed", type=float, metavar="X", help="embedded simulated rig: rig seconds per "
+    q.add_argument("--sim-speed", type=positive, metavar="X", help="embedded simulated rig: rig seconds per "
                                                                 "wall-clock second (default: as serve's)")
     q.add_argument("--parent-pid", type=int, help=argparse.SUPPRESS)  # set by `shakeid serve` for its child
     q.set_defaults(func=cmd_controller)

@@ -49,6 +49,9 @@ def test_gaps_are_listed_never_spliced(tmp_path):
     r.close("aborted", "sensor link lost")
     info = describe(path)
     assert info["gaps"] == [[300, 64]] and info["status"] == "aborted" and info["status_reason"] == "sensor link lost"
+    # the verdict carries the status: an aborted recording is not usable, whatever its signals
+    assert info["quality"]["usable_for_identification"] is False
+    assert info["quality"]["reasons"][0] == "status is aborted (sensor link lost), not complete"
     with h5py.File(path) as f:
         t = f["entry/data/time"][()]
     assert t[300] - t[299] == pytest.approx(65 / 100.0)  # the time axis jumps over the gap
@@ -83,8 +86,17 @@ def test_sigkill_mid_recording_leaves_a_readable_file(tmp_path):
         table = f["entry/data/table_acc"][()]
     assert t.size >= 1000  # flushed at least every second: no more than ~1 s of the 2.6 s lost
     np.testing.assert_array_equal(table, np.arange(t.size))  # every flushed row intact
+    copy = path.with_name("copy.h5")
+    copy.write_bytes(path.read_bytes())
     assert recover(path) and describe(path)["status"] == "aborted"
     assert not recover(path)  # a second start finds nothing to do
+    # by hand, for a script: stdout is the JSON alone, what was done goes to stderr
+    scripted = subprocess.run([SHAKEID, "recordings", "--recover", "--json", str(copy)], capture_output=True,
+                              text=True, timeout=60)
+    assert scripted.returncode == 0 and "marked aborted" in scripted.stderr, scripted.stderr
+    doc = json.loads(scripted.stdout)  # one object, nothing before it
+    assert doc["status"] == "aborted" and doc["identification"]["usable"] is False
+    assert doc["quality"]["usable_for_identification"] is False
     out = subprocess.run([SHAKEID, "recordings", str(path)], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and "aborted" in out.stdout and "found running" in out.stdout
 

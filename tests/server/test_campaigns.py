@@ -190,7 +190,13 @@ def test_estop_pauses_a_campaign_resume_reruns_the_sweep_and_abort_ends_one(serv
     redo = c["sweeps"][1]
     assert [a["sweep_id"] for a in redo["attempts"]] == [stopped["sweep_id"]]  # the stopped attempt is kept
     assert redo["recording_id"] != stopped["recording_id"]
-    assert op.get(f"/api/recordings/{stopped['recording_id']}").json()["status"] == "aborted"
+    aborted = op.get(f"/api/recordings/{stopped['recording_id']}").json()
+    assert aborted["status"] == "aborted"
+    # its signals may be clean; it is not usable for identification all the same (identify refuses it)
+    verdict = aborted["info"]["quality"]
+    assert verdict["usable_for_identification"] is False and verdict["reasons"][0].startswith("status is aborted")
+    listed = {r["id"]: r for r in op.get("/api/recordings").json()}
+    assert listed[stopped["recording_id"]]["info"]["quality"] == verdict
     assert c["recording_ids"] == [c["sweeps"][0]["recording_id"], redo["recording_id"]]
 
     # pause: the running sweep finishes, no next one starts; abort of a paused campaign ends it

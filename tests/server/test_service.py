@@ -100,7 +100,10 @@ def test_abort_mid_sweep_leaves_an_aborted_recording(service):
     none = op.get(f"/api/recordings/{rec['id']}/model")  # aborted: not identified, and the 404 says so
     assert none.status_code == 404 and none.json()["detail"] == (
         f"no identify result for recording {rec['id']}: none was asked for (POST /api/recordings/{rec['id']}/identify)")
-    job = op.post(f"/api/recordings/{rec['id']}/identify", json={}).json()  # refused data: the job fails ...
+    # no body: the CLI's defaults, as explain takes them (a 422 "Field required" before)
+    job = op.post(f"/api/recordings/{rec['id']}/identify").json()  # refused data: the job fails ...
+    assert rec["info"]["quality"]["usable_for_identification"] is False  # as the job will find
+    assert rec["info"]["quality"]["reasons"][0].startswith("status is aborted")
     wait_for(lambda: op.get(f"/api/jobs/{job['id']}").json()["state"] == "failed", 60, "job")
     failed = op.get(f"/api/recordings/{rec['id']}/model").json()["detail"]  # ... and the 404 gives its reason
     assert failed.startswith(f"no identify result for recording {rec['id']}: its latest identify job {job['id']} "

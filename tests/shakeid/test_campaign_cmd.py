@@ -74,6 +74,8 @@ def test_a_campaign_writes_one_file_per_sweep_in_order(rig, tmp_path):
         str(out / f"levels-{k}.h5") for k in range(1, 5)]
     again = _campaign(_plan(tmp_path, "levels", 3.0), cfg, out)  # the same name again: refused, nothing moves
     assert again.returncode == 2 and "already in" in again.stderr and "completed, 4 of 4" in again.stderr
+    # a completed campaign has nothing to resume: the refusal does not send the operator to --resume
+    assert "another name or another --out" in again.stderr and "--resume" not in again.stderr
 
 
 def test_an_estop_pauses_the_campaign_resume_goes_on_and_ctrl_c_aborts(rig, tmp_path):
