@@ -329,6 +329,15 @@ def segments(time_s: np.ndarray, fs_hz: float) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
+def _rig_config(info: dict) -> dict:
+    """The recording's @rig_config (JSON; {} when absent or unreadable)."""
+    try:
+        doc = json.loads(info.get("rig_config") or "{}")
+    except (TypeError, ValueError):
+        return {}
+    return doc if isinstance(doc, dict) else {}
+
+
 def read_h5_recording(path, input: str = DEFAULT_CHANNELS[0], output: str = DEFAULT_CHANNELS[1],
                       samples: tuple[int, int] | None = None) -> Recording:
     """The recording (or rows samples=[a, b)) as identify's Recording. Samples are never spliced: a
@@ -357,7 +366,8 @@ def read_h5_recording(path, input: str = DEFAULT_CHANNELS[0], output: str = DEFA
         rec = Recording(d[input][a:b], d[output][a:b], fs, "base", input, output,
                         (d[input].attrs.get("units", ""), d[output].attrs.get("units", "")), str(path),
                         {"status": info["status"], "status_reason": info.get("status_reason", ""),
-                         "full_scale": full_scale, "first_row": a, "t0_s": float(d["time"][a])})
+                         "full_scale": full_scale, "first_row": a, "t0_s": float(d["time"][a]),
+                         "moving_mass_kg": _rig_config(info).get("moving_mass_kg")})
     return rec
 
 

@@ -148,6 +148,16 @@ class SparseIdentifier:
                          normalize=self.normalize_threshold)
         raise IdentificationError(f"unknown method {self.method!r} (admm or stlsq)")
 
+    def _rig_constants(self) -> tuple[RigConstants, str]:
+        """The rig's constants for the physical parameters and where its mass came from: given (rig=), the
+        recording's (a sweep records its rig configuration's moving mass), or the default, assumed."""
+        if self.rig is not None:
+            return self.rig, "given"
+        mass = (getattr(getattr(self, "recording_", None), "metadata", None) or {}).get("moving_mass_kg")
+        if mass:
+            return RigConstants(mass_kg=float(mass)), "recording"
+        return RigConstants(), "assumed"
+
     def fit(self, recording: "Recording | list[Recording]") -> "SparseIdentifier":
         """Fit to one Recording, or to a list of them: one model for several recordings of the same
         rig (identify.joint: chain and held-out blocks per recording, normal equations summed)."""
@@ -377,7 +387,7 @@ class SparseIdentifier:
             "timings_s": self.timings_,
         }
         if sig.input_name == "zdd":
-            out["physical"] = physical_parameters(self.model_, self.rig or RigConstants())
+            out["physical"] = physical_parameters(self.model_, *self._rig_constants())
         if getattr(self, "joint_", None) is not None:
             from .joint import joint_result
 

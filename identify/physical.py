@@ -23,7 +23,10 @@ class RigConstants:
             raise ValueError(f"rig mass must be > 0 kg, got {self.mass_kg}")
 
 
-def physical_parameters(model: SparseModel, rig: RigConstants = RigConstants()) -> dict:
+def physical_parameters(model: SparseModel, rig: RigConstants = RigConstants(), mass_source: str = "given") -> dict:
+    """Forces per unit mass times the mass: SI parameters with standard errors. mass_source says where
+    rig.mass_kg came from ("given", "recording", "assumed": the default, which scales every value when
+    the rig's moving mass differs)."""
     eq = "q1_dot"
     se = (model.standard_errors or {}).get(eq, {})
     m = rig.mass_kg
@@ -35,6 +38,7 @@ def physical_parameters(model: SparseModel, rig: RigConstants = RigConstants()) 
 
     out = {
         "mass_kg": m,
+        "mass_source": mass_source,
         "damping_ns_per_m": value("q1", 1.0),
         "stiffness_n_per_m": value("q2", 1.0),
         "cubic_stiffness_n_per_m3": value("q2^3", 1.0),

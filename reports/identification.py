@@ -23,7 +23,8 @@ import numpy as np  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from .html import IDENTIFICATION_DOCUMENTS, IDENTIFICATION_FIGURES, Page, report_folder  # noqa: E402
-from .text import DESIGN_K3_NOTE, coefficient_rows, coefficient_table, fit_text, physical_rows, plural, unit  # noqa: E402
+from .text import (DESIGN_K3_NOTE, coefficient_rows, coefficient_table, fit_text, mass_text,  # noqa: E402
+                   physical_rows, plural, unit)
 
 FIGURES, DOCUMENTS = IDENTIFICATION_FIGURES, IDENTIFICATION_DOCUMENTS
 RESIDUAL = "#c0392b"  # the residual traces' colour, the same in every panel
@@ -219,7 +220,7 @@ def _index_html(out: Path, ident, result: dict) -> str:
         prow = [[n, v, s or "-", u, f"{design:.4g}" if n.startswith("cubic") else ""]
                 for n, v, s, u in physical_rows(phys)]
         page.table(["parameter", "identified", "standard error", "unit", "design"], prow,
-                   f"Physical parameters from the q1_dot equation with the moving mass m = {phys['mass_kg']:g} kg "
+                   f"Physical parameters from the q1_dot equation with the moving mass {mass_text(phys)} "
                    f"(c = −m·coef(q1), k = −m·coef(q2), k3 = −m·coef(q2³); b from k). The design column: "
                    + DESIGN_K3_NOTE + ".")
     sel = result.get("selection") or {}

@@ -32,6 +32,15 @@ def p_value_text(p: float | None) -> str:
     return f"< {P_FLOOR:.0e}" if p < P_FLOOR else f"{p:.1e}"
 
 
+def mass_text(phys: dict) -> str:
+    """The moving mass the physical parameters are scaled by, and where it came from: every force is the
+    mass times a fitted acceleration, so an assumed mass that is not the rig's scales them all."""
+    m = phys.get("mass_kg")
+    where = {"given": "given, --mass-kg", "recording": "the recording's rig configuration",
+             "assumed": "assumed: the default; give the rig's with --mass-kg"}.get(phys.get("mass_source"), "given")
+    return f"m = {m:g} kg, {where}"
+
+
 def unit(text: str) -> str:
     """A unit as printed: 'm/s^2' -> 'm/s²', 'N/m^3' -> 'N/m³' (the recordings store ASCII units)."""
     return text.replace("^2", "²").replace("^3", "³")
@@ -120,7 +129,7 @@ def summary(result: dict, source: str) -> str:
                      f"{offset['passes']} passes{'' if offset['converged'] else ', NOT converged'}")
     phys = result.get("physical")
     if phys:
-        lines.append("physical: " + "; ".join(f"{name}: {v}" if v == "term not in model" else f"{name} = {v} {u}"
+        lines.append(f"physical ({mass_text(phys)}): " + "; ".join(f"{name}: {v}" if v == "term not in model" else f"{name} = {v} {u}"
                                               for name, v, _, u in physical_rows(phys)))
         lines.append(f"  design k3 = {phys['design']['cubic_stiffness_n_per_m3']:.4g} N/m³, for comparison: what the "
                      "rig's springs and cam profile give on paper (identify/physical.py)")

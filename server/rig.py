@@ -188,7 +188,7 @@ class RigService:
             plc, beat_plc, source = devices
             runner = SweepRunner(plc, source, self.cfg.limits, float(self.cfg.stream["sensitivity_counts_per_ms2"]),
                                  self.cfg.channels, on_progress=on_progress, on_samples=live.add,
-                                 rig_config={"source": self.cfg.source, "plc": self.cfg.plc,
+                                 rig_config={**self.cfg.recording_metadata(),
                                              "simulated": self.sim is not None}, heartbeat_plc=beat_plc)
             thread = threading.Thread(target=self._run, args=(runner, devices, req, out_path, live, on_end),
                                       name=f"sweep-{sweep_id}", daemon=True)

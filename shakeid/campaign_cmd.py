@@ -139,7 +139,7 @@ def _local(args, plan) -> int:
             progress = Progress(f"sweep {planned.index} of {campaign.total}:", planned.duration_s)
             runner = SweepRunner(plc, source, cfg.limits, float(cfg.stream["sensitivity_counts_per_ms2"]),
                                  cfg.channels, on_progress=progress.sweep_status, heartbeat_plc=devices[2],
-                                 rig_config={"source": cfg.source, "plc": cfg.plc})
+                                 rig_config=cfg.recording_metadata())
             if control.held():
                 return {"status": "held"}
             current["runner"] = runner

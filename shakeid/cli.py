@@ -80,8 +80,9 @@ def _add_identify_options(p: argparse.ArgumentParser) -> None:
                         "by the record's length, 64 up to 250 000 samples, 16 from 1 000 000)")
     g.add_argument("--placements", type=int_in(0), default=24, metavar="N",
                    help="random held-out placements for the inclusion probabilities (0: none, faster)")
-    g.add_argument("--mass-kg", type=positive, default=0.49, metavar="KG",
-                   help="moving mass for the physical parameters, kg")
+    g.add_argument("--mass-kg", type=positive, metavar="KG",
+                   help="moving mass for the physical parameters, kg (default: the recording's, which a sweep "
+                        "takes from its rig configuration, else 0.49, the paper's rig, said to be assumed)")
 
 
 def _identifier(args):
@@ -104,7 +105,7 @@ def _identifier(args):
                             budget=args.budget, budget_refit=args.budget_refit, refine=args.refine,
                             holdout_fraction=args.holdout_fraction, holdout_samples=args.holdout_samples,
                             band_hz=tuple(args.band) if args.band else None,
-                            rig=RigConstants(mass_kg=args.mass_kg), bias_replicates=args.bias_replicates,
+                            rig=RigConstants(mass_kg=args.mass_kg) if args.mass_kg else None, bias_replicates=args.bias_replicates,
                             placements=args.placements)
 
 

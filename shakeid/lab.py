@@ -128,7 +128,7 @@ def cmd_sweep(args) -> int:
     beat_plc = open_plc(cfg.plc)  # the heartbeat's own link: never behind a status poll
     progress = Progress("sweep", args.duration_s)
     runner = SweepRunner(plc, source, cfg.limits, float(cfg.stream["sensitivity_counts_per_ms2"]), cfg.channels,
-                         on_progress=progress.sweep_status, rig_config={"source": cfg.source, "plc": cfg.plc},
+                         on_progress=progress.sweep_status, rig_config=cfg.recording_metadata(),
                          heartbeat_plc=beat_plc)
     try:
         result = runner.run(req, args.out)

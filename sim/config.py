@@ -54,6 +54,13 @@ class RigConfig:
     source: str = "<defaults>"
     server: dict = field(default_factory=dict)
     compute: dict = field(default_factory=dict)
+    moving_mass_kg: float | None = None  # [rig] mass_kg when the file gives it: the lab's mass, recorded
+
+    def recording_metadata(self) -> dict:
+        """What a sweep records of this configuration (/entry@rig_config): where it came from, the PLC's
+        link, and the rig's moving mass when the file gives it (identify scales forces by it)."""
+        return {"source": self.source, "plc": self.plc,
+                **({"moving_mass_kg": self.moving_mass_kg} if self.moving_mass_kg else {})}
 
     def plc_config(self) -> PLCConfig:
         sensor = Accelerometer(noise_fraction=0.0, noise_ms2=self.sensor_noise_ms2, bias_ms2=self.sensor_bias_ms2)
@@ -104,6 +111,7 @@ def load_config(path) -> RigConfig:
         rig = dict(_take(doc["rig"], {f.name for f in fields(RigParameters)}, "rig", path))
         try:
             cfg.rig = RigParameters(**rig)
+            cfg.moving_mass_kg = cfg.rig.mass_kg if "mass_kg" in rig else None
         except (TypeError, ValueError) as exc:
             raise ConfigError(f"{path}: [rig]: {exc}") from None
     sensors = _take(doc.get("sensors", {}), {"noise_ms2", "bias_ms2"}, "sensors", path)

@@ -104,12 +104,21 @@ def test_sigkill_mid_recording_leaves_a_readable_file(tmp_path):
 def test_identify_reads_hdf5_directly(tmp_path, table1_run, table1_truth):
     path = tmp_path / "sweep.h5"
     rec = table1_run.recording
-    r = Recorder(path, fs_hz=rec.fs_hz)
+    # a rig configuration with [rig] mass_kg = 0.98 recorded it (sim.config.RigConfig.recording_metadata)
+    r = Recorder(path, fs_hz=rec.fs_hz, rig_config={"source": "lab.toml", "moving_mass_kg": 0.98})
     r.append(0, np.column_stack([rec.input, rec.output]))
     r.close()
     proc = subprocess.run([SHAKEID, "identify", str(path), "--json"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
-    assert set(json.loads(proc.stdout)["model"]["q1_dot"]) == set(table1_truth["q1_dot"])
+    doc = json.loads(proc.stdout)
+    assert set(doc["model"]["q1_dot"]) == set(table1_truth["q1_dot"])
+    # forces are the recorded mass times the fitted accelerations (k/m = 971.0 is the simulated rig's)
+    phys = doc["physical"]
+    assert phys["mass_kg"] == 0.98 and phys["mass_source"] == "recording"
+    assert phys["stiffness_n_per_m"]["value"] == pytest.approx(0.98 * -table1_truth["q1_dot"]["q2"], rel=0.01)
+    given = subprocess.run([SHAKEID, "identify", str(path), "--mass-kg", "0.49", "--placements", "0",
+                            "--bias-replicates", "0"], capture_output=True, text=True, timeout=300)
+    assert given.returncode == 0 and "physical (m = 0.49 kg, given, --mass-kg)" in given.stdout, given.stderr
     bad = tmp_path / "bad.h5"
     bad.write_bytes(b"not hdf5 at all" * 10)
     proc = subprocess.run([SHAKEID, "identify", str(bad)], capture_output=True, text=True, timeout=60)

@@ -48,3 +48,14 @@ def test_end_stops_from_the_rig_section(tmp_path):
     path.write_text("[rig]\nend_stop_travel_mm = inf\n")
     assert RigPLC(load_config(path).plc_config()).physics.travel == {}
     assert load_config(EXAMPLES / "sim-rig.toml").rig.end_stop_travel_mm == 17.5
+
+
+def test_a_configs_moving_mass_is_what_a_sweep_records(tmp_path):
+    """[rig] mass_kg is the lab's moving mass: a sweep records it (/entry@rig_config) so identify scales
+    the forces by it; a configuration without it records none (identify then says it assumed one)."""
+    cfg = tmp_path / "lab.toml"
+    cfg.write_text("[rig]\nmass_kg = 0.98\n")
+    meta = load_config(cfg).recording_metadata()
+    assert meta["moving_mass_kg"] == 0.98 and meta["source"].endswith("lab.toml")
+    cfg.write_text("[limits]\nwatchdog_s = 0.5\n")
+    assert "moving_mass_kg" not in load_config(cfg).recording_metadata()
