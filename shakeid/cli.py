@@ -388,6 +388,9 @@ def main(argv=None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # a usage error (its line printed), --help, --version: the code, as any command's
         return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    from .progress import survive_closed_readers
+
+    survive_closed_readers()  # a reader that goes away (| head) never stops a sweep or a campaign
     try:
         return args.func(args)
     except ShakeidError as exc:

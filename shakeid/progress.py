@@ -7,6 +7,7 @@ plain lines are printed instead, one each time the sweep passes another `step` o
 """
 from __future__ import annotations
 
+import os
 import sys
 
 
@@ -76,3 +77,45 @@ def rig_label(state: str, frequency_hz: float, position_mm: float) -> str:
     if state != "running":
         return f"{state:8s}  table {position_mm:+6.2f} mm"
     return f"{state:8s} {frequency_hz:6.2f} Hz  table {position_mm:+6.2f} mm"
+
+
+class SurvivesClosedReader:
+    """A text stream (stdout, stderr) whose reader may go away (`shakeid campaign ... | head`, a closed
+    terminal): a write that meets a broken pipe sends this and every later write to /dev/null instead of
+    raising. What is displayed must never stop what the rig does: a BrokenPipeError from a progress line
+    ended a sweep as "DAQ error" and left a campaign marked running."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def _divert(self) -> None:
+        try:
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, self._stream.fileno())  # what is still buffered goes there too, at exit as well
+            os.close(null)
+        except (OSError, ValueError):
+            pass
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            self._divert()
+            return len(text)
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._divert()
+
+    def __getattr__(self, name):  # isatty, fileno, encoding...: the stream's own
+        return getattr(self._stream, name)
+
+
+def survive_closed_readers() -> None:
+    """stdout and stderr of this process as SurvivesClosedReader (once; shakeid.cli.main)."""
+    for name in ("stdout", "stderr"):
+        stream = getattr(sys, name)
+        if stream is not None and not isinstance(stream, SurvivesClosedReader):
+            setattr(sys, name, SurvivesClosedReader(stream))

@@ -181,3 +181,38 @@ def test_paths_that_cannot_be_written_are_one_line_errors(table1_csv, tmp_path):
     assert a_file.read_text() == "{}"
     proc = run("simulate", "--out", tmp_path / "nodir" / "x.csv", "--duration-s", "5")
     assert proc.returncode == 2 and "no folder" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+
+
+def test_a_reader_that_goes_away_stops_nothing(tmp_path):
+    """`shakeid campaign ... | head -3`: once the reader has gone, a write met a broken pipe, which ended a
+    sweep as "DAQ error: BrokenPipeError" and left the campaign marked running. The command now finishes
+    its work, writes nothing more, and exits as it would have (here: a simulated recording, written)."""
+    import os
+
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # the reader is gone before the first line
+    out = tmp_path / "s.csv"
+    try:
+        proc = subprocess.run([SHAKEID, "simulate", "--out", str(out), "--duration-s", "5"], stdout=write_end,
+                              stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(write_end)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    assert out.exists() and out.with_suffix(".truth.json").exists()
+
+
+def test_progress_lines_to_a_closed_pipe_raise_nothing():
+    """The progress display of a sweep (its on_progress callback, inside the DAQ loop) writing into a pipe
+    whose reader has gone: nothing raised, so nothing reaches the sweep as a DAQ error."""
+    import os
+
+    from shakeid.progress import Progress, SurvivesClosedReader
+
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    stream = SurvivesClosedReader(os.fdopen(write_end, "w", buffering=1))
+    progress = Progress("sweep", 10.0, stream=stream, tty=False)
+    for k in range(11):
+        progress.update(k / 10, "running")
+    progress.close("complete")
+    stream.close()
