@@ -18,10 +18,14 @@ def die_with_parent(parent_pid: int) -> None:
     """Pool initializer: the worker exits when the service that started it is gone (even after a
     SIGKILL, which gives the service no chance to stop its pool): a job left behind would hold memory
     and its files for nobody, and the catalog re-queues it on the next start anyway. Also: batch work
-    runs at a lower CPU priority (nice +10), so the web server and the rig controller keep the cores."""
+    runs at a lower CPU priority (nice +10), so the web server and the rig controller keep the cores.
+    And a terminal's Ctrl-C, which reaches the whole process group, is the service's to handle: a worker
+    ignores SIGINT (it printed a KeyboardInterrupt traceback per worker; the service stops its pool)."""
+    import signal
     import threading
     import time
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.nice(10)
 
     def watch():

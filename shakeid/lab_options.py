@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from .argtypes import non_negative, positive
+from .argtypes import int_in, non_negative, positive
 from .lab import cmd_controller, cmd_demo, cmd_recordings, cmd_serve, cmd_sim, cmd_sweep
 from .rigcmd import cmd_rig
 
@@ -59,9 +59,9 @@ def add_lab_parsers(sub) -> None:
     q.add_argument("--config", metavar="RIG.toml", help="rig configuration, e.g. examples/sim-rig.toml "
                                                         "(default: the built-in simulated rig)")
     q.add_argument("--host", help="listen address (default: the config's, else 127.0.0.1)")
-    q.add_argument("--modbus-port", type=int, metavar="PORT", help="TCP port of the PLC's Modbus server "
+    q.add_argument("--modbus-port", type=int_in(1, 65535), metavar="PORT", help="TCP port of the PLC's Modbus server "
                                                                    "(default: the config's [plc] port, else 5020)")
-    q.add_argument("--stream-port", type=int, metavar="PORT", help="TCP port of the accelerometer stream "
+    q.add_argument("--stream-port", type=int_in(1, 65535), metavar="PORT", help="TCP port of the accelerometer stream "
                                                                    "(default: the config's [stream] url port, else 5021)")
     q.add_argument("--speed", type=positive, metavar="X", help="rig seconds per wall-clock second, for the PLC and the "
                                                             "streams (default: the config's [sim] speed, else 1)")
@@ -70,7 +70,7 @@ def add_lab_parsers(sub) -> None:
     q.add_argument("--config", metavar="RIG.toml", help="rig + [server] configuration (default: none, an "
                                                         "embedded simulated rig)")
     q.add_argument("--host", default="127.0.0.1", help="listen address")
-    q.add_argument("--port", type=int, default=8000, help="TCP port")
+    q.add_argument("--port", type=int_in(1, 65535), default=8000, help="TCP port")
     q.add_argument("--data-dir", metavar="DIR", help="recordings, models, catalog, token (default: "
                                                      "$SHAKEID_DATA_DIR, else [server] data_dir, else ./shakeid-data)")
     q.add_argument("--sim-speed", type=positive, metavar="X",

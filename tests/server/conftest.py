@@ -20,8 +20,11 @@ OPERATOR, VIEWER = "operator-token-for-tests", "viewer-token-for-tests"
 class Service:
     """One service process; start() again on the same data_dir is a restart."""
 
-    def __init__(self, data_dir: Path, speed: float = 10.0, env: dict | None = None, args: tuple = ()):
+    def __init__(self, data_dir: Path, speed: float = 10.0, env: dict | None = None, args: tuple = (),
+                 own_group: bool = False):
+        """own_group: the service leads its own process group, as in a terminal (a Ctrl-C reaches all of it)."""
         self.data_dir, self.speed, self.extra_env, self.args = data_dir, speed, env or {}, tuple(args)
+        self.own_group = own_group
         self.proc: subprocess.Popen | None = None
         self.port = 0
 
@@ -37,7 +40,8 @@ class Service:
             self.log = open(self.data_dir.parent / f"serve-{self.port}.log", "w")
             self.proc = subprocess.Popen([SHAKEID, "serve", "--data-dir", str(self.data_dir), "--port",
                                           str(self.port), "--sim-speed", str(self.speed), *self.args],
-                                         stdout=self.log, stderr=subprocess.STDOUT, env=env)
+                                         stdout=self.log, stderr=subprocess.STDOUT, env=env,
+                                         start_new_session=self.own_group)
             end = time.monotonic() + 60
             while True:
                 try:

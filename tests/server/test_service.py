@@ -2,8 +2,10 @@
 from __future__ import annotations
 
 import json
+import os
 import signal
 import threading
+import time
 
 import h5py
 import httpx
@@ -398,3 +400,29 @@ def test_mat_and_hdf5_uploads(service, tmp_path, table1_run):
         assert done["state"] == "completed", done
         model = op.get(f"/api/recordings/{rid}/model").json()
         assert set(model["model"]["q1_dot"]) == {"q1", "q2", "q1*q2^2", "q2^3", "zdd"}
+
+
+def test_ctrl_c_in_a_terminal_stops_the_service_without_tracebacks(tmp_path):
+    """A terminal's Ctrl-C sends SIGINT to the whole process group: the service, its rig controller and
+    its job workers. The service stops its children; each worker printed a KeyboardInterrupt traceback."""
+    s = Service(tmp_path / "data", own_group=True).start()
+    try:
+        def workers():
+            kids = []
+            for pid in os.listdir("/proc"):
+                try:
+                    stat = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+                    cmd = open(f"/proc/{pid}/cmdline", "rb").read()
+                except (OSError, IndexError):
+                    continue
+                if pid.isdigit() and int(stat[1]) == s.proc.pid and b"multiprocessing" in cmd:
+                    kids.append(int(pid))
+            return kids
+        wait_for(lambda: workers(), 60, "the job workers")
+        time.sleep(2.0)  # their initializer has run (it is what ignores SIGINT)
+        os.killpg(s.proc.pid, signal.SIGINT)
+        s.proc.wait(30)
+        out = s.output()
+        assert "Traceback" not in out and "KeyboardInterrupt" not in out, out
+    finally:
+        s.stop()
