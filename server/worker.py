@@ -147,6 +147,10 @@ def _label(path, options: dict) -> str:
 
 def _public(message: str, paths, options: dict) -> str:
     """A job's error as the operator sees it: each recording's absolute path replaced by its _label."""
+    named = False
     for p in paths:
+        named = named or str(p) in message or _label(p, options) in message
         message = message.replace(str(p), _label(p, options))
+    if not named and len(paths) == 1:  # an option's error ("band ... must satisfy"): which recording's job
+        message = f"{_label(paths[0], options)}: {message}"
     return message

@@ -170,6 +170,7 @@ def test_uploads_jobs_and_clear_errors(service, tmp_path, table1_run):
     failed = wait_for(lambda: (j := viewer.get(f"/api/jobs/{failing['id']}").json())["state"] in ("completed", "failed")
                       and j, 60, "job")
     assert failed["state"] == "failed" and "warp" in failed["error"]  # the user's mistake, named
+    assert failed["error"].startswith(f"sweep.csv (recording {rec['id']}): "), failed["error"]  # and whose job
     # a read option that does not fit the file: the job names the recording as it was uploaded, with its
     # id, not by the server's own path to its store
     wrong = op.post(f"/api/recordings/{rec['id']}/identify", json={"input": "acc_base"}).json()
