@@ -188,8 +188,10 @@ class RigService:
             plc, beat_plc, source = devices
             runner = SweepRunner(plc, source, self.cfg.limits, float(self.cfg.stream["sensitivity_counts_per_ms2"]),
                                  self.cfg.channels, on_progress=on_progress, on_samples=live.add,
-                                 rig_config={**self.cfg.recording_metadata(),
-                                             "simulated": self.sim is not None}, heartbeat_plc=beat_plc)
+                                 rig_config={**self.cfg.recording_metadata(), "simulated": self.sim is not None,
+                                             # the embedded simulated rig's mass is known: its own
+                                             **({"moving_mass_kg": self.sim.plc.config.rig.mass_kg}
+                                                if self.sim is not None else {})}, heartbeat_plc=beat_plc)
             thread = threading.Thread(target=self._run, args=(runner, devices, req, out_path, live, on_end),
                                       name=f"sweep-{sweep_id}", daemon=True)
             self.active = {"id": sweep_id, "runner": runner, "thread": thread, "live": live}

@@ -42,7 +42,9 @@ def cmd_demo(args) -> int:
     try:
         plc, source = ModbusPLC(host, port), SerialSource(rig.endpoints["stream"], rig.plc.config.fs_hz)
         progress = Progress("sweep", args.duration_s)
-        runner = SweepRunner(plc, source, Limits(), SENSITIVITY, on_progress=progress.sweep_status)
+        runner = SweepRunner(plc, source, Limits(), SENSITIVITY, on_progress=progress.sweep_status,
+                             rig_config={"source": "shakeid demo", "simulated": True,
+                                         "moving_mass_kg": rig.plc.config.rig.mass_kg})
         result = runner.run(SweepRequest(args.f_start_hz, args.f_end_hz, args.duration_s, args.amplitude_mm,
                                          operator="demo"), h5)
         progress.close()

@@ -77,6 +77,9 @@ def test_sweep_live_model_and_the_rules_around_it(service):
                      60, "model")
     truth = RigParameters.paper_table1().model().equations["q1_dot"]
     assert set(model["model"]["q1_dot"]) == set(truth)
+    # the simulated rig's moving mass, recorded with the sweep, scales the physical parameters
+    assert model["physical"]["mass_kg"] == RigParameters.paper_table1().mass_kg
+    assert model["physical"]["mass_source"] == "recording"
     for term, c in truth.items():
         assert abs(model["model"]["q1_dot"][term] / c - 1) < 0.03, term
     plots = wait_for(lambda: (p := viewer.get(f"/api/recordings/{rec_id}/plots")).status_code == 200 and
