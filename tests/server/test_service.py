@@ -5,7 +5,6 @@ import json
 import os
 import signal
 import threading
-import time
 
 import h5py
 import httpx
@@ -422,8 +421,16 @@ def test_ctrl_c_in_a_terminal_stops_the_service_without_tracebacks(tmp_path):
                 if pid.isdigit() and int(stat[1]) == s.proc.pid and b"multiprocessing" in cmd:
                     kids.append(int(pid))
             return kids
-        wait_for(lambda: workers(), 60, "the job workers")
-        time.sleep(2.0)  # their initializer has run (it is what ignores SIGINT)
+        def ignoring_sigint(pid: int) -> bool:  # /proc/PID/status SigIgn: the mask of ignored signals
+            try:
+                lines = open(f"/proc/{pid}/status").read().splitlines()
+            except OSError:
+                return False
+            mask = next(int(ln.split()[1], 16) for ln in lines if ln.startswith("SigIgn:"))
+            return bool(mask & (1 << (signal.SIGINT - 1)))
+
+        # every worker up and past its initializer (which is what ignores SIGINT): no sleep to guess it
+        wait_for(lambda: (kids := workers()) and all(ignoring_sigint(k) for k in kids), 120, "the job workers")
         os.killpg(s.proc.pid, signal.SIGINT)
         s.proc.wait(30)
         out = s.output()
