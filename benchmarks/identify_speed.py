@@ -105,10 +105,10 @@ def anchor(rec, lib, X, U) -> dict:
 def chain_transforms(rec, sig) -> dict:
     """The chain's transforms alone, each (wall, cpu) seconds: 2 forward (qdd and the input, each without
     its mean: identify.chain.by_mean_alone) and 4 inverse (q1, q2, q1_dot, input) rffts, zero-padded as
-    the chain pads (identify.chain.padded_length) and limited to the band's bins as the chain does them
-    (identify.spectral), and the two Welch spectra of the band estimate (16384-sample segments,
-    transformed in single precision as identify.chain.excited_band does)."""
-    from identify.chain import band_gain, padded_length
+    the chain pads (identify.chain.padded_length), limited to the band's bins and in the precision the
+    chain does them (identify.spectral, identify.chain.STATE_DTYPE), and the two Welch spectra of the band
+    estimate (16384-sample segments, transformed in single precision as identify.chain.excited_band does)."""
+    from identify.chain import STATE_DTYPE, band_gain, padded_length
     from identify.spectral import lowband_irfft, lowband_rfft, welch_psd
 
     n = rec.n_samples
@@ -116,7 +116,7 @@ def chain_transforms(rec, sig) -> dict:
     k_max = int(np.flatnonzero(band_gain(np.fft.rfftfreq(m, rec.dt), sig.band_hz, rec.fs_hz))[-1])
     rows = np.vstack([rec.output - rec.input, rec.input])
     out = {}
-    t_fwd, spec = timed(lambda: lowband_rfft(rows, m, k_max))
+    t_fwd, spec = timed(lambda: lowband_rfft(rows, m, k_max, STATE_DTYPE))
     t_inv, _ = timed(lambda: lowband_irfft(np.vstack([spec, spec]), m, n))
     out["padded_ffts"] = tuple(a + b for a, b in zip(t_fwd, t_inv))
     out["welch"], _ = timed(lambda: [welch_psd(x, rec.fs_hz, 16384, np.float32) for x in (rec.input, rows[0])])
@@ -355,7 +355,7 @@ def main(argv=None) -> int:
               f"{a['gram'][0]:.3f}/{a['gram'][1]:.3f}, 2 FFT pairs at next_fast_len(n) "
               f"{a['fft_pairs'][0]:.3f}/{a['fft_pairs'][1]:.3f}")
         tr = f["transforms"]
-        print(f"          the chain's transforms (wall/cpu): 2 forward + 4 inverse rfft, padded as the chain pads, band bins "
+        print(f"          the chain's transforms (wall/cpu): 2 forward + 4 inverse rfft, padded as the chain pads, band bins, single precision "
               f"{tr['padded_ffts'][0]:.3f}/{tr['padded_ffts'][1]:.3f}, 2 Welch spectra "
               f"{tr['welch'][0]:.3f}/{tr['welch'][1]:.3f} = {(tr['padded_ffts'][1] + tr['welch'][1]) / a['total'][1]:.2f}"
               " x the anchor (cpu)")

@@ -48,6 +48,12 @@ LIVE_EDGE_PERIODS = 3.0
 AT_REST_FRACTION = 0.02
 #: Excited bins closer than this (Welch bins, ~0.125 Hz each) belong to one band.
 MAX_GAP_BINS = 8
+#: Precision of the states' transforms (reconstruct_states; detrending, taper, filters and states are double
+#: whatever it is). Single: its rounding is white noise of ~1e-7 of a channel's scale, imaged like the
+#: sensors' noise (>= 1.5e-5 of full scale at 16 bits): beside noise at 1e-4 of the channels' std, 0.1-0.6 %
+#: of the noise's image in RMS (tests/identify/test_chain.py). A million-sample sweep's coefficients moved by
+#: <= 1.1e-7 of themselves, its chain took 0.075 s against 0.11 s (benchmarks/identify_speed.py).
+STATE_DTYPE = np.float32
 
 
 @dataclass(frozen=True)
@@ -391,13 +397,14 @@ def band_and_taper(fs_hz: float, n: int, layout: str, band_hz, harmonics: float,
 
 
 def reconstruct_states(rec: Recording, band_hz: tuple[float, float] | None = None, harmonics: float = 5.0,
-                       taper_s: float | None = None) -> StateSignals:
+                       taper_s: float | None = None, dtype=STATE_DTYPE) -> StateSignals:
     """States of the paper (q1 = velocity, q2 = displacement) and q1_dot from a recording.
 
     band_hz : (f_lo, f_hi) to integrate in; default from the input's spectrum: its excited range, the top
         widened `harmonics`-fold for the response's nonlinear harmonics, capped below Nyquist; the
         bottom no lower than where the integrated response clears its noise floor, less 20 %.
     taper_s : edge taper length; default one period of f_lo (base layout) or 64 samples (force layout).
+    dtype : the transforms' precision (STATE_DTYPE; np.float64 for the chain's numbers to rounding).
     """
     fs, n = rec.fs_hz, rec.n_samples
     response = rec.output - rec.input if rec.layout == "base" else rec.output
@@ -422,7 +429,7 @@ def reconstruct_states(rec: Recording, band_hz: tuple[float, float] | None = Non
     band = (lo, hi)
     # base layout: the relative acceleration q'' = x'' - z''; force layout: the output (a displacement)
     (q1, q2, q1_dot, u), exact = _spectral_ops([response, rec.input], fs, band, STATE_REQUESTS[rec.layout],
-                                               taper_n)
+                                               taper_n, dtype)
     return StateSignals(q1, q2, q1_dot, u, fs, band, slice(trims[0], rec.n_samples - trims[1]),
                         "zdd" if rec.layout == "base" else "u", taper_n, input_spectrum=exact[3],
                         spectra=read.get("spectra"))

@@ -28,8 +28,8 @@ from typing import Protocol
 import numpy as np
 from scipy.fft import next_fast_len
 
-from .chain import (EDGE_FRACTION, AT_REST_FRACTION, PAD_PERIODS, STATE_REQUESTS, StateSignals, band_and_taper,
-                    band_bins, band_filter, band_from_psd, detrend_rows, taper_ramp, welch_length)
+from .chain import (EDGE_FRACTION, AT_REST_FRACTION, PAD_PERIODS, STATE_DTYPE, STATE_REQUESTS, StateSignals,
+                    band_and_taper, band_bins, band_filter, band_from_psd, detrend_rows, taper_ramp, welch_length)
 from .errors import IdentificationError
 from .spectral import BandLimitedSignal, lowband_irfft, lowband_rfft, welch_psd
 
@@ -77,6 +77,7 @@ class ChunkedChain:
     firsts: np.ndarray  # (2,) first samples (the line through the ends, before filtering/differentiation)
     lasts: np.ndarray   # (2,) last samples
     live_guard: int     # samples guarded at an edge that is not at rest (chain.band_and_taper)
+    dtype: type = STATE_DTYPE  # the transforms' precision, as the whole-record chain's (reconstruct_states)
 
     @property
     def input_name(self) -> str:
@@ -169,9 +170,9 @@ class ChunkedChain:
                 xd[r, off:] *= w
         del x
         f, g = band_bins(nfft, fs, band)
-        spectra = lowband_rfft(xd, nfft, f.size - 1)
+        spectra = lowband_rfft(xd, nfft, f.size - 1, self.dtype)
         del xd
-        out = band_filter([(spectra[r], p) for r, (_, p) in zip(row_of, requests)], f, g, band)
+        out = band_filter([(spectra[r], p) for r, (_, p) in zip(row_of, requests)], f, g, band, spectra.dtype)
         del spectra
         y = lowband_irfft(out, nfft, L + (b - a))[:, L:]
         results = []

@@ -105,9 +105,11 @@ def test_spectral_ops_equal_the_one_signal_operator(band, taper_n):
 
 def test_reconstruct_states_equals_the_previous_chain(table1_run, monkeypatch):
     rec = table1_run.recording
-    padded = reconstruct_states(rec)
+    # in double precision: the algorithm against the previous one, to rounding (the default single
+    # precision is bounded against the sensors' noise in test_chain.py)
+    padded = reconstruct_states(rec, dtype=np.float64)
     monkeypatch.setattr(chain, "PAD_PERIODS", 1e12)  # the previous padding: the record's own length
-    s = reconstruct_states(rec)
+    s = reconstruct_states(rec, dtype=np.float64)
     # the padding of PAD_PERIODS periods of f_lo moves the states by ~1e-8 of their peak (wrap-around of
     # the operators' decaying impulse responses): 5 orders below the 0.5 % sensor noise of this record
     v = s.valid
@@ -135,7 +137,7 @@ def test_force_layout_states_equal_the_previous_chain():
     t = np.arange(int(20 * fs)) / fs
     y = 0.1 * np.sin(2 * np.pi * 10 * t) + 0.02 * np.sin(2 * np.pi * 68 * t + 1.9) + 0.01
     rec = Recording(np.sin(2 * np.pi * 11 * t), y, fs, "force", "u", "y")
-    s = reconstruct_states(rec, band_hz=(0.0, 200.0))
+    s = reconstruct_states(rec, band_hz=(0.0, 200.0), dtype=np.float64)  # double: to rounding
     for name, power in (("q2", 0), ("q1", 1), ("q1_dot", 2)):
         assert _close(getattr(s, name), _spectral_op_before(y, fs, (0.0, 200.0), power, s.taper_n)), name
     assert _close(s.input, _spectral_op_before(rec.input, fs, (0.0, 200.0), 0, s.taper_n))
