@@ -107,7 +107,7 @@ def chain_transforms(rec, sig) -> dict:
     its mean: identify.chain.by_mean_alone) and 4 inverse (q1, q2, q1_dot, input) rffts, zero-padded as
     the chain pads (identify.chain.padded_length), limited to the band's bins and in the precision the
     chain does them (identify.spectral, identify.chain.STATE_DTYPE), and the two Welch spectra of the band
-    estimate (16384-sample segments, transformed in single precision as identify.chain.excited_band does)."""
+    estimate (16384-sample segments, transformed in single precision as identify.band.excited_band does)."""
     from identify.chain import STATE_DTYPE, band_gain, padded_length
     from identify.spectral import lowband_irfft, lowband_rfft, welch_psd
 

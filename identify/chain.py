@@ -28,26 +28,22 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.fft import next_fast_len, rfftfreq
-from scipy.stats import chi2
 
+from .band import band_from_psd, excitation_spectrum
 from .errors import IdentificationError
 from .recording import Recording
 from .simulate import fine_grid_input
-from .spectral import BandLimitedSignal, lowband_irfft, lowband_rfft, welch_dof, welch_psd, welch_segments
+from .spectral import BandLimitedSignal, lowband_irfft, lowband_rfft, welch_segments
 
 #: Band edge roll-off as a fraction of the edge frequency (lower: down to f_lo/2; upper: up to 1.25 f_hi).
 EDGE_FRACTION = 0.5
 #: Zero padding of the transforms in periods of f_lo (padded_length): what the states lose to wrap-around
 #: is below 1e-9 of their peak from ~20 periods on (docs/identification.md, Benchmarks).
 PAD_PERIODS = 40
-#: Excited = Welch PSD at least this many dB above the noise floor (excited_band: the noise level itself).
-EXCITATION_MARGIN_DB = 8.0  # over the noise level: the old rule's 10 dB over a low decile (0.55-0.67 of it)
 #: Guard beyond the taper at an edge where the record is not at rest, in periods of f_lo.
 LIVE_EDGE_PERIODS = 3.0
 #: An edge is at rest when its RMS is below this fraction of the record's RMS.
 AT_REST_FRACTION = 0.02
-#: Excited bins closer than this (Welch bins, ~0.125 Hz each) belong to one band.
-MAX_GAP_BINS = 8
 #: Precision of the states' transforms (reconstruct_states; detrending, taper, filters and states are double
 #: whatever it is). Single: its rounding is white noise of ~1e-7 of a channel's scale, imaged like the
 #: sensors' noise (>= 1.5e-5 of full scale at 16 bits): beside noise at 1e-4 of the channels' std, 0.1-0.6 %
@@ -59,7 +55,7 @@ STATE_DTYPE = np.float32
 @dataclass(frozen=True)
 class BandSpectra:
     """Welch PSDs ((unit)^2/Hz, one-sided) of a record's input and response (base layout: output - input)
-    on the bins f_hz, each the mean over `segments` Hann segments (excited_band's, single precision)."""
+    on the bins f_hz, each the mean over `segments` Hann segments (identify.band.excited_band's, single precision)."""
 
     f_hz: np.ndarray
     input: np.ndarray
@@ -147,64 +143,6 @@ class StateSignals:
             out += spectral_ops(group, self.fs_hz, self.band_hz, [(i, 0) for i in range(len(group))], self.taper_n,
                                 dtype)
         return out
-
-
-def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARGIN_DB) -> tuple[float, float]:
-    """Frequency range (Hz) where the signal's PSD stands `margin_db` above its noise floor."""
-    f, p, nper = excitation_spectrum(x, fs_hz)
-    return band_from_psd(f, p, x.size, nper, margin_db)
-
-
-def excitation_spectrum(x: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray, int]:
-    """(f Hz, PSD, segment length) of x that excited_band reads: scipy.signal.welch(..., detrend="linear")
-    in segments of welch_length, transformed in single precision: a threshold 8 dB over the noise floor
-    does not see the 1.4e-5 it moves a noisy bin by, and its own floor, ~157 dB below the peak, lies under
-    any sensor's noise (welch_psd)."""
-    nper = welch_length(x.size, fs_hz)
-    f, p = welch_psd(x, fs_hz, nper, np.float32)
-    return f, p, nper
-
-
-def welch_length(n: int, fs_hz: float) -> int:
-    """The Welch segment length excited_band uses on a record of n samples (~0.125 Hz resolution)."""
-    nper = int(min(n, 2 ** int(np.ceil(np.log2(fs_hz * 8.0)))))
-    return max(min(nper, n // 2), 16)
-
-
-def band_from_psd(f: np.ndarray, p: np.ndarray, n: int, nper: int,
-                  margin_db: float = EXCITATION_MARGIN_DB) -> tuple[float, float]:
-    """excited_band's rule on a Welch PSD of a record of n samples in segments of nper (identify.chunked
-    accumulates that PSD chunk by chunk, without holding the record)."""
-    skip = 3  # the lowest bins hold the window's leakage of offsets and drifts, not excitation
-    floor = np.percentile(p[skip:], 10) / _low_decile_of_noise(n, nper)
-    above = np.flatnonzero(p[skip:] > floor * 10 ** (margin_db / 10)) + skip
-    if above.size == 0:
-        raise IdentificationError("the input shows no excited frequency band above its noise floor")
-    # With few Welch averages single bins of noise cross any threshold: keep the run of excited bins
-    # (gaps up to MAX_GAP bins merged, for multisines' sparse lines) that holds the most power.
-    breaks = np.flatnonzero(np.diff(above) > MAX_GAP_BINS)
-    starts = np.concatenate([[0], breaks + 1])
-    stops = np.concatenate([breaks, [above.size - 1]])
-    power = [p[above[a]:above[b] + 1].sum() for a, b in zip(starts, stops)]
-    best = int(np.argmax(power))
-    lo_bin, hi_bin = above[starts[best]], above[stops[best]]
-    df = f[1] - f[0]
-    return float(max(f[lo_bin] - df, df)), float(min(f[hi_bin] + df, df * nper / 2))  # df nper / 2: Nyquist
-
-
-def _low_decile_of_noise(n: int, nper: int) -> float:
-    """The 10th percentile of a Welch estimate of white noise, as a fraction of its mean.
-
-    The floor is the spectrum's 10th percentile (robust to how many bins the excitation fills) divided
-    by this, i.e. the noise level itself. A noise bin of a Welch estimate over K segments (Hann, 50 %
-    overlap) is chi-square with ~2K / (1 + 2 c^2 (K - 1) / K) degrees of freedom, c = 0.167: with
-    K = 14 (60 s at 2048 Hz) its low decile is 0.67 of the mean, with K = 3 (a 13-15 s record) 0.37,
-    so the undivided percentile put the threshold at 3.7x instead of 10x the noise on short records:
-    noise bins crossed it and, merged across MAX_GAP_BINS, pulled f_lo to the spectrum's bottom
-    (0.31 Hz for a response that cannot clear its noise below ~1.5 Hz), leaving the record too short for
-    its own band."""
-    dof = welch_dof(welch_segments(n, nper))
-    return float(chi2.ppf(0.1, dof) / dof)
 
 
 def band_gain(f: np.ndarray, band: tuple[float, float], fs_hz: float) -> np.ndarray:

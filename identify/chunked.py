@@ -10,7 +10,7 @@ L = OVERLAP_PERIODS periods of f_lo, the same tail the whole-record chain loses 
 
 What the whole-record chain reads from the whole record comes from one scan (`ChunkedChain.scan`):
 - the band: excited_band's Welch PSD, accumulated over the very segments the whole-record Welch
-  estimate averages (segments never straddle two reads), then the same rule (chain.band_from_psd);
+  estimate averages (segments never straddle two reads), then the same rule (band.band_from_psd);
 - the detrending (chain.by_mean_alone): the channel means and the end samples (the line through them),
 - whether each edge is at rest (its RMS against the record's), hence the trims and the valid rows.
 Memory is O(chunk + 2 L) whatever the record's length (tests/identify/test_chunked_chain.py).
@@ -28,8 +28,9 @@ from typing import Protocol
 import numpy as np
 from scipy.fft import next_fast_len
 
+from .band import band_from_psd, welch_length
 from .chain import (EDGE_FRACTION, AT_REST_FRACTION, PAD_PERIODS, STATE_DTYPE, STATE_REQUESTS, StateSignals,
-                    band_and_taper, band_bins, band_filter, band_from_psd, detrend_rows, taper_ramp, welch_length)
+                    band_and_taper, band_bins, band_filter, detrend_rows, taper_ramp)
 from .errors import IdentificationError
 from .spectral import BandLimitedSignal, lowband_irfft, lowband_rfft, welch_psd
 
@@ -107,7 +108,7 @@ class ChunkedChain:
             sumsq += (d * d).sum(axis=1)
             k0, k1 = -(-a // hop), min(-(-b // hop), n_seg)  # segments starting in [a, b)
             if k1 > k0:
-                # segments in single precision, as chain.excited_band takes them: one rule for the band
+                # segments in single precision, as band.excited_band takes them: one rule for the band
                 f, p = welch_psd(x[:, k0 * hop - a:(k1 - 1) * hop + nper - a], fs, nper, np.float32)
                 psd = p * (k1 - k0) if psd is None else psd + p * (k1 - k0)
             if progress:

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import welch
 
-from .chain import StateSignals, band_gain, excited_band
+from .band import excited_band
+from .chain import StateSignals, band_gain
 from .recording import Recording
 
 

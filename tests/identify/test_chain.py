@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from identify.chain import excited_band, reconstruct_states, spectral_op
+from identify.band import excited_band
+from identify.chain import reconstruct_states, spectral_op
 from identify.errors import IdentificationError
 from identify.recording import Recording
 

@@ -14,7 +14,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from identify.chain import excited_band, reconstruct_states
+from identify.band import excited_band
+from identify.chain import reconstruct_states
 from identify.chunked import ChunkedChain, chunk_ranges
 from identify.recording import Recording
 from sim.sweep import SineSweep

@@ -2,7 +2,8 @@
 noise, records that end with the sweep (no settle time)."""
 import pytest
 
-from identify.chain import excited_band, reconstruct_states
+from identify.band import excited_band
+from identify.chain import reconstruct_states
 from identify.identifier import SparseIdentifier
 from sim.rig import RigParameters
 from sim.sweep import SineSweep

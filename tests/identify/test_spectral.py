@@ -8,8 +8,9 @@ import pytest
 from scipy.fft import irfft, next_fast_len, rfft, rfftfreq
 from scipy.signal import welch
 
-from identify import chain
-from identify.chain import EDGE_FRACTION, band_gain, excited_band, reconstruct_states, spectral_op, spectral_ops
+from identify import band, chain
+from identify.band import excited_band
+from identify.chain import EDGE_FRACTION, band_gain, reconstruct_states, spectral_op, spectral_ops
 from identify.recording import Recording
 from identify.spectral import welch_psd
 
@@ -119,7 +120,7 @@ def test_reconstruct_states_equals_the_previous_chain(table1_run, monkeypatch):
     bands = [excited_band(x, rec.fs_hz) for x in (rec.input, rec.output - rec.input)]
     # the bands, estimated with scipy's welch as before (in double precision; excited_band's segments are
     # transformed in single), are the same bands
-    monkeypatch.setattr(chain, "welch_psd", lambda x, fs, nper, dtype=None: welch(x, fs, nperseg=nper,
+    monkeypatch.setattr(band, "welch_psd", lambda x, fs, nper, dtype=None: welch(x, fs, nperseg=nper,
                                                                                 detrend="linear"))
     assert [excited_band(x, rec.fs_hz) for x in (rec.input, rec.output - rec.input)] == bands
     assert reconstruct_states(rec).band_hz == s.band_hz
