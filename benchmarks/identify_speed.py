@@ -177,11 +177,11 @@ def validation_parts(n: int, repeat: int) -> dict:
     `repeat`: validate() as a whole, and its parts done alone: the input on the RK4 half-step grid (from
     the chain's spectrum, StateSignals.input_fine; what a run in steps of `stride` samples reads), the
     compiled RK4 run on it (with the steps validate takes, identify.simulate.choose_step; and in steps of
-    one sample, for comparison), the three simulated signals through the chain's band (one batch,
-    single-precision transforms, as validate does them), the acceleration equation at the simulated
-    states (all rows) and the fit metrics of the seven pairs (validation.heldout_and_all_metrics)."""
+    one sample, for comparison), the simulated displacement through the chain's band with its two
+    derivatives (one forward and three inverse single-precision transforms, as validate does them), and
+    the fit metrics of the seven pairs (validation.heldout_and_all_metrics)."""
     from identify.simulate import choose_step
-    from identify.validation import _runs, _runs_of, first_equation, fit_metrics, heldout_and_all_metrics, validate
+    from identify.validation import _runs, _runs_of, fit_metrics, heldout_and_all_metrics, validate
 
     rec, _ = sweep_recording(n)
     ident = SparseIdentifier(validate=False, bias_replicates=0, placements=0).fit(rec)
@@ -194,7 +194,6 @@ def validation_parts(n: int, repeat: int) -> dict:
     fine, fine_all = sig.input_fine(subs, stride), sig.input_fine(subs)
     res = simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine, substeps=subs, n_samples=u.shape[0], bound=1e3,
                    stride=stride)
-    signals = [res.states[:, 0], res.states[:, 1], qdot]
     runs = _runs(rows)
     held = _runs_of(runs)
 
@@ -207,11 +206,7 @@ def validation_parts(n: int, repeat: int) -> dict:
                                         n_samples=u.shape[0], bound=1e3, stride=stride)),
             "rk4_one_sample": cpu(lambda: simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine_all, substeps=subs,
                                                    n_samples=u.shape[0], bound=1e3)),
-            "band_limit": cpu(lambda: sig.band_limit_many(signals, np.float32)),
-            "q1_dot": cpu(lambda: first_equation(model, res.states[:, 0], res.states[:, 1], u)),
-            # the run with q1_dot computed in it, as validate does
-            "rk4_q1_dot": cpu(lambda: simulate(model, 1.0 / sig.fs_hz, x[0], inputs_fine=fine, substeps=subs,
-                                               n_samples=u.shape[0], bound=1e3, derivative=(0, u), stride=stride)),
+            "band_limit": cpu(lambda: sig.band_limit_derivatives(res.states[:, 1], (0, 1, 2), np.float32)),
             # as validate scores them: each signal's held-out and all-rows figures from one pass, and the
             # one-step fit of the held-out acceleration
             "metrics": cpu(lambda: [heldout_and_all_metrics(sig.q1[v], sim[:, 0], runs) for _ in range(3)]
@@ -377,9 +372,8 @@ def main(argv=None) -> int:
         print(f"\nfree-run validation, {vp['rows']} rows, {vp['substeps']} RK4 substep(s), steps of {vp['stride']} "
               f"sample(s), CPU s (best of {args.repeat}): validate {vp['validate']:.3f}; alone: input on the half-step "
               f"grid {vp['input_grid']:.3f}, RK4 run {vp['rk4']:.3f} (in steps of one sample {vp['rk4_one_sample']:.3f}), "
-              f"3 signals through the band {vp['band_limit']:.3f}, "
-              f"q1_dot at the simulated states {vp['q1_dot']:.3f}, 7 fit metrics (3 signals held out and all, 1 one-step) {vp['metrics']:.3f}; "
-              f"RK4 run computing q1_dot as it goes {vp['rk4_q1_dot']:.3f}", flush=True)
+              f"the displacement through the band with its 2 derivatives {vp['band_limit']:.3f}, "
+              f"7 fit metrics (3 signals held out and all, 1 one-step) {vp['metrics']:.3f}", flush=True)
     if args.uncertainty_parts and args.sizes:
         up = uncertainty_parts(max(args.sizes), args.repeat)
         print(f"\nuncertainty step, n = {max(args.sizes)}, CPU s (best of {args.repeat}), parts alone: all-rows refits "

@@ -144,6 +144,16 @@ class StateSignals:
                                 dtype)
         return out
 
+    def band_limit_derivatives(self, x: np.ndarray, powers, dtype=np.float64) -> list[np.ndarray]:
+        """x through the band, times (j w)^p on the band's bins for each p of `powers`, from one transform:
+        what the chain makes of a displacement x and of its derivatives (its q1 and q1_dot are those of
+        its q2), for a simulated displacement (identify.validation). Every power shares the detrending of
+        the first (for powers (0, ...): x's mean, or with DC in the band the line through its ends, as
+        band_limit); on a tapered signal a derivative's own line would differ within the taper alone.
+        dtype: the transforms' precision."""
+        return spectral_ops([x], self.fs_hz, self.band_hz, [(0, p) for p in powers], self.taper_n, dtype,
+                            shared=True)
+
 
 def band_gain(f: np.ndarray, band: tuple[float, float], fs_hz: float) -> np.ndarray:
     """1 inside [f_lo, f_hi], half-cosine roll-off outside, 0 beyond (the cosines evaluated on the
@@ -213,15 +223,16 @@ def spectral_op(x: np.ndarray, fs_hz: float, band: tuple[float, float], power: i
 
 
 def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, taper_n: int,
-                 dtype=np.float64) -> list[np.ndarray]:
+                 dtype=np.float64, shared: bool = False) -> list[np.ndarray]:
     """spectral_op for several (signal index, power) `requests` on equally long `signals`, with each
     detrended signal transformed once: integrals of one signal share its spectrum, and all forward
     and all inverse transforms go through one batched rfft / irfft each, of the band's bins only.
-    dtype : the transforms' precision (the detrending and the results are double whatever it is)."""
-    return _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype)[0]
+    dtype : the transforms' precision (the detrending and the results are double whatever it is);
+    shared : every request of a signal detrended as its first one (detrend_rows)."""
+    return _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype, shared)[0]
 
 
-def _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype=np.float64):
+def _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype=np.float64, shared=False):
     """spectral_ops' results, and each as a BandLimitedSignal (its filtered bins, shared; the line)."""
     signals = [np.asarray(x, dtype=float) for x in signals]
     n = signals[0].size
@@ -229,7 +240,7 @@ def _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype=np.float64):
     # the displacement, which leaks into the band; the taper alone makes the edges continuous.
     # Differentiating/filtering with DC in the band: the straight line through the end samples, whose
     # own derivative is known exactly and is restored below (by_mean_alone).
-    rows, row_of = detrend_rows(requests, band)
+    rows, row_of = detrend_rows(requests, band, shared)
     lines = {}  # the end-point lines, kept only when DC is in the band (restored below)
     xd = np.empty((len(rows), n))
     ramp = taper_ramp(np.arange(taper_n), taper_n) if taper_n > 0 else None
@@ -286,10 +297,14 @@ def by_mean_alone(requests, band: tuple[float, float]) -> list[bool]:
     return [p < 0 or (p == 0 and band[0] > 0) for _, p in requests]
 
 
-def detrend_rows(requests, band: tuple[float, float]) -> tuple[list[tuple[int, bool]], list[int]]:
+def detrend_rows(requests, band: tuple[float, float], shared: bool = False) -> tuple[list[tuple[int, bool]], list[int]]:
     """The distinct detrended signals the requests need, as sorted (signal, by mean alone) rows (one
-    forward transform each), and per request the index of its row (by_mean_alone)."""
+    forward transform each), and per request the index of its row (by_mean_alone; shared: each signal
+    detrended as its first request is, one row per signal)."""
     keys = [(i, alone) for (i, _), alone in zip(requests, by_mean_alone(requests, band))]
+    if shared:
+        first = dict(reversed(keys))
+        keys = [(i, first[i]) for i, _ in keys]
     rows = sorted(set(keys))
     return rows, [rows.index(k) for k in keys]
 
