@@ -144,15 +144,15 @@ class StateSignals:
                                 dtype)
         return out
 
-    def band_limit_derivatives(self, x: np.ndarray, powers, dtype=np.float64) -> list[np.ndarray]:
+    def band_limit_derivatives(self, x: np.ndarray, powers, dtype=np.float64) -> np.ndarray:
         """x through the band, times (j w)^p on the band's bins for each p of `powers`, from one transform:
         what the chain makes of a displacement x and of its derivatives (its q1 and q1_dot are those of
-        its q2), for a simulated displacement (identify.validation). Every power shares the detrending of
-        the first (for powers (0, ...): x's mean, or with DC in the band the line through its ends, as
-        band_limit); on a tapered signal a derivative's own line would differ within the taper alone.
-        dtype: the transforms' precision."""
-        return spectral_ops([x], self.fs_hz, self.band_hz, [(0, p) for p in powers], self.taper_n, dtype,
-                            shared=True)
+        its q2), for a simulated displacement (identify.validation), as the rows of one (len(powers), n)
+        array. Every power shares the detrending of the lowest (for power 0: x's mean, or with DC in the
+        band the line through its ends, as band_limit); on a tapered signal a derivative's own line would
+        differ within the taper alone. dtype: the transforms' precision."""
+        return _spectral_ops([x], self.fs_hz, self.band_hz, [(0, p) for p in powers], self.taper_n, dtype,
+                             shared=True)[0]
 
 
 def band_gain(f: np.ndarray, band: tuple[float, float], fs_hz: float) -> np.ndarray:
@@ -228,12 +228,13 @@ def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, tap
     detrended signal transformed once: integrals of one signal share its spectrum, and all forward
     and all inverse transforms go through one batched rfft / irfft each, of the band's bins only.
     dtype : the transforms' precision (the detrending and the results are double whatever it is);
-    shared : every request of a signal detrended as its first one (detrend_rows)."""
-    return _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype, shared)[0]
+    shared : every request of a signal detrended as its lowest power's (detrend_rows)."""
+    return list(_spectral_ops(signals, fs_hz, band, requests, taper_n, dtype, shared)[0])
 
 
 def _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype=np.float64, shared=False):
-    """spectral_ops' results, and each as a BandLimitedSignal (its filtered bins, shared; the line)."""
+    """spectral_ops' results as the rows of one (len(requests), n) array, and each as a BandLimitedSignal
+    (its filtered bins, shared; the line)."""
     signals = [np.asarray(x, dtype=float) for x in signals]
     n = signals[0].size
     # integrating: only the mean goes. A line removed from an acceleration is a cubic removed from
@@ -242,20 +243,20 @@ def _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype=np.float64, sha
     # own derivative is known exactly and is restored below (by_mean_alone).
     rows, row_of = detrend_rows(requests, band, shared)
     lines = {}  # the end-point lines, kept only when DC is in the band (restored below)
-    xd = np.empty((len(rows), n))
+    xd = np.empty((len(rows), n), dtype=dtype)  # detrended in double, stored as the transforms read it
     ramp = taper_ramp(np.arange(taper_n), taper_n) if taper_n > 0 else None
     steps = None  # 0, 1, ..., n - 1 as floats, shared by the lines
     for r, (i, alone) in enumerate(rows):
         x = signals[i]
         if alone:
-            np.subtract(x, x.mean(), out=xd[r])
+            np.subtract(x, x.mean(), out=xd[r], casting="same_kind")
         else:
             # x[0] + (x[-1] - x[0]) k / (n - 1), in place, operation for operation (the same numbers)
             steps = np.arange(n, dtype=float) if steps is None else steps
             line = np.multiply(steps, x[-1] - x[0])
             line /= max(n - 1, 1)
             line += x[0]
-            np.subtract(x, line, out=xd[r])
+            np.subtract(x, line, out=xd[r], casting="same_kind")
             if band[0] == 0:
                 lines[i] = line
         if taper_n > 0:
@@ -268,7 +269,7 @@ def _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype=np.float64, sha
     out = band_filter([(spectra[r], power) for r, (_, power) in zip(row_of, requests)], f, g, band, spectra.dtype)
     del spectra
     y = lowband_irfft(out, nfft, n)
-    results, exact = [], []
+    exact = []
     for k, (i, power) in enumerate(requests):
         yk = y[k]
         line = (0.0, 0.0)
@@ -278,9 +279,8 @@ def _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype=np.float64, sha
             slope = (x[-1] - x[0]) / max(n - 1, 1)
             yk += lines[i] if power == 0 else slope * fs_hz
             line = (float(x[0]), float(slope)) if power == 0 else (float(slope * fs_hz), 0.0)
-        results.append(yk)
         exact.append(BandLimitedSignal(out[k], nfft, yk, line))
-    return results, exact
+    return y, exact
 
 
 def by_mean_alone(requests, band: tuple[float, float]) -> list[bool]:
@@ -300,11 +300,15 @@ def by_mean_alone(requests, band: tuple[float, float]) -> list[bool]:
 def detrend_rows(requests, band: tuple[float, float], shared: bool = False) -> tuple[list[tuple[int, bool]], list[int]]:
     """The distinct detrended signals the requests need, as sorted (signal, by mean alone) rows (one
     forward transform each), and per request the index of its row (by_mean_alone; shared: each signal
-    detrended as its first request is, one row per signal)."""
-    keys = [(i, alone) for (i, _), alone in zip(requests, by_mean_alone(requests, band))]
+    detrended as its request of the lowest power is, one row per signal)."""
+    alone = by_mean_alone(requests, band)
     if shared:
-        first = dict(reversed(keys))
-        keys = [(i, first[i]) for i, _ in keys]
+        lowest = {}  # signal -> (lowest power, its detrending)
+        for (i, p), a in zip(requests, alone):
+            if i not in lowest or p < lowest[i][0]:
+                lowest[i] = (p, a)
+        alone = [lowest[i][1] for i, _ in requests]
+    keys = [(i, a) for (i, _), a in zip(requests, alone)]
     rows = sorted(set(keys))
     return rows, [rows.index(k) for k in keys]
 
@@ -381,8 +385,8 @@ def reconstruct_states(rec: Recording, band_hz: tuple[float, float] | None = Non
                                   f"{rec.n_samples} samples, {sum(trims)} lost to edge tapers and guards")
     band = (lo, hi)
     # base layout: the relative acceleration q'' = x'' - z''; force layout: the output (a displacement)
-    (q1, q2, q1_dot, u), exact = _spectral_ops([response, rec.input], fs, band, STATE_REQUESTS[rec.layout],
-                                               taper_n, dtype)
+    exact = _spectral_ops([response, rec.input], fs, band, STATE_REQUESTS[rec.layout], taper_n, dtype)[1]
+    q1, q2, q1_dot, u = (e.samples for e in exact)  # the arrays the input's spectrum describes (input_fine)
     return StateSignals(q1, q2, q1_dot, u, fs, band, slice(trims[0], rec.n_samples - trims[1]),
                         "zdd" if rec.layout == "base" else "u", taper_n, input_spectrum=exact[3],
                         spectra=read.get("spectra"))
