@@ -37,16 +37,17 @@ def _from_sums(sse: float, spread: float, count: int) -> dict:
     return {"nrmse": nrmse, "fit_percent": 100.0 * (1.0 - nrmse), "rmse": rmse}
 
 
-def heldout_and_all_metrics(measured: np.ndarray, simulated: np.ndarray, runs) -> tuple[dict, dict]:
+def heldout_and_all_metrics(measured: np.ndarray, simulated: np.ndarray, runs,
+                            scratch: np.ndarray | None = None) -> tuple[dict, dict]:
     """fit_metrics on the rows of `runs` (slices: the held-out blocks) and on all rows, from one error
     array and one centred copy of the measurement (validate scores three signals a million samples long
     both ways): the held-out sums are sums over the runs' slices, no concatenated copies. The held-out
     spread is about the held-out mean: sum (y - mean_all)^2 over the runs less n_h (mean_h - mean_all)^2.
     The same figures as fit_metrics on the concatenated rows to rounding (tests/identify/test_validation.py);
     a simulation not finite on the held-out rows has no held-out figures, one not finite anywhere none
-    on all rows."""
+    on all rows. scratch: an array like measured to hold the errors (validate's three signals share one)."""
     n, n_h = measured.size, sum(r.stop - r.start for r in runs)
-    err = measured - simulated
+    err = np.subtract(measured, simulated, out=scratch)
     sse = float(np.dot(err, err))
     sse_h = float(sum(np.dot(err[r], err[r]) for r in runs))
     np.subtract(measured, measured.mean() if n else 0.0, out=err)
@@ -110,8 +111,10 @@ def validate(model: SparseModel, sig: StateSignals, heldout_rows: np.ndarray, su
            "heldout_samples": int(np.count_nonzero(heldout_rows))}
     runs = _runs(heldout_rows)
     held = _runs_of(runs)
+    scratch = np.empty(v.stop - v.start)
     for name in measured:
-        out["heldout"][name], out["all"][name] = heldout_and_all_metrics(measured[name], simulated[name], runs)
+        out["heldout"][name], out["all"][name] = heldout_and_all_metrics(measured[name], simulated[name], runs,
+                                                                         scratch)
     # one step: the model's acceleration from the measured states and input, on the same held-out rows
     # (only there: the other rows' one-step prediction is not reported)
     q1, q2 = sig.state_columns(v)
