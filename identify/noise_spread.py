@@ -335,7 +335,10 @@ def noise_variance(parts, supports: dict, coefs: dict, G: np.ndarray, col_exps: 
     recordings); coefs : {equation: (m,) all-rows coefficients}; col_exps, target_exps : monomial
     exponents of the columns and of each equation's target (identify.corrected). Exact responses
     H_v = gain (j w)^p on the bins (chain_noise.BandLimitedNoise), as the chain and the noise draws have them."""
-    kept = {e: np.flatnonzero(sup) for e, sup in supports.items() if sup.any()}
+    # an equation whose one kept column is its own target (q2_dot = q1: the chain's q1 is the derivative
+    # of its q2) fits it exactly, coefficient 1 and residual 0 to rounding: its score does not move (0)
+    kept = {e: np.flatnonzero(sup) for e, sup in supports.items()
+            if sup.any() and not (sup.sum() == 1 and col_exps[np.flatnonzero(sup)[0]] == target_exps[e])}
     V = {e: np.zeros((S.size, S.size)) for e, S in kept.items()}
     for y, noise, (s_in, s_out) in parts:
         scores = {e: _Score(y[0].size, noise, [col_exps[j] for j in S], target_exps[e], coefs[e][S])
