@@ -150,9 +150,9 @@ class StateSignals:
         its q2), for a simulated displacement (identify.validation), as the rows of one (len(powers), n)
         array. Every power shares the detrending of the lowest (for power 0: x's mean, or with DC in the
         band the line through its ends, as band_limit); on a tapered signal a derivative's own line would
-        differ within the taper alone. dtype: the transforms' precision."""
+        differ within the taper alone. dtype: the transforms' precision and the results'."""
         return _spectral_ops([x], self.fs_hz, self.band_hz, [(0, p) for p in powers], self.taper_n, dtype,
-                             shared=True)[0]
+                             shared=True, out_dtype=dtype)[0]
 
 
 def band_gain(f: np.ndarray, band: tuple[float, float], fs_hz: float) -> np.ndarray:
@@ -232,9 +232,9 @@ def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, tap
     return list(_spectral_ops(signals, fs_hz, band, requests, taper_n, dtype, shared)[0])
 
 
-def _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype=np.float64, shared=False):
-    """spectral_ops' results as the rows of one (len(requests), n) array, and each as a BandLimitedSignal
-    (its filtered bins, shared; the line)."""
+def _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype=np.float64, shared=False, out_dtype=np.float64):
+    """spectral_ops' results as the rows of one (len(requests), n) array of out_dtype, and each as a
+    BandLimitedSignal (its filtered bins, shared; the line)."""
     signals = [np.asarray(x, dtype=float) for x in signals]
     n = signals[0].size
     # integrating: only the mean goes. A line removed from an acceleration is a cubic removed from
@@ -268,7 +268,7 @@ def _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype=np.float64, sha
     del xd
     out = band_filter([(spectra[r], power) for r, (_, power) in zip(row_of, requests)], f, g, band, spectra.dtype)
     del spectra
-    y = lowband_irfft(out, nfft, n)
+    y = lowband_irfft(out, nfft, n, out_dtype)
     exact = []
     for k, (i, power) in enumerate(requests):
         yk = y[k]

@@ -167,9 +167,9 @@ def polyphase_rfft(phases: np.ndarray, nfft: int, k_max: int) -> np.ndarray:
     return out
 
 
-def lowband_irfft(spec: np.ndarray, nfft: int, n_out: int) -> np.ndarray:
+def lowband_irfft(spec: np.ndarray, nfft: int, n_out: int, out_dtype=np.float64) -> np.ndarray:
     """irfft(Y, nfft, axis=-1)[..., :n_out] for spectra Y (k, k_max + 1) that are zero above bin k_max,
-    as one C-contiguous (k, n_out) array of doubles; the transforms in Y's precision (single for
+    as one (k, n_out) array of out_dtype (rows C-contiguous); the transforms in Y's precision (single for
     complex64 spectra).
 
     The output's polyphase components y[r::M] are each an irfft of nfft / M points of Y[k] w^(-k r) / M
@@ -189,7 +189,7 @@ def lowband_irfft(spec: np.ndarray, nfft: int, n_out: int) -> np.ndarray:
     y = irfft(z, length, axis=-1, overwrite_x=True)
     del z
     # y[:, r, j] is the sample M j + r; one transposing copy into time order, in double precision
-    out = np.empty((k, rows, m))
+    out = np.empty((k, rows, m), dtype=out_dtype)
     out[...] = y[:, :, :rows].transpose(0, 2, 1)
     return out.reshape(k, rows * m)[:, :n_out]
 
