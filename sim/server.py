@@ -6,7 +6,8 @@
 
 One asyncio loop runs everything: every tick it advances the PLC by tick x speed of rig time (so
 speed=10 runs the rig ten times faster, PLC clock and streams alike) and sends the new samples as
-frames (sim.frames) to every connected stream client.
+frames (sim.frames) to every connected stream client. A stall of the process is not made up in one
+jump (SimulatedRig.max_step_s): the rig's clock stops with it, as a real PLC's would not stall at all.
 """
 from __future__ import annotations
 
@@ -108,6 +109,7 @@ class SimulatedRig:
         self.stream_port = stream_port or free_port(stream_host or host)
         self.speed = speed
         self.tick_s = tick_s
+        self.lost_rig_s = 0.0  # rig time not simulated because this process stalled (max_step_s)
         self.frame_samples = frame_samples
         self.sensitivity = sensitivity
         # drop_plc_link: Modbus requests fail; cut_plc_link_s: the PLC's TCP server goes away for that
@@ -259,13 +261,31 @@ class SimulatedRig:
             await self._plc_link()
             if self.ads is not None:
                 self.ads.cycle()
-            first, samples = self.plc.advance(dt)
+            step = min(dt, self.max_step_s())
+            self.lost_rig_s += dt - step
+            first, samples = self.plc.advance(step)
             rig_t = target
             if samples.size:
                 if not self._pending.size:
                     self._pending_first = first
                 self._pending = np.vstack([self._pending, samples])
             await self._send_frames()
+
+    def max_step_s(self) -> float:
+        """The most rig time one tick may simulate (s): twice a tick's share (a late tick on a loaded
+        machine is caught up), and no more than a quarter of the watchdog, though never less than one
+        tick's share (the rig keeps its speed whatever the watchdog).
+
+        A stall of this process (the loop, or the whole process, not scheduled for a while) is time
+        the rig does not see: what a tick would simulate beyond this is dropped (lost_rig_s adds it up).
+        Otherwise the first tick after a 0.5 s stall at 10x would simulate 5 s at once, and the next
+        would find the heartbeat silent for 5 s, though the client was stalled with the simulator or
+        its beat was queued on the socket: a spurious watchdog fault that a real PLC, whose scan
+        cannot stall like that, never raises. A client that really falls silent is still caught. It is
+        silent in wall time while ticks go on at their normal pace, and the rig's clock keeps `speed`
+        through that."""
+        tick = self.tick_s * self.speed
+        return max(tick, min(2.0 * tick, self.plc.config.limits.watchdog_s / 4))
 
     def _send_can(self, counts: np.ndarray, flags: int) -> None:
         import can  # only rigs with a CAN output need python-can loaded
