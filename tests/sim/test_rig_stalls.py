@@ -39,12 +39,17 @@ class BeatingClient:
         return r[0], r[1]
 
     def start_sweep(self, f0, f1, duration_s, amplitude_mm):
+        """Set the sweep, start beating and START; return once the PLC reports RUNNING."""
         with self.lock:
             for addr, v in ((0, f0), (2, f1), (4, duration_s), (6, amplitude_mm)):
                 self.mb.write_registers(addr, self.mb.convert_to_registers([v], self.F), device_id=1)
         self.thread = threading.Thread(target=self._beat, daemon=True)
         self.thread.start()
         self.write(10, 1)
+        deadline = time.time() + 10
+        while self.state()[0] != State.RUNNING:
+            assert time.time() < deadline, self.state()
+            time.sleep(0.02)
 
     def _beat(self):
         n = 0
@@ -71,10 +76,6 @@ def test_a_stall_of_the_simulator_and_its_client_is_not_a_silent_heartbeat():
     cli = BeatingClient(rig)
     try:
         cli.start_sweep(3.0, 6.0, 30.0, 1.0)
-        deadline = time.time() + 10
-        while cli.state()[0] != State.RUNNING:
-            assert time.time() < deadline, cli.state()
-            time.sleep(0.02)
         time.sleep(0.3)
         with cli.lock:
             rig._loop.call_soon_threadsafe(time.sleep, 1.5)  # the simulator's whole loop stalls
@@ -97,10 +98,6 @@ def test_a_silent_client_still_faults_the_watchdog_on_time():
     cli = BeatingClient(rig)
     try:
         cli.start_sweep(3.0, 6.0, 60.0, 1.0)
-        deadline = time.time() + 10
-        while cli.state()[0] != State.RUNNING:
-            assert time.time() < deadline, cli.state()
-            time.sleep(0.02)
         cli.beating = False
         cli.thread.join()
         t0 = time.time()
