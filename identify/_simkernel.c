@@ -21,12 +21,11 @@
  *   continuous extension (strided_run).
  *   int32 buffers: term_ptr (n_terms+1), fac_feat, fac_pow; float64 buffers: coef (n_states*n_terms),
  *   x0 (n_states), u_fine ((n_out-1)*2*substeps+1 rows of n_inputs), out (n_out*n_states, writable),
- *   travel (n_states, m; inf = no end stop; omitted = none anywhere); optional eq, u_samples (n_out rows of
- *   n_inputs), dx_out (n_out, writable): dx_out[t] = equation eq at the written sample t and u_samples[t].
+ *   travel (n_states, m; inf = no end stop; omitted = none anywhere).
  * Returns the number of samples written: n_out, or fewer if a state left [-bound, bound] or went NaN.
  *
  * rhs_rows(term_ptr, fac_feat, fac_pow, coef, columns, eq, out [, travel]): equation eq of the right-hand
- *   side at n independent rows (the one-step prediction and the free run's q1_dot, identify.validation).
+ *   side at n independent rows (the one-step prediction and a diverged free run's q1_dot, identify.validation).
  *
  * Speed: a free-run step is four dependent right-hand sides, a chain of latencies rather than of
  * arithmetic, so equation() keeps every value in registers, from the state it reads to the next stage's
@@ -37,7 +36,6 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
-#include <string.h>
 
 #define MAX_STATES 8
 #define MAX_INPUTS 8
@@ -278,29 +276,21 @@ static void stop_substep(const model_t *m, double *x, double h, const double *u0
     for (i = 0; i < m->n_states; i++) mode[i] = side(m, x, i);
 }
 
-/* The derivative at a sample (simulate's derivative=(eq, u_samples)) is the right-hand side the step
-   leaving that sample starts with, when that step reads the same input there (validation: the samples
-   themselves, bit for bit): then it is taken from the step's first stage, the same function of the same
-   numbers, instead of evaluated again. */
-static inline int same_input(const double *a, const double *b, int ni) {
-    return memcmp(a, b, sizeof(double) * (size_t)ni) == 0;
-}
-
 /* The free run in steps of `stride` samples (h = stride dt) for a model without end stops: the input at a
    step's start, middle and end read from the half-sample grid u (index 2 t is sample t, 2 t + 1 the half
    sample after it), the samples inside a step from RK4's continuous extension, third order like the
    step's own local error (x(t + th h) = x + h (b1 k1 + b2 (k2 + k3) + b4 k4), Hairer, Norsett & Wanner,
    Solving ODEs I, II.6): a smooth model slow against the sample rate (omega dt <= STEP_OMEGA / stride,
    identify.simulate.choose_step) takes stride times fewer right-hand sides on its chain of dependencies.
-   The last step may be shorter. Returns the samples written, as simulate. */
-static Py_ssize_t strided_run(const model_t *m, const double *x0, const double *u, Py_ssize_t n_out, int stride,
-                              double dt, double bound, double *out, int deq, const double *us, double *dxo) {
+   The last step may be shorter. Returns the samples written, as simulate. Not inlined into simulate: inlined,
+   its loop ran 8-10 % slower (code layout; measured on the Table 1 model, steps of 3 samples). */
+static __attribute__((noinline)) Py_ssize_t strided_run(const model_t *m, const double *x0, const double *u, Py_ssize_t n_out, int stride,
+                              double dt, double bound, double *out) {
     double x[MAX_STATES], xa[MAX_STATES], xs[MAX_STATES], xt[MAX_STATES], kk[3][MAX_STATES], k4[MAX_STATES];
     int i, ni = m->n_inputs, e, ns = m->n_states;
     Py_ssize_t t0, written = 0;
     if (n_out <= 0) return 0;
     for (i = 0; i < ns; i++) out[i] = x[i] = x0[i];
-    if (deq >= 0) dxo[0] = equation(m, deq, x, us, NULL, 0);
     written = 1;
     Py_BEGIN_ALLOW_THREADS
     for (t0 = 0; t0 < n_out - 1;) {
@@ -309,8 +299,6 @@ static Py_ssize_t strided_run(const model_t *m, const double *x0, const double *
         const double *ua = u + 2 * t0 * ni;
         for (i = 0; i < ns; i++) xa[i] = x[i];
         stage(m, x, x, ua, 0.5 * h, kk[0], xs, NULL);
-        if (deq >= 0 && t0 > 0) /* sample t0's derivative (same_input), before the step can fail */
-            dxo[t0] = same_input(ua, us + t0 * ni, ni) ? kk[0][deq] : equation(m, deq, x, us + t0 * ni, NULL, 0);
         stage(m, x, xs, ua + w * ni, 0.5 * h, kk[1], xt, NULL);
         stage(m, x, xt, ua + w * ni, h, kk[2], xs, NULL);
         stage(m, x, xs, ua + 2 * w * ni, h / 6.0, k4, x, (const double (*)[MAX_STATES])kk);
@@ -327,8 +315,6 @@ static Py_ssize_t strided_run(const model_t *m, const double *x0, const double *
             } else {
                 for (e = 0; e < ns; e++) o[e] = x[e];
             }
-            if (deq >= 0 && (j < w || t0 + w == n_out - 1)) /* a step's end: at the next step's start */
-                dxo[t0 + j] = equation(m, deq, o, us + (t0 + j) * ni, NULL, 0);
         }
         t0 += w;
         written = t0 + 1;
@@ -338,12 +324,12 @@ static Py_ssize_t strided_run(const model_t *m, const double *x0, const double *
 }
 
 static PyObject *simulate(PyObject *self, PyObject *args) {
-    Py_buffer b_ptr, b_feat, b_pow, b_coef, b_x0, b_u, b_out, b_travel = {0}, b_us = {0}, b_dx = {0};
-    int n_inputs, substeps, stride, i, deq = -1;
+    Py_buffer b_ptr, b_feat, b_pow, b_coef, b_x0, b_u, b_out, b_travel = {0};
+    int n_inputs, substeps, stride, i;
     Py_ssize_t n_out;
     double dt, bound;
-    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*iniiddw*|y*iy*w*", &b_ptr, &b_feat, &b_pow, &b_coef, &b_x0, &b_u,
-                          &n_inputs, &n_out, &substeps, &stride, &dt, &bound, &b_out, &b_travel, &deq, &b_us, &b_dx))
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*iniiddw*|y*", &b_ptr, &b_feat, &b_pow, &b_coef, &b_x0, &b_u,
+                          &n_inputs, &n_out, &substeps, &stride, &dt, &bound, &b_out, &b_travel))
         return NULL;
     model_t m;
     m.ptr = (const int *)b_ptr.buf;
@@ -362,8 +348,6 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
         b_coef.len != (Py_ssize_t)(sizeof(double) * m.n_states * m.n_terms) ||
         b_u.len < (Py_ssize_t)sizeof(double) * need_u ||
         b_out.len < (Py_ssize_t)sizeof(double) * n_out * m.n_states || m.n_terms > MAX_NZ ||
-        (deq >= 0 && (deq >= m.n_states || b_us.len < (Py_ssize_t)sizeof(double) * n_out * n_inputs ||
-                      b_dx.len < (Py_ssize_t)sizeof(double) * n_out)) ||
         !prepare(&m, (const double *)b_coef.buf)) {
         PyErr_SetString(PyExc_ValueError, "simulate: inconsistent buffer sizes or model too large");
         goto done;
@@ -374,15 +358,13 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
     }
     for (i = 0; i < m.n_states; i++) m.travel[i] = has_travel ? ((const double *)b_travel.buf)[i] : HUGE_VAL;
     if (stride > 1) {
-        result = PyLong_FromSsize_t(strided_run(&m, (const double *)b_x0.buf, u, n_out, stride, dt, bound, out, deq,
-                                                (const double *)b_us.buf, (double *)b_dx.buf));
+        result = PyLong_FromSsize_t(strided_run(&m, (const double *)b_x0.buf, u, n_out, stride, dt, bound, out));
         goto done;
     }
     {
         double x[MAX_STATES], xs[MAX_STATES], xt[MAX_STATES], kk[3][MAX_STATES],
             k4[MAX_STATES];
-        double h = dt / substeps, *dxo = (double *)b_dx.buf;
-        const double *us = (const double *)b_us.buf;
+        double h = dt / substeps;
         int s, ni = n_inputs, mode[MAX_STATES];
         Py_ssize_t t, written = 0;
         for (i = 0; i < m.n_states; i++) x[i] = ((const double *)b_x0.buf)[i];
@@ -390,7 +372,6 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
         Py_BEGIN_ALLOW_THREADS
         if (n_out > 0) {
             for (i = 0; i < m.n_states; i++) out[i] = x[i];
-            if (deq >= 0) dxo[0] = equation(&m, deq, x, us, NULL, 1);
             written = 1;
         }
         for (t = 1; t < n_out; t++) {
@@ -405,9 +386,6 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
                 }
                 /* xs = x + h/2 k1, xt = x + h/2 k2, xs = x + h k3 (as (0.5 * h) * k, the same numbers) */
                 stage(&m, x, x, u0, 0.5 * h, kk[0], xs, NULL);
-                if (deq >= 0 && s == 0 && t > 1) /* sample t - 1's derivative (same_input) */
-                    dxo[t - 1] = same_input(u0, us + (t - 1) * ni, ni) ? kk[0][deq]
-                                                                       : equation(&m, deq, x, us + (t - 1) * ni, NULL, 0);
                 stage(&m, x, xs, u0 + ni, 0.5 * h, kk[1], xt, NULL);
                 stage(&m, x, xt, u0 + ni, h, kk[2], xs, NULL);
                 stage(&m, x, xs, u0 + 2 * ni, h / 6.0, k4, x, (const double (*)[MAX_STATES])kk);
@@ -416,10 +394,6 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
             }
             if (!ok) break;
             for (i = 0; i < m.n_states; i++) out[t * m.n_states + i] = x[i];
-            /* the derivative at the sample: with end stops, and at the last sample, evaluated here (off
-               the steps' chain of dependencies); otherwise the next step's first stage (same_input) */
-            if (deq >= 0 && m.has_stops) dxo[t] = equation(&m, deq, x, us + t * ni, NULL, 1);
-            else if (deq >= 0 && t == n_out - 1) dxo[t] = equation(&m, deq, x, us + t * ni, NULL, 0);
             written = t + 1;
         }
         Py_END_ALLOW_THREADS
@@ -434,14 +408,12 @@ done:
     PyBuffer_Release(&b_u);
     PyBuffer_Release(&b_out);
     if (has_travel) PyBuffer_Release(&b_travel);
-    if (b_us.buf) PyBuffer_Release(&b_us);
-    if (b_dx.buf) PyBuffer_Release(&b_dx);
     return result;
 }
 
 /* rhs_rows(term_ptr, fac_feat, fac_pow, coef, columns, eq, out [, travel]): out[t] = f_eq(x_t, u_t), the
-   model's right-hand side of equation `eq` at n independent rows (the one-step prediction, the free run's
-   q1_dot), with each row's own contact sides. `columns`: a tuple of n_states + n_inputs 1-D float64
+   model's right-hand side of equation `eq` at n independent rows (the one-step prediction, a diverged free
+   run's q1_dot), with each row's own contact sides. `columns`: a tuple of n_states + n_inputs 1-D float64
    buffers (strided views allowed), the states then the inputs; out: n doubles, writable. Rows are
    independent, so unlike the free run this is not one long chain of dependent operations. */
 static PyObject *rhs_rows(PyObject *self, PyObject *args) {

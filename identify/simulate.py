@@ -36,9 +36,6 @@ class SimulationResult:
     states: np.ndarray
     n_valid: int
     substeps: int
-    #: simulate(derivative=(e, u)): equation e of the model at each simulated sample and u's row (NaN after
-    #: a divergence), else None
-    derivative: np.ndarray | None = None
     #: samples per RK4 step (simulate's stride; 1: `substeps` steps per sample)
     stride: int = 1
 
@@ -148,14 +145,12 @@ def equation_rows(model: SparseModel, states, inputs, equation: int = 0) -> np.n
 
 def simulate(model: SparseModel, dt: float, x0, inputs=None, *, inputs_fine=None, substeps: int | None = None,
              interpolation: str = "bandlimited", state_scale=None, n_samples: int | None = None,
-             bound: float | None = None, derivative=None, stride: int = 1) -> SimulationResult:
+             bound: float | None = None, stride: int = 1) -> SimulationResult:
     """Free-run `model` from state `x0` over the input's samples (spacing `dt` seconds).
 
     Give either `inputs` (n, n_inputs) sampled at dt, or `inputs_fine` already on the h/2 grid (then
     `substeps` and `n_samples` are required). `state_scale` (typical |state| per state) sets the
     substeps automatically; `bound` stops the run when a state leaves [-bound, bound] (divergence).
-    `derivative` = (e, u_samples (n, n_inputs)): also equation e at each simulated sample with that sample's
-    input (validation's simulated q1_dot), computed in the run, as equation_rows would: the same numbers.
     `stride` > 1 (substeps 1, a model without end stops; choose_step says when): RK4 steps of `stride`
     samples, their input read from the same half-sample grid, the samples inside a step from RK4's
     continuous extension (third order, like a step's local error).
@@ -182,21 +177,11 @@ def simulate(model: SparseModel, dt: float, x0, inputs=None, *, inputs_fine=None
         bound = 1e6 if state_scale is None else 1e3 * float(np.max(state_scale))
     ptr, feat, powr = model.space.encode(model.terms)
     out = np.empty((n_samples, x0.size))  # the kernel writes the rows it reaches; the rest are NaN'd below
-    extra = ()
-    if derivative is not None:
-        eq, u_s = derivative
-        u_s = np.ascontiguousarray(np.asarray(u_s, dtype=float).reshape(n_samples, -1))
-        if u_s.shape[1] != len(model.inputs):
-            raise ValueError(f"derivative input has {u_s.shape[1]} channels; model expects {model.inputs}")
-        dx = np.empty(n_samples)
-        extra = (int(eq), u_s.reshape(-1), dx)
     n_valid = _simkernel.simulate(
         np.asarray(ptr, dtype=np.int32).tobytes(), np.asarray(feat, dtype=np.int32).tobytes(),
         np.asarray(powr, dtype=np.int32).tobytes(), np.ascontiguousarray(model.coef_).tobytes(),
         x0.tobytes(), u.reshape(-1), u.shape[1], int(n_samples), int(substeps), int(stride), float(dt), float(bound),
-        out.reshape(-1), np.array([model.travel.get(s, np.inf) for s in model.states]).tobytes(), *extra)
+        out.reshape(-1), np.array([model.travel.get(s, np.inf) for s in model.states]).tobytes())
     if n_valid < n_samples:
         out[n_valid:] = np.nan
-        if extra:
-            dx[n_valid:] = np.nan
-    return SimulationResult(out, int(n_valid), int(substeps), dx if extra else None, int(stride))
+    return SimulationResult(out, int(n_valid), int(substeps), int(stride))

@@ -98,41 +98,12 @@ def test_equation_rows_is_the_models_rhs(equations, travel, equation):
         assert np.any(np.abs(x[:, 1]) > 0.02) and np.any(np.abs(x[:, 1]) < 0.02)
 
 
-@pytest.mark.parametrize("travel", [None, {"q2": 0.0175}])
-def test_derivative_in_the_run_is_equation_rows_at_the_simulated_states(travel):
-    """simulate(derivative=(0, u)) (validation's simulated q1_dot) against equation_rows at the states it
-    returns: the same function of the same numbers, so equal exactly; NaN after a divergence."""
-    from identify.simulate import equation_rows
-
-    eqs = {"q1_dot": dict(TABLE1["q1_dot"]), "q2_dot": {"q1": 1.0}}
-    if travel:
-        eqs["q1_dot"].update({"stop(q2)": -4e5, "q1*contact(q2)": -40.0})
-    model = SparseModel(eqs, travel=travel)
-    fs, n = 2048.0, 40_000
-    t = np.arange(n) / fs
-    amplitude = 4e-3 if travel else 1.3e-3  # without the stops 4 mm runs away (q1*q2^2's negative damping)
-    u = (-amplitude * (2 * np.pi * 5) ** 2 * np.sin(2 * np.pi * (3 * t + 0.2 * t**2)))[:, None]
-    res = simulate(model, 1 / fs, [0.0, 0.0], u, substeps=2, derivative=(0, u))
-    assert not res.diverged
-    if travel:
-        assert np.max(np.abs(res.states[:, 1])) > 0.0175  # the run reaches the stops
-    np.testing.assert_array_equal(res.derivative, equation_rows(model, res.states, u, 0))
-    unstable = SparseModel({"q1_dot": {"q1": 50.0, "q2": -100.0, "zdd": 1.0}, "q2_dot": {"q1": 1.0}})
-    res = simulate(unstable, 1e-3, [0.0, 1.0], np.zeros((5000, 1)), substeps=1, bound=1e3,
-                   derivative=(0, np.zeros((5000, 1))))
-    assert res.diverged and np.all(np.isnan(res.derivative[res.n_valid:]))
-    np.testing.assert_array_equal(res.derivative[:res.n_valid],
-                                  equation_rows(unstable, res.states[:res.n_valid], np.zeros((res.n_valid, 1)), 0))
-
-
 def test_steps_of_several_samples_converge_at_fourth_order():
     """simulate(stride=s): RK4 steps of s samples, the samples inside a step from RK4's continuous
     extension. Against DOP853 on the Duffing sweep (analytic input): the error grows as h^4 with the step
     (16x per doubling; an O(h^2) or O(h^3) interpolation bug shows as 4-8x), the samples inside a step no
-    worse than its ends, the last, shorter step included (n - 1 not a multiple of the stride), and the
-    in-run derivative is the model's equation at the returned states. Measured (of the peak): 1.2e-8,
-    2.0e-7, 1.05e-6, 3.4e-6 for strides 1-4 (h omega_max 0.036-0.14)."""
-    from identify.simulate import equation_rows
+    worse than its ends, the last, shorter step included (n - 1 not a multiple of the stride). Measured
+    (of the peak): 1.2e-8, 2.0e-7, 1.05e-6, 3.4e-6 for strides 1-4 (h omega_max 0.036-0.14)."""
     fs, T = 2048.0, 8.0
     n = int(T * fs) + 3  # n - 1 = 16386: a last step of 2 samples for stride 4, of 1 for stride 3
 
@@ -144,17 +115,14 @@ def test_steps_of_several_samples_converge_at_fourth_order():
     ref = solve_ivp(lambda tt, x: model.rhs(x[None, :], [[u(tt)]])[0], (0, t[-1]), [0.0, 0.0], t_eval=t,
                     method="DOP853", rtol=1e-11, atol=1e-14).y[1]
     fine = u(np.arange((n - 1) * 2 + 1) / (2 * fs))[:, None]
-    u_samples = u(t)[:, None]
     scale = np.max(np.abs(ref))
     errors = {}
     for stride in (1, 2, 3, 4):
-        res = simulate(model, 1 / fs, [0.0, 0.0], inputs_fine=fine, substeps=1, n_samples=n, stride=stride,
-                       derivative=(0, u_samples))
+        res = simulate(model, 1 / fs, [0.0, 0.0], inputs_fine=fine, substeps=1, n_samples=n, stride=stride)
         err = np.abs(res.states[:, 1] - ref) / scale
         ends, inside = err[::stride].max(), err.max()
         assert inside < 2.0 * ends, (stride, ends, inside)
         errors[stride] = inside
-        np.testing.assert_array_equal(res.derivative, equation_rows(model, res.states, u_samples, 0))
     assert errors[1] < 1e-7 and errors[2] < 1e-6, errors
     assert 10 < errors[4] / errors[2] < 25 and 10 < errors[2] / errors[1] < 25, errors
 
