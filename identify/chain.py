@@ -132,16 +132,14 @@ class StateSignals:
         what lies outside the band (e.g. the static offset an asymmetric spring produces)."""
         return spectral_op(x, self.fs_hz, self.band_hz, 0, self.taper_n)
 
-    def band_limit_many(self, xs, dtype=np.float64) -> list[np.ndarray]:
+    def band_limit_many(self, xs) -> list[np.ndarray]:
         """band_limit of several equally long signals, their transforms batched (a few at a time, so a
-        long record's padded spectra stay within a few hundred MB); dtype: the transforms' precision
-        (np.float32: within ~1e-7 of the signals' scale, for signals that are only scored, not fitted)."""
+        long record's padded spectra stay within a few hundred MB)."""
         xs = list(xs)
         out = []
         for a in range(0, len(xs), 4):
             group = xs[a:a + 4]
-            out += spectral_ops(group, self.fs_hz, self.band_hz, [(i, 0) for i in range(len(group))], self.taper_n,
-                                dtype)
+            out += spectral_ops(group, self.fs_hz, self.band_hz, [(i, 0) for i in range(len(group))], self.taper_n)
         return out
 
     def band_limit_derivatives(self, x: np.ndarray, powers, dtype=np.float64) -> np.ndarray:
@@ -223,18 +221,18 @@ def spectral_op(x: np.ndarray, fs_hz: float, band: tuple[float, float], power: i
 
 
 def spectral_ops(signals, fs_hz: float, band: tuple[float, float], requests, taper_n: int,
-                 dtype=np.float64, shared: bool = False) -> list[np.ndarray]:
+                 dtype=np.float64) -> list[np.ndarray]:
     """spectral_op for several (signal index, power) `requests` on equally long `signals`, with each
     detrended signal transformed once: integrals of one signal share its spectrum, and all forward
     and all inverse transforms go through one batched rfft / irfft each, of the band's bins only.
-    dtype : the transforms' precision (the detrending and the results are double whatever it is);
-    shared : every request of a signal detrended as its lowest power's (detrend_rows)."""
-    return list(_spectral_ops(signals, fs_hz, band, requests, taper_n, dtype, shared)[0])
+    dtype : the transforms' precision (the detrending and the results are double whatever it is)."""
+    return list(_spectral_ops(signals, fs_hz, band, requests, taper_n, dtype)[0])
 
 
 def _spectral_ops(signals, fs_hz, band, requests, taper_n, dtype=np.float64, shared=False, out_dtype=np.float64):
     """spectral_ops' results as the rows of one (len(requests), n) array of out_dtype, and each as a
-    BandLimitedSignal (its filtered bins, shared; the line)."""
+    BandLimitedSignal (its filtered bins, shared; the line). shared: every request of a signal detrended
+    as its lowest power's (detrend_rows; StateSignals.band_limit_derivatives)."""
     signals = [np.asarray(x, dtype=float) for x in signals]
     n = signals[0].size
     # integrating: only the mean goes. A line removed from an acceleration is a cubic removed from
