@@ -278,12 +278,13 @@ class SimulatedRig:
 
         A stall of this process (the loop, or the whole process, not scheduled for a while) is time
         the rig does not see: what a tick would simulate beyond this is dropped (lost_rig_s adds it up).
-        Otherwise the first tick after a 0.5 s stall at 10x would simulate 5 s at once, and the next
-        would find the heartbeat silent for 5 s, though the client was stalled with the simulator or
-        its beat was queued on the socket: a spurious watchdog fault that a real PLC, whose scan
-        cannot stall like that, never raises. A client that really falls silent is still caught. It is
-        silent in wall time while ticks go on at their normal pace, and the rig's clock keeps `speed`
-        through that."""
+        Otherwise the first tick after a 0.5 s stall at 10x would simulate 5 s at once, and the next,
+        10 ms later, would find the heartbeat silent for 5 s unless the client's beat had arrived in
+        between. A beat queued on the socket during the stall is read in that gap. A client stalled with
+        the simulator (the same process, or a starved machine) may send it only later. That is a
+        spurious watchdog fault: a real PLC, whose scan cannot stall like that, never raises it. A
+        client that really falls silent is still caught. It is silent in wall time while ticks go on at
+        their normal pace, and the rig's clock keeps `speed` through that."""
         tick = self.tick_s * self.speed
         return max(tick, min(2.0 * tick, self.plc.config.limits.watchdog_s / 4))
 

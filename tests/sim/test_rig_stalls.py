@@ -4,8 +4,9 @@ The rig runs in rig time (speed x wall time) and its watchdog counts rig time. W
 (or its whole process, heartbeat thread and all) is not scheduled for a while, the first tick after
 it must not simulate the whole stall at once: the next one would find the heartbeat silent for that
 long, though the client's beat was only late with the simulator. A real PLC's scan does not stall that
-way, so the fault would be an artefact of the simulation (seen at 10x with a 2 s rig-time watchdog, a
-0.2 s wall-clock stall on a loaded machine).
+way, so the fault would be an artefact of the simulation. With the demo's 2 s rig-time watchdog at 10x,
+a 0.2 s wall-clock stall would be enough. Such a stall is the suspected, unproven cause of one CI failure
+of the streamed-sweep test in tests/sim/test_rig_server.py.
 """
 import threading
 import time
@@ -68,8 +69,8 @@ def test_a_stall_of_the_simulator_and_its_client_is_not_a_silent_heartbeat():
     """The rig's loop blocked for 1.5 s of wall time (15 s of rig time, about twice the 8 s watchdog), the
     client's beat held until 0.2 s after it: the sweep goes on and ends DONE, and the rig time that was not
     simulated is counted. Before max_step_s the tick after the stall simulated 15 s at once (~70 ms of
-    physics) and the next one faulted WATCHDOG ("heartbeat silent for 15.0 s") before the held beat
-    arrived (measured: this test failed that way). Now a tick simulates at most 0.2 s of rig time and ticks
+    physics) and the next one faulted WATCHDOG before the held beat arrived (measured: this test failed
+    with "heartbeat silent for 15.27 s"). Now a tick simulates at most 0.2 s of rig time and ticks
     are >= 10 ms apart, so the beat may come up to ~0.39 s of wall time after the stall before this fails.
     """
     rig = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=8.0)), speed=SPEED).start()
