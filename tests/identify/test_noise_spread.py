@@ -143,3 +143,10 @@ def test_noise_variance_is_the_formula_evaluated_directly(noise_fraction, monkey
     monkeypatch.setattr(noise_spread, "DTYPE", np.float64)
     exact = noise_variance(parts, {0: sups[0]}, coefs, G, col_exps, unc.TARGET_EXPONENTS)[0]
     np.testing.assert_allclose(exact[S], direct[S], rtol=1e-9)  # the shared transforms' algebra
+    # q2_dot = q1 (its one column is its own target): no transforms, variance 0; the formula evaluated
+    # directly gives 0 to rounding too (the score q1 (q1 - q1 beta) does not move with the noise)
+    S1 = np.flatnonzero(sups[1])
+    assert [col_exps[j] for j in S1] == [unc.TARGET_EXPONENTS[1]] and coefs[1][S1[0]] == pytest.approx(1.0)
+    assert np.all(noise_variance(parts, {1: sups[1]}, coefs, G, col_exps, unc.TARGET_EXPONENTS)[1] == 0)
+    # measured 2.7e-37 and 4.8e-35 (0.5 and 5 % noise): a standard error of 1e-17 at most on a coefficient of 1
+    assert _direct(parts, {1: sups[1]}, coefs, G, col_exps, unc.TARGET_EXPONENTS)[1][S1] < 1e-20
