@@ -19,6 +19,10 @@ made on what the model is for, the free-run error, and on the estimation data on
 
 The equation-error coefficients of a small support often free-run badly although the same terms,
 refit, free-run well (Silverbox: the winner ranked 6th of 120 before its refit); hence step 3.
+
+Several recordings of one rig (a joint fit, identify.joint): `train` is their summed normal equations,
+and every free-run error is pooled over the recordings, each simulated from its own start on its own
+rows (identify.refine.PooledFreeRunError).
 """
 from __future__ import annotations
 
@@ -32,7 +36,7 @@ import numpy as np
 from .gram import NormalEquations
 from .model import SparseModel
 from .optimizers.base import least_squares
-from .refine import FreeRunError, refine_free_run
+from .refine import free_run_error, refine_free_run
 
 #: Most subsets screened by free run (each one simulation of the record).
 MAX_SUBSETS = 300
@@ -63,7 +67,8 @@ def choose_budget(model: SparseModel, names, support: np.ndarray, max_terms: int
 
     train : normal equations of the fit rows (least-squares coefficients of each candidate).
     fit_rows, heldout_rows : masks over the valid rows of `sig` (StateSignals); held-out rows rank the
-        refit candidates when there are any.
+        refit candidates when there are any. Several recordings: `sig` a list of StateSignals and each
+        mask a list of masks, one per recording (the free-run errors are pooled).
     final_rows : mask of the rows the winner's final refit uses (None: fit_rows). The choice itself
         never sees them beyond fit_rows and heldout_rows.
     signals : the simulated states whose error screens, refits and ranks (FreeRunError); ("q2",) is the
@@ -78,7 +83,7 @@ def choose_budget(model: SparseModel, names, support: np.ndarray, max_terms: int
         eqs[equation] = {names[j]: float(x[j]) for j in np.flatnonzero(s)}
         return SparseModel(eqs, model.states, model.inputs, travel=model.travel or None)
 
-    screen_error = FreeRunError(sig, fit_rows, signals, model=model)
+    screen_error = free_run_error(sig, fit_rows, signals, model=model)
 
     def screen(s: np.ndarray) -> float:
         return screen_error.cost(candidate(s))
@@ -100,8 +105,9 @@ def choose_budget(model: SparseModel, names, support: np.ndarray, max_terms: int
         screened.append((screen(s), keep, s))
     screened.sort(key=lambda t: (t[0], t[1]))
     # 3. refit the best on their free-run error, rank on the held-out rows
-    has_heldout = heldout_rows is not None and np.any(heldout_rows)
-    rank_error = FreeRunError(sig, heldout_rows if has_heldout else fit_rows, signals, model=model)
+    has_heldout = heldout_rows is not None and any(np.any(h) for h in
+                                                   (heldout_rows if isinstance(sig, (list, tuple)) else [heldout_rows]))
+    rank_error = free_run_error(sig, heldout_rows if has_heldout else fit_rows, signals, model=model)
     results = []
     for cost, keep, s in screened[:max(n_refit, 1)]:
         refit, info = refine_free_run(candidate(s), sig, fit_rows, equation, signals, ftol=REFIT_FTOL)

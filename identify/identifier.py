@@ -72,6 +72,15 @@ def effective_samples(sig: StateSignals) -> float:
     return 2 * (sig.band_hz[1] - sig.band_hz[0]) * (sig.valid.stop - sig.valid.start) / sig.fs_hz
 
 
+def per_record(rows: np.ndarray, sig):
+    """f -> f(rows) for one recording (sig a StateSignals); for several (sig a list, rows a mask over
+    all their valid rows, one after the other), f -> [f(part) for each recording's part of rows]."""
+    if not isinstance(sig, (list, tuple)):
+        return lambda f: f(rows)
+    parts = np.split(rows, np.cumsum([s.valid.stop - s.valid.start for s in sig])[:-1])
+    return lambda f: [f(p) for p in parts]
+
+
 class SparseIdentifier:
     """Parameters (stored as given, sklearn-style; fitted attributes end in `_`):
 
@@ -224,18 +233,7 @@ class SparseIdentifier:
         reported, self.standard_errors_, self.uncertainty_ = self._trust(gram, held, effective_samples(sig), bias_of)
         timings["refit_uncertainty"] = time.perf_counter() - t0
         self.model_ = SparseModel(reported, ("q1", "q2"), (sig.input_name,), self.standard_errors_)
-        validated = self.training_model_
-        self.refinement_ = None
-        if self.budget_ is not None:  # chosen after its free-run refit: that model is reported and validated
-            self.model_ = validated = SparseModel(self.budget_.model.equations, ("q1", "q2"), (sig.input_name,),
-                                                  self.standard_errors_)
-            self.refinement_ = self.budget_.refinement
-        elif self.refine is not None:  # free-run refit of the training fit, reported and validated as such
-            t0 = time.perf_counter()
-            refined, self.refinement_ = refine_free_run(self.training_model_, sig, ~self.heldout_rows_)
-            self.model_ = validated = SparseModel(refined.equations, refined.states, refined.inputs,
-                                                  self.standard_errors_)
-            timings["refine"] = time.perf_counter() - t0
+        validated = self._free_run_choice(sig, timings)
         self.validation_ = None
         if self.validate:
             t0 = time.perf_counter()
@@ -251,6 +249,26 @@ class SparseIdentifier:
         self.verdict_ = fit_verdict(self.validation_, validated, self.model_, sig.input_name)
         self.timings_ = timings
         return self
+
+    def _free_run_choice(self, sig, timings: dict) -> SparseModel:
+        """The model the free run validates: the training fit; or, with the free-run budget, its winner
+        (chosen after its free-run refit), or, with refine="free-run", the training fit refit on the fit
+        rows' free-run error; both are then reported too (with the equation-error standard errors).
+        sig: the StateSignals, or a list of them for several recordings (identify.joint)."""
+        self.refinement_ = None
+        if self.budget_ is not None:
+            self.model_ = SparseModel(self.budget_.model.equations, ("q1", "q2"), (self.states_.input_name,),
+                                      self.standard_errors_)
+            self.refinement_ = self.budget_.refinement
+            return self.model_
+        if self.refine is None:
+            return self.training_model_
+        t0 = time.perf_counter()
+        refined, self.refinement_ = refine_free_run(self.training_model_, sig,
+                                                    per_record(self.heldout_rows_, sig)(np.logical_not))
+        self.model_ = SparseModel(refined.equations, refined.states, refined.inputs, self.standard_errors_)
+        timings["refine"] = time.perf_counter() - t0
+        return self.model_
 
     def _gram(self, sig: StateSignals, edges, columns=None) -> BlockGram:
         """Per-block normal equations of the library on the model's states. With an offset carried
@@ -291,19 +309,20 @@ class SparseIdentifier:
                            None if by_free_run and e == 0 else self.max_terms)
                 for e, eq in enumerate(("q1_dot", "q2_dot"))}
 
-    def _budget_by_free_run(self, sig: StateSignals, train, held, coefs: dict, timings: dict) -> dict:
+    def _budget_by_free_run(self, sig, train, held, coefs: dict, timings: dict) -> dict:
         """With budget="free-run", the first equation's max_terms terms chosen by free-run error
-        (identify.budget); sets budget_ (None otherwise) and returns the coefficients by equation."""
+        (identify.budget); sets budget_ (None otherwise) and returns the coefficients by equation.
+        sig: the StateSignals, or a list of them for several recordings (heldout_rows_ then spans them all)."""
         self.budget_ = None
         sel = self.selections_["q1_dot"]
         if self.budget != "free-run" or self.max_terms is None or sel.support.sum() <= self.max_terms:
             return coefs
         lib = self.library_
-        start = SparseModel(coefs, ("q1", "q2"), (sig.input_name,))
+        start = SparseModel(coefs, ("q1", "q2"), (self.states_.input_name,))
+        each = per_record(self.heldout_rows_, sig)  # f -> f(mask), or [f(mask) per recording] for several
         self.budget_ = choose_budget(start, lib.names, sel.support, self.max_terms, train, sig,
-                                     ~self.heldout_rows_, self.heldout_rows_ if held.any() else None,
-                                     final_rows=(np.ones_like(self.heldout_rows_)
-                                                 if self.budget_refit == "all" else None))
+                                     each(np.logical_not), each(np.asarray) if held.any() else None,
+                                     final_rows=each(np.ones_like) if self.budget_refit == "all" else None)
         timings["budget"] = self.budget_.seconds
         sel.support = self.budget_.support.copy()
         sel.coef = least_squares(train.G, train.B[:, 0], sel.support)

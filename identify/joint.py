@@ -30,9 +30,14 @@ in one recording: |z| 17-36 at 0.5 % noise (benchmarks/joint_change.py, docs/ide
 Which recording of a set changed is not told by this: the joint fit is a compromise, and with a large
 change every recording disagrees with it; the largest z says which terms moved.
 
+budget="free-run" and refine="free-run" run on the summed normal equations too, their free-run errors
+pooled over the recordings, each simulated from its own start on its own fit (or held-out) rows
+(identify.refine.PooledFreeRunError): a second recording at other amplitudes is more data for what the
+free run extrapolates (Silverbox with its zip's second record, docs/identification.md).
+
 Refused for several recordings (IdentificationError): holdout_samples (the paper's split of one
-record), budget="free-run" and refine="free-run" (free runs of one record), and a force with an even
-part (its displacement below the band is carried per record, identify.inband).
+record) and a force with an even part (its displacement below the band is carried per record,
+identify.inband).
 """
 from __future__ import annotations
 
@@ -83,13 +88,10 @@ def fit_joint(ident, recordings: list):
     joint_states_ and joint_ (the per-recording account)."""
     if not recordings:
         raise IdentificationError("no recordings to identify")
-    for option, why in ((ident.holdout_samples is not None, "holdout_samples (the first N samples of one record)"),
-                        (ident.refine is not None, "refine='free-run' (a free run of one record)"),
-                        (ident.budget == "free-run" and ident.max_terms is not None,
-                         "budget='free-run' (free runs of one record)")):
-        if option:
-            raise IdentificationError(f"joint identification of {len(recordings)} recordings does not take {why}; "
-                                      "identify the recordings one by one for it")
+    if ident.holdout_samples is not None:
+        raise IdentificationError(f"joint identification of {len(recordings)} recordings does not take "
+                                  "holdout_samples (the first N samples of one record); identify the recordings "
+                                  "one by one for it")
     _refuse_copies(recordings)
     timings = {}
     t0 = time.perf_counter()
@@ -108,9 +110,7 @@ def fit_joint(ident, recordings: list):
     held = np.concatenate([h for _, h in parts])
     timings["library_gram"] = time.perf_counter() - t0
     n_eff = sum(effective_samples(s) for s in sigs)
-    ident._fit_pass(n_eff, gram, held, timings)
-    coefs = {eq: {lib.names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)}
-             for eq, s in ident.selections_.items()}
+    train, _, coefs = ident._fit_pass(n_eff, gram, held, timings)
     training = SparseModel(coefs, ("q1", "q2"), (sigs[0].input_name,))
     even = [r.source for r, s in zip(recordings, sigs) if s.band_hz[0] > 0 and has_even_force(training, s)]
     if even:
@@ -120,9 +120,10 @@ def fit_joint(ident, recordings: list):
             "does not do; identify the recordings one by one")
     ident.recording_, ident.recordings_, ident.joint_states_ = None, list(recordings), sigs
     ident.states_ = sigs[0]  # names the states and input; bands and rows are per recording (joint_)
-    ident.offset_, ident.budget_, ident.refinement_ = {"carried": False, "passes": 0}, None, None
+    ident.offset_ = {"carried": False, "passes": 0}
     ident.heldout_rows_ = np.concatenate([np.repeat(h, np.diff(e)) for e, h in parts])
-    ident.training_model_ = training
+    coefs = ident._budget_by_free_run(sigs, train, held, coefs, timings)
+    ident.training_model_ = training = SparseModel(coefs, ("q1", "q2"), (sigs[0].input_name,))
 
     t0 = time.perf_counter()
     bias_of = None
@@ -136,13 +137,19 @@ def fit_joint(ident, recordings: list):
     reported, ident.standard_errors_, ident.uncertainty_ = ident._trust(gram, held, n_eff, bias_of)
     timings["refit_uncertainty"] = time.perf_counter() - t0
     ident.model_ = SparseModel(reported, ("q1", "q2"), (sigs[0].input_name,), ident.standard_errors_)
+    validated = ident._free_run_choice(sigs, timings)  # the training fit, or its free-run refit
 
     t0 = time.perf_counter()
-    per = [_recording(ident, gram, i, r, s, e, h) for i, (r, s, (e, h)) in enumerate(zip(recordings, sigs, parts))]
+    per = [_recording(ident, gram, validated, i, r, s, e, h)
+           for i, (r, s, (e, h)) in enumerate(zip(recordings, sigs, parts))]
     timings["per_recording"] = time.perf_counter() - t0
     runs = [p.pop("_runs") for p in per]
-    ident.validation_ = _pooled(training, runs) if ident.validate else None
-    ident.verdict_ = fit_verdict(ident.validation_, training, ident.model_, sigs[0].input_name)
+    ident.validation_ = _pooled(validated, runs) if ident.validate else None
+    if ident.validation_ is not None and ident.budget_ is not None and ident.budget_refit == "all":
+        ident.validation_["heldout_fitted"] = True  # the winner's coefficients saw these rows
+        for p in per:
+            p["validation"]["heldout_fitted"] = True
+    ident.verdict_ = fit_verdict(ident.validation_, validated, ident.model_, sigs[0].input_name)
     flagged = [p for p in per if p["status"] == "inconsistent"]
     failed = [p for p in per if p["status"] == "failed"]
     if flagged or failed:  # the per-recording findings first: they say what is wrong with the set
@@ -157,9 +164,10 @@ def fit_joint(ident, recordings: list):
     return ident
 
 
-def _recording(ident, gram: BlockGram, i: int, rec, sig, edges, held) -> dict:
-    """One recording's account: its chain, the joint model's held-out free run on it, the recording
-    identified alone, the consistency of its coefficients with the joint ones, and its status."""
+def _recording(ident, gram: BlockGram, model: SparseModel, i: int, rec, sig, edges, held) -> dict:
+    """One recording's account: its chain, the joint model's held-out free run on it (`model`, the one
+    validated), the recording identified alone, the consistency of its coefficients with the joint
+    ones, and its status."""
     rows = np.repeat(held, np.diff(edges))
     part = gram.part(i)
     out = {"source": rec.source, "samples": int(rec.input.size), "fs_hz": float(rec.fs_hz),
@@ -179,12 +187,12 @@ def _recording(ident, gram: BlockGram, i: int, rec, sig, edges, held) -> dict:
     if not ident.validate:
         return out
     mask = rows if held.any() else np.ones_like(rows)
-    val, sim_states, sim_qdot = validate(ident.training_model_, sig, mask)
+    val, sim_states, sim_qdot = validate(model, sig, mask)
     out["validation"] = val
     out["_runs"] = (sig, mask, sim_states, sim_qdot, val)
     alone_val = validate(alone, sig, mask)[0]
     out["alone"]["validation"] = {k: alone_val[k] for k in ("diverged", "heldout")}
-    verdict = model_verdict(val, ident.training_model_, sig.input_name)
+    verdict = model_verdict(val, model, sig.input_name)
     out["status"], out["reason"] = verdict["status"], verdict["reason"]
     ratios = {}
     for k in COMPARED:

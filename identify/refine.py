@@ -8,7 +8,8 @@ measures. Same support, only the coefficients move (Gauss-Newton / trust region,
 each residual evaluation is one compiled free run).
 
 The error is taken on the interior rows only (interior_rows): band-limiting a simulation tapers its
-ends, which the measured states, tapered outside the valid rows, do not share.
+ends, which the measured states, tapered outside the valid rows, do not share. Several recordings of one
+rig (a joint fit) are each simulated on their own and their errors pooled (PooledFreeRunError).
 """
 from __future__ import annotations
 
@@ -80,14 +81,46 @@ class FreeRunError:
         return float(r @ r)
 
 
+class PooledFreeRunError:
+    """The free-run error of models over several recordings of one rig: each recording is simulated on
+    its own (its own initial state, input and band: a separate experiment, FreeRunError), and the
+    residuals are concatenated, each recording's weighted by its share of the compared rows, so that
+    cost = sum_r n_r cost_r / sum_r n_r: every row counts the same, as the summed normal equations of a
+    joint fit weigh them (identify.joint)."""
+
+    def __init__(self, errors: list):
+        self.errors = list(errors)
+        self.n_rows = sum(e.n_rows for e in self.errors)
+        self.weights = [np.sqrt(e.n_rows / self.n_rows) for e in self.errors]
+        self.substeps = max(e.substeps for e in self.errors)
+
+    def residuals(self, model: SparseModel) -> np.ndarray:
+        return np.concatenate([w * e.residuals(model) for w, e in zip(self.weights, self.errors)])
+
+    def cost(self, model: SparseModel) -> float:
+        r = self.residuals(model)
+        return float(r @ r)
+
+
+def free_run_error(sig, rows=None, signals=("q2", "q1"), substeps: int | None = None,
+                   model: SparseModel | None = None):
+    """FreeRunError of one recording (sig a StateSignals, rows a mask over its valid rows or None), or
+    the PooledFreeRunError of several (sig a list of StateSignals, rows None or a list of masks)."""
+    if not isinstance(sig, (list, tuple)):
+        return FreeRunError(sig, rows, signals, substeps, model)
+    rows = [None] * len(sig) if rows is None else rows
+    return PooledFreeRunError([FreeRunError(s, r, signals, substeps, model) for s, r in zip(sig, rows)])
+
+
 def refine_free_run(model: SparseModel, sig: StateSignals, fit_rows: np.ndarray | None = None,
                     equation: str = "q1_dot", signals=("q2", "q1"), max_nfev: int = 60,
                     ftol: float = 1e-8, substeps: int | None = None) -> tuple[SparseModel, dict]:
     """Refit `equation`'s coefficients of `model` on the free-run error of `signals` over `fit_rows`
     (bool mask over sig.valid; interior rows only, FreeRunError). Each signal's error is normalised by its
-    std. `ftol`: relative change of the cost at which the search stops; `substeps`: RK4 steps per sample
+    std. Several recordings: sig a list of StateSignals, fit_rows None or a list of masks (free_run_error).
+    `ftol`: relative change of the cost at which the search stops; `substeps`: RK4 steps per sample
     (None: as FreeRunError chooses them, for `model`). Returns (model, info)."""
-    error = FreeRunError(sig, fit_rows, signals, substeps=substeps, model=model)
+    error = free_run_error(sig, fit_rows, signals, substeps=substeps, model=model)
     terms = list(model.equations[equation])
     theta0 = np.array([model.equations[equation][t] for t in terms])
 

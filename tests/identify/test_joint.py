@@ -123,7 +123,7 @@ def test_block_covariance_does_not_pair_blocks_across_recordings(recordings):
 
 
 def test_single_record_options_are_refused_for_several(recordings):
+    """The paper's split (the first N samples of one record) has no meaning for several; the free-run
+    options do (tests/identify/test_joint_free_run.py)."""
     with pytest.raises(IdentificationError, match="holdout_samples"):
         SparseIdentifier(holdout_samples=3000).fit(recordings[:2])
-    with pytest.raises(IdentificationError, match="refine"):
-        SparseIdentifier(refine="free-run").fit(recordings[:2])
