@@ -140,25 +140,49 @@ def summary(result: dict, source: str) -> str:
 
 def unsettled_lines(result: dict) -> list[str]:
     """The line saying which terms the selection decided against most held-out placements (unsettled_terms),
-    or none: under the coefficient table of one recording's and of a joint fit's summary."""
+    and the one naming the terms a free-run budget dropped (budget_dropped), or none: under the coefficient
+    table of one recording's and of a joint fit's summary."""
+    lines = []
     unsettled = unsettled_terms(result)
-    if not unsettled:
+    if unsettled:
+        lines.append("unsettled selection: " + "; ".join(
+            f"{term} ({eq}) {'kept' if kept else 'left out'} though P(kept) {p:.2f}" for eq, term, kept, p in unsettled)
+            + ": the held-out placements disagree on these terms, so the model is not settled by this record "
+              "(a longer sweep, or a stronger one, carries more of them)")
+    dropped = budget_dropped(result)
+    if dropped:
+        lines.append(f"left out by the term budget (at most {result['selection']['max_terms']} terms, chosen by "
+                     "free-run error): " + "; ".join(f"{term} (q1_dot, P(kept) {p:.2f} by the selection rule alone)"
+                                                     for term, p in dropped))
+    return lines
+
+
+def _free_run_budget(result: dict) -> bool:
+    """Whether a free-run budget chose q1_dot's terms: its held-out placements ran the rule without it."""
+    return bool(result.get("budget"))
+
+
+def budget_dropped(result: dict) -> list[tuple[str, float]]:
+    """(term, inclusion probability) of q1_dot's terms the selection rule keeps in most held-out placements
+    but a free-run budget left out (the placements rerun the rule, not the budget, which runs once)."""
+    if not _free_run_budget(result):
         return []
-    return ["unsettled selection: " + "; ".join(
-        f"{term} ({eq}) {'kept' if kept else 'left out'} though P(kept) {p:.2f}" for eq, term, kept, p in unsettled)
-        + ": the held-out placements disagree on these terms, so the model is not settled by this record "
-          "(a longer sweep, or a stronger one, carries more of them)"]
+    probs = (result.get("inclusion_probability") or {}).get("q1_dot", {})
+    model = result["model"].get("q1_dot", {})
+    return [(term, float(p)) for term, p in probs.items() if term not in model and p >= 0.5]
 
 
 def unsettled_terms(result: dict) -> list[tuple[str, str, bool, float]]:
     """(equation, term, kept, inclusion probability) of every term the selection decided against most of
-    its held-out placements: kept with P(kept) < 0.5, or left out with P(kept) >= 0.5."""
+    its held-out placements: kept with P(kept) < 0.5, or left out with P(kept) >= 0.5 (not a q1_dot term
+    a free-run budget left out: budget_dropped)."""
     out = []
     for eq, probs in (result.get("inclusion_probability") or {}).items():
         model = result["model"].get(eq, {})
         for term, p in probs.items():
             kept = term in model
-            if (kept and p < 0.5) or (not kept and p >= 0.5):
+            by_budget = eq == "q1_dot" and _free_run_budget(result)
+            if (kept and p < 0.5) or (not kept and p >= 0.5 and not by_budget):
                 out.append((eq, term, kept, float(p)))
     return out
 

@@ -255,6 +255,25 @@ def test_a_selection_the_placements_disagree_with_is_said_to_be_unsettled(make_r
     assert unsettled_terms(full) == [] and "unsettled" not in summary(full, "sweep.csv")
 
 
+def test_a_term_the_free_run_budget_dropped_is_named_as_such(make_run):
+    """With a free-run budget the held-out placements rerun the selection rule, not the budget: a true term
+    the budget of 4 drops (the weak q1*q2^2) has P(kept) 1.00, and the summary says the budget left it out
+    instead of calling the selection unsettled (it did, before)."""
+    from identify.identifier import SparseIdentifier
+    from reports.text import budget_dropped, summary, unsettled_terms
+    from sim.sweep import SineSweep
+
+    rec = make_run(sweep=SineSweep(1, 20, 30, 1.3), fs_hz=1024.0, seed=1).recording
+    res = SparseIdentifier(max_terms=4, budget="free-run").fit(rec).result()
+    assert "q1*q2^2" not in res["model"]["q1_dot"] and res["inclusion_probability"]["q1_dot"]["q1*q2^2"] >= 0.5
+    assert [t for t, _ in budget_dropped(res)] == ["q1*q2^2"] and unsettled_terms(res) == []
+    text = summary(res, "sweep.csv")
+    assert "left out by the term budget (at most 4 terms, chosen by free-run error): q1*q2^2 (q1_dot, P(kept) 1.00" \
+        in text and "unsettled" not in text
+    # the equation-error budget's placements run the budget too: nothing to single out there
+    assert budget_dropped(SparseIdentifier(max_terms=4).fit(rec).result()) == []
+
+
 def test_a_model_reads_as_equations_not_json():
     """explain prints its model as equations with 5 significant digits (it printed the JSON, 17 digits)."""
     from reports.text import model_text
