@@ -10,6 +10,13 @@ equation error (backward elimination) then refit on the free-run error (identify
 budget chosen by free-run error on the estimation data (identify.budget); the same with the winner refit on
 all estimation rows (budget_refit="all"); the default with the free-run refit. Nothing but the estimation
 range is used to choose terms or fit coefficients.
+
+Two-record variants (`--second-record`, default the vendored Schroeder80mV.mat; `--no-second-record` to
+skip them): the same 7-term free-run budget fitted jointly to the estimation range and the
+distribution's second record of the circuit (identify.joint; free-run errors pooled over both). Their
+estimation data are not the usual split's: the second record is further data of the same circuit (no
+test set sees any of it), with output peaks up to 23 % above the estimation range's. Compare them with
+published figures only under that convention.
 """
 from __future__ import annotations
 
@@ -34,6 +41,8 @@ TESTS = {"arrow_full": (100, 40575), "arrow_no_extrapolation": (100, 32100), "mu
 PUBLISHED_MV = {"best linear approximation": 13.5, "PNLSS (Paduart 2010)": 0.3, "deep SUBNET (Beintema 2021)": 1.4,
                 "LSTM (Champneys 2024)": 2.7}
 N_INIT = 50
+SECOND_RECORD = Path(__file__).resolve().parents[1] / "data/silverbox/Schroeder80mV.mat"
+TWO_RECORDS = "two records, budget by free run"
 
 
 def score(model, u, y, substeps: int) -> dict:
@@ -55,21 +64,26 @@ def score(model, u, y, substeps: int) -> dict:
     return out
 
 
-def run(path: str) -> dict:
+def run(path: str, second: str | None = None) -> dict:
     rec_all = read_recording(path, "force", "V1", "V2", fs_hz=FS_HZ)
     u, y = rec_all.input, rec_all.output
     est = rec_all.slice(*ESTIMATION)
     variants = {
-        "default": SparseIdentifier(),
-        "max_terms=7 + free-run refit": SparseIdentifier(max_terms=7, refine="free-run"),
-        "max_terms=7 budget by free run": SparseIdentifier(max_terms=7, budget="free-run"),
-        "same, refit on all est. rows": SparseIdentifier(max_terms=7, budget="free-run", budget_refit="all"),
-        "default + free-run refit": SparseIdentifier(refine="free-run"),
+        "default": (SparseIdentifier(), est),
+        "max_terms=7 + free-run refit": (SparseIdentifier(max_terms=7, refine="free-run"), est),
+        "max_terms=7 budget by free run": (SparseIdentifier(max_terms=7, budget="free-run"), est),
+        "same, refit on all est. rows": (SparseIdentifier(max_terms=7, budget="free-run", budget_refit="all"), est),
+        "default + free-run refit": (SparseIdentifier(refine="free-run"), est),
     }
+    if second:
+        both = [est, read_recording(second, "force", "V1", "V2", fs_hz=FS_HZ)]
+        variants[TWO_RECORDS] = (SparseIdentifier(max_terms=7, budget="free-run"), both)
+        variants["two records, refit on all rows"] = (SparseIdentifier(max_terms=7, budget="free-run",
+                                                                       budget_refit="all"), both)
     results = {}
-    for label, ident in variants.items():
+    for label, (ident, data) in variants.items():
         t0, c0 = time.perf_counter(), time.process_time()
-        ident.fit(est)
+        ident.fit(data)
         elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
         substeps = ident.validation_["substeps"]
         results[label] = {"rmse_mv": score(ident.model_, u, y, substeps), "terms": ident.model_.n_terms,
@@ -82,13 +96,18 @@ def run(path: str) -> dict:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--data", default=str(Path(__file__).resolve().parents[1] / "data/silverbox/SNLS80mV.mat"))
+    p.add_argument("--second-record", default=str(SECOND_RECORD),
+                   help="the distribution's second record, for the two-record variants (default: vendored)")
+    p.add_argument("--no-second-record", action="store_true", help="skip the two-record variants")
     p.add_argument("--json", action="store_true", help="print one JSON object (the budget chosen by free run)")
     args = p.parse_args(argv)
-    results = run(args.data)
+    results = run(args.data, None if args.no_second_record else args.second_record)
     best = results["max_terms=7 budget by free run"]
     if args.json:
+        two = results.get(TWO_RECORDS)
         print(json.dumps({"rmse_mv": best["rmse_mv"], "terms": best["terms_q1_dot"], "terms_total": best["terms"],
                           "model": best["model"], "variants": results,
+                          "two_records_rmse_mv": two["rmse_mv"] if two else None,
                           "scoring": "1000*RMSE(y[50:], y_sim[50:]); x0 fitted on the first 50 samples"}))
         return 0
     print(f"{'variant':32s} {'terms':>5s} {'arrow_full':>11s} {'arrow_no_ext':>13s} {'multisine':>10s} {'fit s':>6s} "
@@ -101,6 +120,8 @@ def main(argv=None) -> int:
         print(f"{'':32s} q1_dot: {', '.join(r['model']['q1_dot'])}")
     print("published (arrowhead full, mV): " + ", ".join(f"{k} {v}" for k, v in PUBLISHED_MV.items()))
     print("target: arrow_full <= 0.36 mV with <= 7 terms")
+    if TWO_RECORDS in results:
+        print("two-record variants: estimated on the estimation range and the second record (not the usual split)")
     return 0
 
 
