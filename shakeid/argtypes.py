@@ -5,6 +5,13 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+import re
+
+from identify.errors import ShakeidError
+
+#: FILE[START:STOP], the notation a cut recording's source is printed in (Recording.slice)
+_RANGE = re.compile(r"^(?P<path>.+)\[(?P<start>\d+):(?P<stop>\d+)\]$")
 
 
 def _number(kind, text: str):
@@ -44,3 +51,19 @@ def int_in(low: int, high: int | None = None):
         return value
     parse.__name__ = "integer"  # argparse names the type in its own messages
     return parse
+
+
+def file_and_samples(name: str, samples) -> tuple[str, tuple[int, int] | None]:
+    """A FILE argument and --samples -> (path, (start, stop) or None). FILE[START:STOP] cuts that file
+    alone to samples [START, STOP) (0-based): how each recording of a joint fit gets its own range
+    (`shakeid identify A.mat[40650:105712] B.mat`), where --samples cuts every file alike. A file whose
+    own name ends in brackets is read as named."""
+    m = _RANGE.match(name)
+    if m is None or os.path.exists(name):
+        return name, (tuple(samples) if samples else None)
+    if samples:
+        raise ShakeidError(f"{name}: samples given twice, in the file name and with --samples; give one")
+    start, stop = int(m["start"]), int(m["stop"])
+    if stop <= start:
+        raise ShakeidError(f"{name}: empty sample range [{start}, {stop}): STOP must exceed START")
+    return m["path"], (start, stop)

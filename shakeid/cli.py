@@ -13,7 +13,7 @@ from pathlib import Path
 from identify.errors import IdentificationError, ShakeidError
 from reports.text import gap_closed_text, model_text, p_value_text, summary
 
-from .argtypes import int_in, non_negative, positive
+from .argtypes import file_and_samples, int_in, non_negative, positive
 from .batch_cmd import add_batch_parser
 from .campaign_cmd import add_campaign_parser
 from .helpformat import Parser
@@ -127,7 +127,7 @@ def cmd_identify(args) -> int:
         from .joint_cmd import cmd_identify_joint
 
         return cmd_identify_joint(args, _identifier, _read)
-    args.file = args.files[0]
+    args.file, args.samples = file_and_samples(args.files[0], getattr(args, "samples", None))
     ident = _identifier(args)  # option errors first, before any file is read
     from .ooc_cmd import identify_out_of_core, wants_out_of_core
 
@@ -164,6 +164,7 @@ def cmd_explain(args) -> int:
     from identify.explain import DiscrepancyAnalysis
     from identify.quality import check_identifiable
 
+    args.file, args.samples = file_and_samples(args.file, getattr(args, "samples", None))
     baseline = _baseline(args.model) if args.model else None
     if args.report:
         from reports.html import check_report_folder
@@ -348,7 +349,7 @@ def build_parser() -> argparse.ArgumentParser:
     q = sub.add_parser("identify", help="identify a sparse ODE model from a recording (CSV, MAT, HDF5)")
     q.add_argument("files", nargs="+", metavar="FILE",
                    help="a recording (CSV, MAT or HDF5); several: one model fitted to all of them (joint "
-                        "identification)")
+                        "identification); FILE[START:STOP]: that file's samples [START, STOP) only")
     _add_identify_options(q)
     add_out_of_core_options(q)
     q.add_argument("--report", metavar="DIR",
@@ -359,7 +360,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.set_defaults(func=cmd_identify)
     add_batch_parser(sub, _add_identify_options, _identifier, _read)
     q = sub.add_parser("explain", help="where a model misses the rig, which effect is missing, and the fix")
-    q.add_argument("file", help="the recording: CSV, MAT or HDF5 (a sweep's .h5)")
+    q.add_argument("file", help="the recording: CSV, MAT or HDF5 (a sweep's .h5); FILE[START:STOP]: its samples "
+                                "[START, STOP) only")
     q.add_argument("--model", metavar="MODEL.json",
                    help="baseline model, e.g. model.json of an identify --report (default: the textbook Duffing, "
                         "fitted to the data)")

@@ -14,6 +14,8 @@ import sys
 
 from identify.errors import ShakeidError
 
+from .argtypes import file_and_samples
+
 
 def cmd_identify_joint(args, make_identifier, read) -> int:
     """`args.files` (two or more); make_identifier(args), read(args) as the single-file command's."""
@@ -25,16 +27,19 @@ def cmd_identify_joint(args, make_identifier, read) -> int:
         raise ShakeidError("--chunked identifies one recording out of core; a joint fit of several reads them "
                            "into memory (drop --chunked, or identify the files one by one)")
     seen: dict = {}
-    for path in args.files:  # one recording counted twice would shrink every standard error by sqrt(2)
+    common = getattr(args, "samples", None)
+    cuts = [file_and_samples(name, common) for name in args.files]  # FILE[START:STOP]: that file's rows only
+    for name, (path, rows) in zip(args.files, cuts):  # a recording counted twice would shrink every SE by sqrt(2)
         key = os.path.realpath(path)
-        if key in seen:
-            raise ShakeidError(f"{path}: the same recording as {seen[key]}; a joint fit takes each recording once "
-                               "(twice would count its evidence twice and shrink the standard errors)")
-        seen[key] = path
+        for other, other_rows in seen.get(key, []):
+            if rows is None or other_rows is None or (rows[0] < other_rows[1] and other_rows[0] < rows[1]):
+                raise ShakeidError(f"{name}: the same recording as {other}" + (" (overlapping samples)" if rows and
+                                   other_rows else "") + "; a joint fit takes each recording once (twice would "
+                                   "count its evidence twice and shrink the standard errors)")
+        seen.setdefault(key, []).append((name, rows))
     ident = make_identifier(args)  # option errors first, before any file is read
     recs, quality = [], []
-    for path in args.files:
-        args.file = path
+    for path, (args.file, args.samples) in zip(args.files, cuts):
         rec = read(args)
         quality.append(check_identifiable(rec, path, args.accept_faulty))
         rec.source = path

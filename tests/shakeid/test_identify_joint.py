@@ -92,3 +92,27 @@ def test_chunked_is_refused_for_several_files(files, capsys):
     """--chunked bounds memory for one recording; a joint fit reads all into memory: refused, not ignored."""
     assert main(["identify", str(files[0]), str(files[1]), "--chunked"]) == 2
     assert "--chunked identifies one recording out of core" in capsys.readouterr().err
+
+
+def test_each_file_can_be_cut_to_its_own_samples(files, capsys):
+    """FILE[START:STOP] cuts that file alone (--samples cuts every file alike): two files, the first cut to
+    its second half, fitted jointly; the recording is named with its range, and the cut file's rows are
+    those of --samples on it alone. Overlapping ranges of one file, a range beside a whole file, and a range
+    given twice are refused before anything is read; disjoint ranges of one file are two recordings."""
+    a, b = str(files[0]), str(files[2])
+    cut = f"{a}[15000:30000]"
+    assert main(["identify", cut, b, "--json", "--placements", "0", "--bias-replicates", "0"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert [r["source"] for r in res["recordings"]] == [cut, b]
+    assert res["recordings"][0]["samples"] == 15000 and res["status"] == "ok"
+    assert main(["identify", cut, "--json", "--placements", "0", "--bias-replicates", "0"]) == 0
+    single = json.loads(capsys.readouterr().out)
+    assert main(["identify", a, "--samples", "15000", "30000", "--json", "--placements", "0",
+                 "--bias-replicates", "0"]) == 0
+    assert json.loads(capsys.readouterr().out)["model"] == single["model"]  # the same rows as --samples
+    for bad, why in (([f"{a}[0:16000]", cut], "overlapping samples"), ([a, cut], f"{cut}: the same recording as {a}"),
+                     ([cut, "--samples", "0", "100"], "samples given twice"), ([f"{a}[5:5]"], "empty sample range")):
+        assert main(["identify", *bad]) == 2
+        assert why in capsys.readouterr().err
+    assert main(["identify", f"{a}[0:15000]", cut, "--placements", "0", "--bias-replicates", "0"]) == 0
+    assert "identified 2 recordings jointly" in capsys.readouterr().out
