@@ -27,12 +27,14 @@ Against the formula evaluated term by term at full rate (tests/identify/test_noi
 records): 2e-11 without decimation, 5e-6 - 1.6e-5 with it (the fitted rows' two ends leak). It had
 combined the integrated signals in time by running trapezoidal integrals (one transform per signal row
 and term); the exact responses (j w)^p now multiply on the bins, as the chain's and the noise draws' do
-(the variances moved by < 1e-4). A million-sample fit spends 0.04-0.06 s CPU here, less than half of it
-in pocketfft (0.040-0.054 s in three rounds of benchmarks/identify_speed.py --sizes 200000 1000000
---repeat 4 --no-simulation --uncertainty-parts, "the noise's share of the variance", 0.045-0.057 s in
-three more the next day; 0.062-0.069 s in double precision (DTYPE) in the first rounds; 0.100-0.122 s
-before the rows were built in the transforms' polyphase order, in place, and batched across signals and
-equations). Against SIMEX's replicate spread (256 replicates, ~6 % Monte Carlo error) on the Table 1 rig: within 1-7 % at 0.5 % noise, 5-20 % at 5 % (where the replicates' antithetic halves carry
+(the variances moved by < 1e-4). Each row is a polynomial of the signals, evaluated by a compiled loop
+(identify/_polyrows.c) straight into the transform's buffer, every sample's monomials made once: a
+million-sample fit spends 0.054-0.055 s CPU here, about half of it in pocketfft, against 0.062-0.063 s
+when numpy made the rows in whole-array passes from signals first copied into the polyphase order
+(benchmarks/identify_speed.py --sizes 1000000 --repeat 4 --no-simulation --uncertainty-parts, "the
+noise's share of the variance", two rounds each, alternating, 2026-11-24; 0.062-0.069 s in double
+precision (DTYPE) in the first rounds; 0.100-0.122 s before the rows were built in the transforms'
+polyphase order and batched across signals and equations). Against SIMEX's replicate spread (256 replicates, ~6 % Monte Carlo error) on the Table 1 rig: within 1-7 % at 0.5 % noise, 5-20 % at 5 % (where the replicates' antithetic halves carry
 third-order terms too). Why it is worth it: for a weak term the block estimates of the
 variance (sandwich, jackknife) are noisy because its information sits in a few blocks, while this one is
 not (docs/identification.md section 5). Monomial terms only (their derivatives are monomials); the caller
@@ -42,19 +44,21 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import _polyrows
 from .gram import scaled_pinv
 from .spectral import polyphase_factor, polyphase_rfft
 
 #: Rows transformed together, times the step (a row at step D is D times shorter): a padded
-#: million-sample record's polyphase buffers stay ~35 MB (single precision, DTYPE).
+#: million-sample record's polyphase buffer stays ~35 MB (single precision, DTYPE; one for all batches).
 BATCH = 8
 #: Largest sampling step of the score's transforms (decimation).
 MAX_STEP = 8
-#: Precision of the score's rows and their transforms. A variance that sets a standard error needs a
-#: few digits; single precision moves it by a few 1e-7 of itself at most (against double: 7-8e-8 on the
-#: 30 s records of tests/identify/test_noise_spread.py, 7.5e-8 on a million samples, <= 2.5e-7 on the
-#: five sweeps of benchmarks/uncertainty_numbers.py), and halves the memory the rows are built in and the
-#: time pocketfft takes on them. The sums over the band's bins (U, and the product that squares it) and
+#: Precision of the score's rows (their evaluation too, identify/_polyrows.c) and their transforms. A
+#: variance that sets a standard error needs a few digits; single precision moves it by a few 1e-7 of
+#: itself at most (against double: 5e-8 and 1.2e-7 on the 30 s records of tests/identify/
+#: test_noise_spread.py at 0.5 and 5 % noise, 2.0e-7 on the million samples of benchmarks/
+#: identify_speed.py; 3e-8, 1.2e-7 and 5e-8 when numpy made the rows from single-precision copies of the
+#: signals), and halves the memory the rows are built in and the time pocketfft takes on them. The sums over the band's bins (U, and the product that squares it) and
 #: the filters H_v are in double precision (H_v in single moved the variances by 5e-9 only, and saved no
 #: measurable time: kept double, with no cast).
 DTYPE = np.float32
@@ -100,96 +104,60 @@ def boxcar_spectrum(n: int, nfft: int, kk: int) -> np.ndarray:
     return out
 
 
-def _combination(terms, scratch) -> np.ndarray | float:
-    """sum of c x over the (c, x) pairs, x an array or the constant monomial's 1.0, into one new array
-    (each product made in `scratch`): no temporary per term."""
-    const = float(sum(c for c, x in terms if not isinstance(x, np.ndarray)))
-    # python floats: a numpy float64 coefficient would widen single-precision rows to double
-    arrays = [(float(c), x) for c, x in terms if isinstance(x, np.ndarray)]
-    if not arrays:
-        return const
-    out = np.multiply(arrays[0][1], arrays[0][0])
-    for c, x in arrays[1:]:
-        out += np.multiply(x, c, out=scratch)
-    if const:
-        out += const
+def _poly_add(p: dict, q: dict, scale: float = 1.0) -> dict:
+    """p + scale q, polynomials as {exponents: coefficient} over the signals (q1, q2, q1_dot, input)."""
+    out = dict(p)
+    for k, c in q.items():
+        out[k] = out.get(k, 0.0) + scale * c
     return out
 
 
-class _Strided:
-    """A recording's signals read every P-th sample: y_v[c::P] as row c of a (P, ceil(n / P)) array (0 past
-    the end), each row read once. A strided read touches every cache line of y_v whatever P, and the
-    steps whose transforms split into M components with M x step = P share rows (at 2048 Hz with the
-    band to 106 Hz, steps 2, 3 and 6 all read every 6th sample: 4 reads of each signal instead of 6)."""
-
-    def __init__(self, y):
-        self.y, self._rows, self._read = y, {}, set()
-
-    def __call__(self, v: int, stride: int, offsets) -> np.ndarray:
-        y = self.y[v]
-        if (v, stride) not in self._rows:
-            self._rows[v, stride] = np.zeros((stride, -(-y.size // stride)), dtype=DTYPE)
-        rows = self._rows[v, stride]
-        for c in offsets:
-            if (v, stride, c) not in self._read:
-                part = y[c::stride]
-                rows[c, :part.size] = part
-                self._read.add((v, stride, c))
-        return rows
+def _poly_mul(p: dict, q: dict) -> dict:
+    out: dict = {}
+    for kp, cp in p.items():
+        for kq, cq in q.items():
+            k = tuple(x + y for x, y in zip(kp, kq))
+            out[k] = out.get(k, 0.0) + cp * cq
+    return out
 
 
-class _Signals:
-    """One recording's fitted rows at one sampling step, in the order the step's transform reads them, and
-    their monomials (y^k, k exponents over q1, q2, q1_dot, input; each made once, shared by the equations).
+def _poly_derivative(k: tuple, v: int) -> dict:
+    """d y^k / d y_v: {k - e_v: k_v}, or {} where y_v does not appear."""
+    if not k[v]:
+        return {}
+    lower = list(k)
+    lower[v] -= 1
+    return {tuple(lower): float(k[v])}
 
-    The transform on nfft / step points splits its rows into M polyphase components (spectral.
-    polyphase_rfft); the signals are decimated straight into that order, shape (M, width): [r, j] is the
-    decimated sample j M + r, 0 from the last sample on. Every g row is a sum of products of them taken
-    sample by sample, so it is built in that order too, written into the transform's buffer: no
-    decimated copy in time order and no second copy into the components."""
 
-    def __init__(self, strided: _Strided, n: int, nfft: int, kk: int, step: int):
-        self.strided, self.step, self.length, self.kk = strided, step, nfft // step, kk
-        self.m = polyphase_factor(self.length, kk - 1)
-        self.n = len(range(0, n, step))
-        self.width = -(-self.n // self.m)
-        # components whose last column is past the record's end: zeroed in every row transformed
-        self.short = [r for r in range(self.m) if (self.width - 1) * self.m + r >= self.n]
-        self._mono = {}
-        self.scratch = np.empty((self.m, self.width), dtype=DTYPE)
-
-    def signal(self, v: int) -> np.ndarray:
-        """(M, width) y_v: component r is y_v[r step::M step], row r step of the recording's stride M step."""
-        p = self.m * self.step
-        return self.strided(v, p, range(0, p, self.step))[::self.step]
-
-    def __call__(self, k: tuple):
-        """y^k; the constant is the scalar 1.0."""
-        if not any(k):
-            return 1.0
-        if k not in self._mono:
-            v = next(i for i, p in enumerate(k) if p)
-            lower = list(k)
-            lower[v] -= 1
-            rest = self(tuple(lower))
-            self._mono[k] = self.signal(v) if np.isscalar(rest) else rest * self.signal(v)
-        return self._mono[k]
-
-    def derivative_term(self, k: tuple, v: int) -> tuple:
-        """d y^k / d y_v as the pair (k_v, y^(k - e_v)) (k_v 0: y_v does not appear)."""
-        if not k[v]:
-            return 0.0, 1.0
-        lower = list(k)
-        lower[v] -= 1
-        return float(k[v]), self(tuple(lower))
+def _monomials(polys: list) -> tuple[list, np.ndarray, np.ndarray]:
+    """Every monomial the polynomials use, with the ones they are made from: (exponents in order, parent,
+    var), monomial i = monomial parent[i] times signal var[i], parent[i] < i, monomial 0 the constant."""
+    n_vars = len(next(iter(polys[0]))) if polys and polys[0] else 4
+    wanted = {k for p in polys for k in p}
+    todo, table = list(wanted), {(0,) * n_vars}
+    while todo:  # the chain of lower monomials down to the constant, each once
+        k = todo.pop()
+        if k in table:
+            continue
+        table.add(k)
+        v = next(i for i, e in enumerate(k) if e)
+        todo.append(tuple(e - (i == v) for i, e in enumerate(k)))
+    order = sorted(table, key=lambda k: (sum(k), k))
+    index = {k: i for i, k in enumerate(order)}
+    parent, var = np.zeros(len(order), dtype=np.int32), np.zeros(len(order), dtype=np.int32)
+    for i, k in enumerate(order[1:], start=1):
+        v = next(j for j, e in enumerate(k) if e)
+        parent[i], var[i] = index[tuple(e - (j == v) for j, e in enumerate(k))], v
+    return order, parent, var
 
 
 class _Score:
     """The transforms of one equation's score derivatives g_v on one recording's band bins: theta (kept
     columns) and the residual r where a signal's slope and Jacobians are constants (combined on the bins),
-    g_v term by term otherwise, each at the step its degree allows. Each row is built in place in the
-    transform's buffer (fill; _transform batches the rows of every equation by step: q1's and q2's g rows
-    of a cubic model share their steps), from the step's signals, residual and slopes, each made once."""
+    g_v term by term otherwise, each at the step its degree allows. Each row is a polynomial of the
+    signals (row) evaluated straight into the transform's buffer (_transform batches the rows of every
+    equation by step: q1's and q2's g rows of a cubic model share their steps)."""
 
     def __init__(self, n: int, noise, cols: list, target: tuple, beta: np.ndarray):
         """n : the recording's fitted rows. Leaves in self.jobs the rows to transform, {step: [job]}
@@ -197,7 +165,7 @@ class _Score:
         self.noise, self.cols, self.target, self.beta = noise, cols, target, beta
         self.kk, self.nfft = noise.responses[0].size, noise.nfft
         self.r_degree = max([_degree(k) for k in cols] + [_degree(target)])
-        self._resid, self._slope, self.spec = {}, {}, {}
+        self.spec = {}
         self.plans = [self._plan(v) for v in range(len(noise.requests))]
         jobs: dict = {}
         for v, plan in enumerate(self.plans):
@@ -233,42 +201,24 @@ class _Score:
                                               jac_deg[a] + self.r_degree if jac_deg[a] is not None else -1))
                 for a, k in enumerate(self.cols)}
 
-    def resid(self, sig: _Signals):
-        """r = target - theta . beta on the rows of sig's step."""
-        if sig.step not in self._resid:
-            total = _combination([(b, sig(k)) for b, k in zip(self.beta, self.cols) if b], sig.scratch)
-            target = sig(self.target)
-            self._resid[sig.step] = (np.subtract(target, total, out=total) if isinstance(total, np.ndarray)
-                                     else target - total)
-        return self._resid[sig.step]
-
-    def slope(self, sig: _Signals, v: int):
-        """dtarget/dy_v - sum_j beta_j dtheta_j/dy_v on the rows of sig's step."""
-        if (sig.step, v) not in self._slope:
-            terms = [sig.derivative_term(self.target, v)]
-            for b, k in zip(self.beta, self.cols):
-                c, x = sig.derivative_term(k, v)
-                if b and c:
-                    terms.append((-b * c, x))
-            self._slope[sig.step, v] = _combination([(c, x) for c, x in terms if c], sig.scratch)
-        return self._slope[sig.step, v]
-
-    def fill(self, sig: _Signals, job: tuple, out: np.ndarray):
-        """Row `job` of the transform ("theta", a; "resid"; or v, a: g_v of term a) into out, (M, width)."""
+    def row(self, job: tuple) -> dict:
+        """Row `job` as a polynomial of the signals: ("theta", a) the kept column a; ("resid",) the residual
+        r = target - theta . beta; (v, a) g_v of term a = theta_a slope_v + dtheta_a/dy_v r, with
+        slope_v = dtarget/dy_v - sum_j beta_j dtheta_j/dy_v."""
+        resid = {self.target: 1.0}
+        for b, k in zip(self.beta, self.cols):
+            if b:
+                resid = _poly_add(resid, {k: 1.0}, -float(b))
         if job[0] == "theta":
-            out[...] = sig(self.cols[job[1]])
-        elif job[0] == "resid":
-            out[...] = self.resid(sig)
-        else:
-            v, a = job
-            np.multiply(sig(self.cols[a]), self.slope(sig, v), out=out)  # theta slope_v
-            c, lower = sig.derivative_term(self.cols[a], v)
-            if c:  # + dtheta/dy_v r
-                term = np.multiply(lower, self.resid(sig), out=sig.scratch) if isinstance(lower, np.ndarray) \
-                    else self.resid(sig)
-                if c != 1.0:
-                    term = np.multiply(term, c, out=sig.scratch)
-                out += term
+            return {self.cols[job[1]]: 1.0}
+        if job[0] == "resid":
+            return resid
+        v, a = job
+        slope = _poly_derivative(self.target, v)
+        for b, k in zip(self.beta, self.cols):
+            if b:
+                slope = _poly_add(slope, _poly_derivative(k, v), -float(b))
+        return _poly_add(_poly_mul({self.cols[a]: 1.0}, slope), _poly_mul(_poly_derivative(self.cols[a], v), resid))
 
     def accumulate(self, U: np.ndarray):
         """U[row of v] += conj(H_v) Phi_v for every signal v, Phi_v the (|S|, kk) transform of
@@ -289,42 +239,40 @@ class _Score:
                     U[row, a] += self.spec.pop((v, a)) * h
 
 
-def _steps(y, noise):
-    """step -> the recording's _Signals at that step, each made once."""
-    cache: dict = {}
-    strided = _Strided(y)
-
-    def at(step: int) -> _Signals:
-        if step not in cache:
-            cache[step] = _Signals(strided, y[0].size, noise.nfft, noise.responses[0].size, step)
-        return cache[step]
-    return at
-
-
-def _transform(scores, at):
+def _transform(scores, y, noise):
     """Every score's rows (_Score.jobs) of one recording, transformed on the band's bins: the rows of one
-    step, all equations', built in one buffer and transformed together, BATCH x step at a time (a buffer
-    as large as BATCH rows at full rate). Batches matter: pocketfft transforms several rows at once with
-    vector instructions (24 rows of 180,000 points: 23 ms in one call, 33 ms in 24 calls, scipy 1.17 on
-    this machine). at : step -> the recording's _Signals."""
+    step, all equations', evaluated together (identify._polyrows: every sample's monomials made once,
+    written in the polyphase order of the step's transform) and transformed together, BATCH x step at a
+    time (a buffer as large as BATCH rows at full rate). Batches matter: pocketfft transforms several
+    rows at once with vector instructions (24 rows of 180,000 points: 23 ms in one call, 33 ms in 24
+    calls, scipy 1.17 on this machine). y : the recording's (q1, q2, q1_dot, input) on the fitted rows."""
+    y = tuple(np.ascontiguousarray(x, dtype=np.float64) for x in y)
+    n, kk = y[0].size, noise.responses[0].size
     by_step: dict = {}
     for score in scores:
         for step, jobs in score.jobs.items():
             by_step.setdefault(step, []).extend((score, job) for job in jobs)
-    for step, todo in by_step.items():
-        sig = at(step)
-        for first in range(0, len(todo), BATCH * step):
-            chunk = todo[first:first + BATCH * step]
-            buf = np.empty((len(chunk), sig.m, sig.length // sig.m), dtype=DTYPE)
-            for i, (score, job) in enumerate(chunk):
-                score.fill(sig, job, buf[i, :, :sig.width])
-            buf[:, :, sig.width:] = 0.0  # the zero padding to nfft / step points
-            buf[:, sig.short, sig.width - 1] = 0.0  # and past the record's end
-            spec = polyphase_rfft(buf, sig.length, sig.kk - 1)
-            if step > 1:
-                spec *= step
-            for (score, job), row in zip(chunk, spec):
-                score.spec[job] = row
+    chunks = [(step, todo[first:first + BATCH * step]) for step, todo in by_step.items()
+              for first in range(0, len(todo), BATCH * step)]
+    # one buffer for every chunk's rows, touched once (a new one per chunk paid its pages each time)
+    scratch = np.empty(max((len(chunk) * (noise.nfft // step) for step, chunk in chunks), default=0), dtype=DTYPE)
+    for step, chunk in chunks:
+        length = noise.nfft // step
+        m = polyphase_factor(length, kk - 1)
+        width = -(-len(range(0, n, step)) // m)
+        polys = [score.row(job) for score, job in chunk]
+        order, parent, var = _monomials(polys)
+        index = {k: i for i, k in enumerate(order)}
+        ptr = np.cumsum([0] + [len(p) for p in polys]).astype(np.int32)
+        mono = np.array([index[k] for p in polys for k in p], dtype=np.int32)
+        coef = np.array([c for p in polys for c in p.values()], dtype=np.float64)
+        buf = scratch[:len(chunk) * length].reshape(len(chunk), m, length // m)
+        _polyrows.poly_rows(y, n, step, m, width, parent, var, ptr, mono, coef, buf)
+        spec = polyphase_rfft(buf, length, kk - 1)
+        if step > 1:
+            spec *= step
+        for (score, job), row in zip(chunk, spec):
+            score.spec[job] = row
 
 
 def noise_variance(parts, supports: dict, coefs: dict, G: np.ndarray, col_exps: list, target_exps: list) -> dict:
@@ -343,7 +291,7 @@ def noise_variance(parts, supports: dict, coefs: dict, G: np.ndarray, col_exps: 
     for y, noise, (s_in, s_out) in parts:
         scores = {e: _Score(y[0].size, noise, [col_exps[j] for j in S], target_exps[e], coefs[e][S])
                   for e, S in kept.items()}
-        _transform(scores.values(), _steps(y, noise))
+        _transform(scores.values(), y, noise)
         c, w = noise.white_covariance(s_in, s_out), noise.bin_weights()
         for e, score in scores.items():
             U = np.zeros((2, kept[e].size, noise.responses[0].size), dtype=complex)

@@ -115,7 +115,7 @@ def test_noise_variance_is_the_formula_evaluated_directly(noise_fraction, monkey
     direct evaluation (numerical derivatives, every signal transformed at full rate, in double precision).
     Without decimation (MAX_STEP = 1) and in double precision (DTYPE), the shared transforms must give
     the same numbers: measured within 2e-11, asked 1e-9. In single precision (the default DTYPE) the
-    rows' rounding adds: measured 7-8e-8, asked 1e-6. Decimated (the default, each term at the step its
+    rows' rounding adds: measured 5e-8 and 1.2e-7 (0.5 and 5 % noise), asked 1e-6. Decimated (the default, each term at the step its
     degree allows): the fitted rows' two ends leak; measured 5e-6 and 1.6e-5 (0.5 and 5 % noise), asked
     1e-4, a standard error moved by 5e-5 of itself at most."""
     sensors = {k: Accelerometer(noise_fraction=noise_fraction) for k in ("table_sensor", "mass_sensor")}
@@ -150,3 +150,43 @@ def test_noise_variance_is_the_formula_evaluated_directly(noise_fraction, monkey
     assert np.all(noise_variance(parts, {1: sups[1]}, coefs, G, col_exps, unc.TARGET_EXPONENTS)[1] == 0)
     # measured 2.7e-37 and 4.8e-35 (0.5 and 5 % noise): a standard error of 1e-17 at most on a coefficient of 1
     assert _direct(parts, {1: sups[1]}, coefs, G, col_exps, unc.TARGET_EXPONENTS)[1][S1] < 1e-20
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_polynomial_rows_land_in_the_transforms_polyphase_order(dtype):
+    """identify/_polyrows.c: rows sum_k c_k y^k of the signals on every step-th sample, component c of a
+    row holding the samples (j m + c) step, zero past the record's end and in the padding, against numpy
+    in double precision; a constant monomial is zero there too (padding, not the constant). Inconsistent
+    buffers are refused with ValueError, not read out of bounds."""
+    from identify import _polyrows
+    from identify.noise_spread import _monomials
+
+    rng = np.random.default_rng(3)
+    n, step, m, length = 999, 2, 3, 180  # 500 samples at step 2 in 3 components of 167 (the last one short)
+    y = tuple(rng.standard_normal(n) for _ in range(4))
+    polys = [{(1, 2, 0, 0): 2.5, (0, 0, 1, 0): -1.0, (0, 0, 0, 0): 0.75}, {(0, 3, 0, 1): 1e3}, {(0, 0, 0, 0): 1.0}]
+    order, parent, var = _monomials(polys)
+    index = {k: i for i, k in enumerate(order)}
+    ptr = np.cumsum([0] + [len(p) for p in polys]).astype(np.int32)
+    mono = np.array([index[k] for p in polys for k in p], dtype=np.int32)
+    coef = np.array([c for p in polys for c in p.values()])
+    width = -(-len(range(0, n, step)) // m)
+    out = np.full((len(polys), m, length), np.nan, dtype=dtype)
+    _polyrows.poly_rows(y, n, step, m, width, parent, var, ptr, mono, coef, out)
+    t = np.arange(0, n, step)
+    for r, p in enumerate(polys):
+        row = sum(c * np.prod([y[v][t] ** e for v, e in enumerate(k)], axis=0) for k, c in p.items())
+        expected = np.zeros(m * length)
+        expected[:t.size] = row  # sample j m + c of the decimated row is component c, column j
+        expected = expected.reshape(length, m).T
+        np.testing.assert_allclose(out[r], expected, rtol=1e-5 if dtype == np.float32 else 1e-13, atol=1e-4)
+    assert np.all(out[2, :, width:] == 0) and out[2, 2, width - 1] == 0  # padding; past the end (500 < 3 x 167)
+    assert out[2, 0, width - 1] == 1.0 and out[2, 1, width - 1] == 1.0  # decimated samples 498, 499
+    with pytest.raises(ValueError, match="inconsistent"):
+        _polyrows.poly_rows(y, n, step, m, length + 1, parent, var, ptr, mono, coef, out)  # width > length
+    with pytest.raises(ValueError, match="inconsistent"):
+        _polyrows.poly_rows(y, 2 * n, step, m, width, parent, var, ptr, mono, coef, out)  # signals too short
+    with pytest.raises(ValueError, match="inconsistent"):
+        _polyrows.poly_rows(y, n, step, m, width, parent, var, ptr, mono + 100, coef, out)  # no such monomial
+    with pytest.raises(ValueError, match="inconsistent"):
+        _polyrows.poly_rows(y, n, step, m, width, parent, var, ptr, mono, coef, out.astype(np.int32))
