@@ -164,7 +164,8 @@ def test_the_wheel_the_image_installs_carries_the_service(tmp_path):
         for module in (REPO / package).rglob("*.py"):
             assert str(module.relative_to(REPO)) in names, module
     assert {"server/dashboard.html", "server/static/dashboard.js", "server/static/dashboard.css"} <= names
-    assert any(n.startswith("identify/_simkernel") and n.endswith(".so") for n in names)
+    for kernel in ("identify/_simkernel", "identify/_polyrows"):
+        assert any(n.startswith(kernel) and n.endswith(".so") for n in names), kernel
     entry = next(n for n in names if n.endswith("entry_points.txt"))
     assert "shakeid = shakeid.cli:main" in zipfile.ZipFile(wheel).read(entry).decode()
     assert not any(n.startswith(("tests/", "benchmarks/")) for n in names)
