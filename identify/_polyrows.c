@@ -74,23 +74,45 @@
 DEFINE_ROWS(rows_single, float)
 DEFINE_ROWS(rows_double, double)
 
+/* A C-contiguous buffer of one element type (struct format "i" int32, "d" float64, "f" float32); 1 if it
+   is, 0 if it is of another type (released), -1 with a Python error if it is no buffer. */
+static int typed_buffer(PyObject *obj, Py_buffer *b, int flags, const char *format, Py_ssize_t itemsize) {
+    if (PyObject_GetBuffer(obj, b, flags | PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
+        b->obj = NULL;
+        return -1;
+    }
+    if (b->itemsize == itemsize && b->format != NULL && strcmp(b->format, format) == 0 && b->len % itemsize == 0)
+        return 1;
+    PyBuffer_Release(b);
+    b->obj = NULL;
+    return 0;
+}
+
 static PyObject *poly_rows(PyObject *self, PyObject *args) {
-    PyObject *signals, *out_obj, *result = NULL;
+    PyObject *signals, *o_parent, *o_var, *o_ptr, *o_mono, *o_coef, *out_obj, *result = NULL;
     Py_ssize_t n, step, m, width;
-    Py_buffer b_parent, b_var, b_ptr, b_mono, b_coef, b_out = {0}, sig[MAX_VARS];
+    Py_buffer b_parent = {0}, b_var = {0}, b_ptr = {0}, b_mono = {0}, b_coef = {0}, b_out = {0}, sig[MAX_VARS];
     int n_sig = 0, ok = 1, single = 1;
-    if (!PyArg_ParseTuple(args, "O!nnnny*y*y*y*y*O", &PyTuple_Type, &signals, &n, &step, &m, &width, &b_parent,
-                          &b_var, &b_ptr, &b_mono, &b_coef, &out_obj))
+    if (!PyArg_ParseTuple(args, "O!nnnnOOOOOO", &PyTuple_Type, &signals, &n, &step, &m, &width, &o_parent, &o_var,
+                          &o_ptr, &o_mono, &o_coef, &out_obj))
         return NULL;
-    if (PyObject_GetBuffer(out_obj, &b_out, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
-        b_out.obj = NULL;
-        ok = -1;
-    } else if (strcmp(b_out.format, "f") == 0 && b_out.itemsize == 4) {
-        single = 1;
-    } else if (strcmp(b_out.format, "d") == 0 && b_out.itemsize == 8) {
-        single = 0;
-    } else {
-        ok = 0;
+    /* the index arrays int32, the coefficients float64, the output float32 or float64: anything else refused */
+    Py_buffer *typed[5] = {&b_parent, &b_var, &b_ptr, &b_mono, &b_coef};
+    PyObject *objs[5] = {o_parent, o_var, o_ptr, o_mono, o_coef};
+    for (int i = 0; i < 5 && ok > 0; i++)
+        ok = i < 4 ? typed_buffer(objs[i], typed[i], PyBUF_SIMPLE, "i", sizeof(int))
+                   : typed_buffer(objs[i], typed[i], PyBUF_SIMPLE, "d", sizeof(double));
+    if (ok > 0) {
+        ok = typed_buffer(out_obj, &b_out, PyBUF_WRITABLE, "f", sizeof(float));
+        if (ok == 0) {
+            ok = typed_buffer(out_obj, &b_out, PyBUF_WRITABLE, "d", sizeof(double));
+            single = 0;
+        }
+    }
+    if (ok <= 0) {
+        if (ok == 0) PyErr_SetString(PyExc_ValueError, "poly_rows: int32 indices, float64 coefficients and a float32 "
+                                                       "or float64 output expected");
+        goto done;
     }
     int n_vars = (int)PyTuple_GET_SIZE(signals);
     int n_mono = (int)(b_parent.len / (Py_ssize_t)sizeof(int));
@@ -101,8 +123,9 @@ static PyObject *poly_rows(PyObject *self, PyObject *args) {
     const int *parent = (const int *)b_parent.buf, *var = (const int *)b_var.buf;
     const int *ptr = (const int *)b_ptr.buf, *mono = (const int *)b_mono.buf;
     const double *coef = (const double *)b_coef.buf;
+    /* step <= n + 1 and m <= MAX_COMPONENTS keep m step, and the sample indices, far from overflow */
     if (ok > 0 && (n_vars < 1 || n_vars > MAX_VARS || n_mono < 1 || b_var.len != b_parent.len || n_rows < 1 ||
-                   n < 0 || step < 1 || m < 1 || m > MAX_COMPONENTS || width < 0 || length < width ||
+                   n < 0 || step < 1 || step > n + 1 || m < 1 || m > MAX_COMPONENTS || width < 0 || length < width ||
                    total != (Py_ssize_t)n_rows * m * length || b_mono.len / (Py_ssize_t)sizeof(int) != n_nz ||
                    ptr[0] != 0 || ptr[n_rows] != n_nz))
         ok = 0;
@@ -156,11 +179,8 @@ static PyObject *poly_rows(PyObject *self, PyObject *args) {
     result = Py_None;
 done:
     for (int i = 0; i < n_sig; i++) PyBuffer_Release(&sig[i]);
-    PyBuffer_Release(&b_parent);
-    PyBuffer_Release(&b_var);
-    PyBuffer_Release(&b_ptr);
-    PyBuffer_Release(&b_mono);
-    PyBuffer_Release(&b_coef);
+    for (int i = 0; i < 5; i++)
+        if (typed[i]->obj != NULL) PyBuffer_Release(typed[i]);
     if (b_out.obj != NULL) PyBuffer_Release(&b_out);
     return result;
 }

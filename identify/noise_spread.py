@@ -28,14 +28,16 @@ records): 2e-11 without decimation, 5e-6 - 1.6e-5 with it (the fitted rows' two 
 combined the integrated signals in time by running trapezoidal integrals (one transform per signal row
 and term); the exact responses (j w)^p now multiply on the bins, as the chain's and the noise draws' do
 (the variances moved by < 1e-4). Each row is a polynomial of the signals, evaluated by a compiled loop
-(identify/_polyrows.c) straight into the transform's buffer, every sample's monomials made once: a
-million-sample fit spends 0.054-0.055 s CPU here, about half of it in pocketfft, against 0.062-0.063 s
-when numpy made the rows in whole-array passes from signals first copied into the polyphase order
-(benchmarks/identify_speed.py --sizes 1000000 --repeat 4 --no-simulation --uncertainty-parts, "the
-noise's share of the variance", two rounds each, alternating, 2026-11-24; 0.062-0.069 s in double
-precision (DTYPE) in the first rounds; 0.100-0.122 s before the rows were built in the transforms'
-polyphase order and batched across signals and equations). Against SIMEX's replicate spread (256 replicates, ~6 % Monte Carlo error) on the Table 1 rig: within 1-7 % at 0.5 % noise, 5-20 % at 5 % (where the replicates' antithetic halves carry
-third-order terms too). Why it is worth it: for a weak term the block estimates of the
+(identify/_polyrows.c) straight into the transform's buffer, each sample's monomials made once per
+batch: a million-sample fit spends 0.054-0.055 s CPU here, about half of it in pocketfft, against
+0.062-0.063 s when numpy made the rows in whole-array passes from signals first copied into the
+polyphase order (benchmarks/identify_speed.py --sizes 1000000 --repeat 4 --no-simulation
+--uncertainty-parts, "the noise's share of the variance", two rounds each, alternating, 2026-11-24;
+0.062-0.069 s in double precision (DTYPE) in the first rounds; 0.100-0.122 s before the rows were built
+in the transforms' polyphase order and batched across signals and equations). Against SIMEX's replicate
+spread (256 replicates, ~6 % Monte Carlo error) on the Table 1 rig: within 1-7 % at 0.5 % noise, 5-20 %
+at 5 % (where the replicates' antithetic halves carry third-order terms too). Why it is worth it: for a
+weak term the block estimates of the
 variance (sandwich, jackknife) are noisy because its information sits in a few blocks, while this one is
 not (docs/identification.md section 5). Monomial terms only (their derivatives are monomials); the caller
 falls back to SIMEX otherwise.
@@ -51,16 +53,19 @@ from .spectral import polyphase_factor, polyphase_rfft
 #: Rows transformed together, times the step (a row at step D is D times shorter): a padded
 #: million-sample record's polyphase buffer stays ~35 MB (single precision, DTYPE; one for all batches).
 BATCH = 8
+#: The signals the score's rows are polynomials of: q1, q2, q1_dot, input.
+N_SIGNALS = 4
 #: Largest sampling step of the score's transforms (decimation).
 MAX_STEP = 8
 #: Precision of the score's rows (their evaluation too, identify/_polyrows.c) and their transforms. A
 #: variance that sets a standard error needs a few digits; single precision moves it by a few 1e-7 of
-#: itself at most (against double: 5e-8 and 1.2e-7 on the 30 s records of tests/identify/
-#: test_noise_spread.py at 0.5 and 5 % noise, 2.0e-7 on the million samples of benchmarks/
-#: identify_speed.py; 3e-8, 1.2e-7 and 5e-8 when numpy made the rows from single-precision copies of the
-#: signals), and halves the memory the rows are built in and the time pocketfft takes on them. The sums over the band's bins (U, and the product that squares it) and
-#: the filters H_v are in double precision (H_v in single moved the variances by 5e-9 only, and saved no
-#: measurable time: kept double, with no cast).
+#: itself at most (against double: 5e-8 and 1.2e-7 on the 30 s records of
+#: tests/identify/test_noise_spread.py at 0.5 and 5 % noise, 2.0e-7 on the million samples of
+#: benchmarks/identify_speed.py; 3e-8, 1.2e-7 and 5e-8 when numpy made the rows from single-precision
+#: copies of the signals), and halves the memory the rows are built in and the time pocketfft takes on
+#: them. The sums over the band's bins (U, and the product that squares it) and the filters H_v are in
+#: double precision (H_v in single moved the variances by 5e-9 only, and saved no measurable time: kept
+#: double, with no cast).
 DTYPE = np.float32
 
 
@@ -133,9 +138,8 @@ def _poly_derivative(k: tuple, v: int) -> dict:
 def _monomials(polys: list) -> tuple[list, np.ndarray, np.ndarray]:
     """Every monomial the polynomials use, with the ones they are made from: (exponents in order, parent,
     var), monomial i = monomial parent[i] times signal var[i], parent[i] < i, monomial 0 the constant."""
-    n_vars = len(next(iter(polys[0]))) if polys and polys[0] else 4
     wanted = {k for p in polys for k in p}
-    todo, table = list(wanted), {(0,) * n_vars}
+    todo, table = list(wanted), {(0,) * N_SIGNALS}
     while todo:  # the chain of lower monomials down to the constant, each once
         k = todo.pop()
         if k in table:
@@ -241,7 +245,7 @@ class _Score:
 
 def _transform(scores, y, noise):
     """Every score's rows (_Score.jobs) of one recording, transformed on the band's bins: the rows of one
-    step, all equations', evaluated together (identify._polyrows: every sample's monomials made once,
+    step, all equations', evaluated together (identify._polyrows: a sample's monomials made once per batch,
     written in the polyphase order of the step's transform) and transformed together, BATCH x step at a
     time (a buffer as large as BATCH rows at full rate). Batches matter: pocketfft transforms several
     rows at once with vector instructions (24 rows of 180,000 points: 23 ms in one call, 33 ms in 24

@@ -152,19 +152,10 @@ def test_noise_variance_is_the_formula_evaluated_directly(noise_fraction, monkey
     assert _direct(parts, {1: sups[1]}, coefs, G, col_exps, unc.TARGET_EXPONENTS)[1][S1] < 1e-20
 
 
-@pytest.mark.parametrize("dtype", [np.float32, np.float64])
-def test_polynomial_rows_land_in_the_transforms_polyphase_order(dtype):
-    """identify/_polyrows.c: rows sum_k c_k y^k of the signals on every step-th sample, component c of a
-    row holding the samples (j m + c) step, zero past the record's end and in the padding, against numpy
-    in double precision; a constant monomial is zero there too (padding, not the constant). Inconsistent
-    buffers are refused with ValueError, not read out of bounds."""
+def _poly_call(polys, y, n, step, m, length, dtype):
     from identify import _polyrows
     from identify.noise_spread import _monomials
 
-    rng = np.random.default_rng(3)
-    n, step, m, length = 999, 2, 3, 180  # 500 samples at step 2 in 3 components of 167 (the last one short)
-    y = tuple(rng.standard_normal(n) for _ in range(4))
-    polys = [{(1, 2, 0, 0): 2.5, (0, 0, 1, 0): -1.0, (0, 0, 0, 0): 0.75}, {(0, 3, 0, 1): 1e3}, {(0, 0, 0, 0): 1.0}]
     order, parent, var = _monomials(polys)
     index = {k: i for i, k in enumerate(order)}
     ptr = np.cumsum([0] + [len(p) for p in polys]).astype(np.int32)
@@ -172,21 +163,49 @@ def test_polynomial_rows_land_in_the_transforms_polyphase_order(dtype):
     coef = np.array([c for p in polys for c in p.values()])
     width = -(-len(range(0, n, step)) // m)
     out = np.full((len(polys), m, length), np.nan, dtype=dtype)
-    _polyrows.poly_rows(y, n, step, m, width, parent, var, ptr, mono, coef, out)
+    args = [y, n, step, m, width, parent, var, ptr, mono, coef, out]
+    _polyrows.poly_rows(*args)
+    return out, width, args
+
+
+def _poly_expected(poly, y, n, step, m, length):
+    """A row in numpy, double precision: the decimated samples in time order, folded into m components."""
     t = np.arange(0, n, step)
-    for r, p in enumerate(polys):
-        row = sum(c * np.prod([y[v][t] ** e for v, e in enumerate(k)], axis=0) for k, c in p.items())
-        expected = np.zeros(m * length)
-        expected[:t.size] = row  # sample j m + c of the decimated row is component c, column j
-        expected = expected.reshape(length, m).T
-        np.testing.assert_allclose(out[r], expected, rtol=1e-5 if dtype == np.float32 else 1e-13, atol=1e-4)
-    assert np.all(out[2, :, width:] == 0) and out[2, 2, width - 1] == 0  # padding; past the end (500 < 3 x 167)
-    assert out[2, 0, width - 1] == 1.0 and out[2, 1, width - 1] == 1.0  # decimated samples 498, 499
-    with pytest.raises(ValueError, match="inconsistent"):
-        _polyrows.poly_rows(y, n, step, m, length + 1, parent, var, ptr, mono, coef, out)  # width > length
-    with pytest.raises(ValueError, match="inconsistent"):
-        _polyrows.poly_rows(y, 2 * n, step, m, width, parent, var, ptr, mono, coef, out)  # signals too short
-    with pytest.raises(ValueError, match="inconsistent"):
-        _polyrows.poly_rows(y, n, step, m, width, parent, var, ptr, mono + 100, coef, out)  # no such monomial
-    with pytest.raises(ValueError, match="inconsistent"):
-        _polyrows.poly_rows(y, n, step, m, width, parent, var, ptr, mono, coef, out.astype(np.int32))
+    row = sum(c * np.prod([y[v][t] ** e for v, e in enumerate(k)], axis=0) for k, c in poly.items())
+    expected = np.zeros(m * length)
+    expected[:t.size] = row  # sample j m + c of the decimated row is component c, column j
+    return expected.reshape(length, m).T
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_polynomial_rows_land_in_the_transforms_polyphase_order(dtype):
+    """identify/_polyrows.c: rows sum_k c_k y^k of the signals on every step-th sample, component c of a
+    row holding the samples (j m + c) step, zero past the record's end and in the padding, against numpy
+    in double precision (float64 to rounding, float32 to its own); a constant monomial is zero there too
+    (padding, not the constant). Records short and long against the kernel's blocks of 256 columns.
+    Buffers of the wrong type or size, and steps that would overflow, are refused with ValueError."""
+    from identify import _polyrows
+
+    rng = np.random.default_rng(3)
+    polys = [{(1, 2, 0, 0): 2.5, (0, 0, 1, 0): -1.0, (0, 0, 0, 0): 0.75}, {(0, 3, 0, 1): 1e3}, {(0, 0, 0, 0): 1.0},
+             {(2, 1, 1, 1): -0.5, (0, 0, 0, 2): 3.0}]
+    cases = [(999, 2, 3, 180), (5003, 1, 6, 900), (4099, 3, 2, 1000), (1, 1, 1, 4), (257, 1, 1, 300)]
+    for n, step, m, length in cases:  # (5003, 1, 6): 834 columns, four blocks; (999, 2, 3): the last component short
+        y = tuple(rng.standard_normal(n) for _ in range(4))
+        out, width, args = _poly_call(polys, y, n, step, m, length, dtype)
+        for r, p in enumerate(polys):
+            expected = _poly_expected(p, y, n, step, m, length)
+            if dtype == np.float64:
+                np.testing.assert_allclose(out[r], expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
+            else:
+                np.testing.assert_allclose(out[r], expected, rtol=1e-5, atol=1e-5 * np.abs(expected).max())
+        assert np.all(out[2, :, width:] == 0), (n, step, m)  # the padding: zero, not the constant
+    out, width, args = _poly_call(polys, tuple(rng.standard_normal(999) for _ in range(4)), 999, 2, 3, 180, dtype)
+    assert out[2, 2, width - 1] == 0 and out[2, 0, width - 1] == 1.0  # decimated samples 500 (past the end), 498
+    refused = {"width > length": {4: 181}, "signals too short": {1: 2000}, "a step past the record": {2: 2**62},
+               "no such monomial": {8: args[8] + 100}, "int64 indices": {5: args[5].astype(np.int64)},
+               "float32 coefficients": {9: args[9].astype(np.float32)}, "int32 output": {10: args[10].astype(np.int32)}}
+    for why, change in refused.items():
+        call = [change.get(i, a) for i, a in enumerate(args)]
+        with pytest.raises(ValueError):
+            _polyrows.poly_rows(*call)
