@@ -56,6 +56,7 @@ class BudgetChoice:
     refinement: dict             # the winner's refine_free_run info
     candidates: list = field(default_factory=list)  # [{"terms", "screen", "refit"}], best first
     seconds: float = 0.0
+    pool: list = field(default_factory=list)  # the terms it chose from (the selection rule's support)
 
 
 def choose_budget(model: SparseModel, names, support: np.ndarray, max_terms: int, train: NormalEquations,
@@ -121,4 +122,5 @@ def choose_budget(model: SparseModel, names, support: np.ndarray, max_terms: int
     table = [{"terms": [names[j] for j in r[1]], "screen": r[5], "refit": r[0]} for r in results]
     table += [{"terms": [names[j] for j in keep], "screen": cost, "refit": None}
               for cost, keep, _ in screened[max(n_refit, 1):]]
-    return BudgetChoice(best[2], refit, info, table, time.perf_counter() - t0)
+    return BudgetChoice(best[2], refit, info, table, time.perf_counter() - t0,
+                        [names[j] for j in np.flatnonzero(support)])

@@ -400,7 +400,7 @@ class SparseIdentifier:
                                   else f"{self.holdout_fraction:.0%} in interleaved blocks"),
                       "displacement_below_band": self.offset_},
             "refinement": self.refinement_,
-            "budget": None if self.budget_ is None else {"seconds": self.budget_.seconds,
+            "budget": None if self.budget_ is None else {"seconds": self.budget_.seconds, "pool": self.budget_.pool,
                                                          "candidates": self.budget_.candidates[:N_REPORTED]},
             "validation": self.validation_,
             "timings_s": self.timings_,

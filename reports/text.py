@@ -157,32 +157,31 @@ def unsettled_lines(result: dict) -> list[str]:
     return lines
 
 
-def _free_run_budget(result: dict) -> bool:
-    """Whether a free-run budget chose q1_dot's terms: its held-out placements ran the rule without it."""
-    return bool(result.get("budget"))
+def _dropped_by_budget(result: dict) -> set:
+    """q1_dot's terms a free-run budget left out: in the selection rule's support it chose from (its pool),
+    not in the model. Empty without a free-run budget."""
+    budget = result.get("budget") or {}
+    return set(budget.get("pool", ())) - set(result["model"].get("q1_dot", {}))
 
 
 def budget_dropped(result: dict) -> list[tuple[str, float]]:
     """(term, inclusion probability) of q1_dot's terms the selection rule keeps in most held-out placements
     but a free-run budget left out (the placements rerun the rule, not the budget, which runs once)."""
-    if not _free_run_budget(result):
-        return []
     probs = (result.get("inclusion_probability") or {}).get("q1_dot", {})
-    model = result["model"].get("q1_dot", {})
-    return [(term, float(p)) for term, p in probs.items() if term not in model and p >= 0.5]
+    dropped = _dropped_by_budget(result)
+    return [(term, float(p)) for term, p in probs.items() if term in dropped and p >= 0.5]
 
 
 def unsettled_terms(result: dict) -> list[tuple[str, str, bool, float]]:
     """(equation, term, kept, inclusion probability) of every term the selection decided against most of
     its held-out placements: kept with P(kept) < 0.5, or left out with P(kept) >= 0.5 (not a q1_dot term
-    a free-run budget left out: budget_dropped)."""
-    out = []
+    a free-run budget left out of the rule's choice: budget_dropped)."""
+    out, dropped = [], _dropped_by_budget(result)
     for eq, probs in (result.get("inclusion_probability") or {}).items():
         model = result["model"].get(eq, {})
         for term, p in probs.items():
             kept = term in model
-            by_budget = eq == "q1_dot" and _free_run_budget(result)
-            if (kept and p < 0.5) or (not kept and p >= 0.5 and not by_budget):
+            if (kept and p < 0.5) or (not kept and p >= 0.5 and not (eq == "q1_dot" and term in dropped)):
                 out.append((eq, term, kept, float(p)))
     return out
 

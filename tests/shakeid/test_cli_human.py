@@ -270,6 +270,12 @@ def test_a_term_the_free_run_budget_dropped_is_named_as_such(make_run):
     text = summary(res, "sweep.csv")
     assert "left out by the term budget (at most 4 terms, chosen by free-run error): q1*q2^2 (q1_dot, P(kept) 1.00" \
         in text and "unsettled" not in text
+    assert res["budget"]["pool"] and set(res["budget"]["pool"]) >= set(res["model"]["q1_dot"]) | {"q1*q2^2"}
+    # a term the rule itself left out (never in the budget's pool) that most placements keep is still unsettled
+    other = {**res, "inclusion_probability": {**res["inclusion_probability"],
+                                              "q1_dot": {**res["inclusion_probability"]["q1_dot"], "q1^3": 0.6}}}
+    assert "q1^3" not in res["budget"]["pool"]
+    assert ("q1_dot", "q1^3", False, 0.6) in unsettled_terms(other) and "q1^3" not in dict(budget_dropped(other))
     # the equation-error budget's placements run the budget too: nothing to single out there
     assert budget_dropped(SparseIdentifier(max_terms=4).fit(rec).result()) == []
 
