@@ -61,7 +61,8 @@ class FreeRunError:
         self.substeps, self.stride = int(substeps), int(stride)
         # exact between samples (the chain's band-limited input), where the steps read it
         self.u_fine = sig.input_fine(self.substeps, self.stride)
-        self.norms = {s: np.std(self.measured[s][self.rows]) or 1.0 for s in self.signals}
+        self.norms = {s: (np.std(self.measured[s][self.rows]) if self.rows.any() else 0.0) or 1.0
+                      for s in self.signals}
         self.n_rows = max(int(self.rows.sum()), 1)
 
     def residuals(self, model: SparseModel) -> np.ndarray:
@@ -85,14 +86,17 @@ class PooledFreeRunError:
     """The free-run error of models over several recordings of one rig: each recording is simulated on
     its own (its own initial state, input and band: a separate experiment, FreeRunError), and the
     residuals are concatenated, each recording's weighted by its share of the compared rows, so that
-    cost = sum_r n_r cost_r / sum_r n_r: every row counts the same, as the summed normal equations of a
-    joint fit weigh them (identify.joint)."""
+    cost = sum_r n_r cost_r / sum_r n_r. A recording counts by its rows, as in the summed normal
+    equations of a joint fit (identify.joint); within it, as for one record, each signal's error is
+    relative to that recording's own spread of the signal. A recording with no rows to compare is left
+    out."""
 
     def __init__(self, errors: list):
-        self.errors = list(errors)
+        self.errors = [e for e in errors if e.rows.any()]
+        if not self.errors:
+            raise ValueError("no rows to compare in any recording")
         self.n_rows = sum(e.n_rows for e in self.errors)
         self.weights = [np.sqrt(e.n_rows / self.n_rows) for e in self.errors]
-        self.substeps = max(e.substeps for e in self.errors)
 
     def residuals(self, model: SparseModel) -> np.ndarray:
         return np.concatenate([w * e.residuals(model) for w, e in zip(self.weights, self.errors)])

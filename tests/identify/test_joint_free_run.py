@@ -62,6 +62,11 @@ def test_pooled_error_weighs_every_row_the_same(joint_budget, table1_truth):
     assert pooled.cost(model) < 1e-3  # the truth reproduces both motions (1.0: no better than the mean)
     assert pooled.cost(joint_budget.model_) > 3 * pooled.cost(model)
     assert isinstance(free_run_error(sigs[0], rows[0], model=model), FreeRunError)
+    # a recording with no rows to compare is left out of the pool (it had counted as one row of NaN spread)
+    none = [rows[0], np.zeros_like(rows[1])]
+    assert free_run_error(sigs, none, model=model).cost(model) == pytest.approx(alone[0].cost(model), rel=1e-12)
+    with pytest.raises(ValueError, match="no rows"):
+        free_run_error(sigs, [np.zeros_like(r) for r in rows], model=model)
 
 
 def test_pooled_budget_keeps_the_true_terms_among_spurious_ones(joint_budget, table1_truth, true_q1_terms):
@@ -114,6 +119,13 @@ def test_joint_refine_and_budget_refit_on_all_rows(recordings, table1_truth, tru
     for term, c in q1.items():
         assert c == pytest.approx(table1_truth["q1_dot"][term], rel=0.05 if term == WEAK else 0.01), term
     assert ident.refinement_["cost_after"] <= ident.refinement_["cost_before"]
+    # the refit's error is the pool's over both recordings' fit rows, not the first recording's
+    sigs = ident.joint_states_
+    fit_rows = per_record(ident.heldout_rows_, sigs)(np.logical_not)
+    start = ident.training_model_
+    pooled = free_run_error(sigs, fit_rows, model=start).cost(start)
+    assert ident.refinement_["cost_before"] == pytest.approx(pooled, rel=1e-9)
+    assert FreeRunError(sigs[0], fit_rows[0], model=start).cost(start) != pytest.approx(pooled, rel=1e-3)
     assert ident.timings_["refine"] > 0 and ident.result()["status"] == "ok"
     ident = SparseIdentifier(max_terms=4, budget="free-run", budget_refit="all").fit(recordings)
     assert set(ident.model_.equations["q1_dot"]) == true_q1_terms - {WEAK}
