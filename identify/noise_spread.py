@@ -47,14 +47,13 @@ from __future__ import annotations
 import numpy as np
 
 from . import _polyrows
+from .corrected import SIGNALS
 from .gram import scaled_pinv
 from .spectral import polyphase_factor, polyphase_rfft
 
 #: Rows transformed together, times the step (a row at step D is D times shorter): a padded
 #: million-sample record's polyphase buffer stays ~35 MB (single precision, DTYPE; one for all batches).
 BATCH = 8
-#: The signals the score's rows are polynomials of: q1, q2, q1_dot, input.
-N_SIGNALS = 4
 #: Largest sampling step of the score's transforms (decimation).
 MAX_STEP = 8
 #: Precision of the score's rows (their evaluation too, identify/_polyrows.c) and their transforms. A
@@ -110,7 +109,7 @@ def boxcar_spectrum(n: int, nfft: int, kk: int) -> np.ndarray:
 
 
 def _poly_add(p: dict, q: dict, scale: float = 1.0) -> dict:
-    """p + scale q, polynomials as {exponents: coefficient} over the signals (q1, q2, q1_dot, input)."""
+    """p + scale q, polynomials as {exponents: coefficient} over corrected.SIGNALS (q1, q2, q1_dot, input)."""
     out = dict(p)
     for k, c in q.items():
         out[k] = out.get(k, 0.0) + scale * c
@@ -135,25 +134,33 @@ def _poly_derivative(k: tuple, v: int) -> dict:
     return {tuple(lower): float(k[v])}
 
 
-def _monomials(polys: list) -> tuple[list, np.ndarray, np.ndarray]:
-    """Every monomial the polynomials use, with the ones they are made from: (exponents in order, parent,
-    var), monomial i = monomial parent[i] times signal var[i], parent[i] < i, monomial 0 the constant."""
-    wanted = {k for p in polys for k in p}
-    todo, table = list(wanted), {(0,) * N_SIGNALS}
-    while todo:  # the chain of lower monomials down to the constant, each once
+def _lower(k: tuple) -> tuple[tuple, int]:
+    """The monomial y^k is made from: (k less one power of its first signal, that signal)."""
+    v = next(i for i, e in enumerate(k) if e)
+    return tuple(e - (i == v) for i, e in enumerate(k)), v
+
+
+def packed_rows(polys: list) -> tuple:
+    """The polynomials as identify._polyrows.poly_rows reads them: (parent, var, row_ptr, mono, coef).
+    Every monomial they use, with the ones it is made from down to the constant, is listed once by degree:
+    monomial i = monomial parent[i] times signal var[i], parent[i] < i, monomial 0 the constant; row r
+    is sum over k in [row_ptr[r], row_ptr[r + 1]) of coef[k] times monomial mono[k]."""
+    table, todo = {(0,) * len(SIGNALS)}, [k for p in polys for k in p]
+    while todo:
         k = todo.pop()
-        if k in table:
-            continue
-        table.add(k)
-        v = next(i for i, e in enumerate(k) if e)
-        todo.append(tuple(e - (i == v) for i, e in enumerate(k)))
+        if k not in table:
+            table.add(k)
+            todo.append(_lower(k)[0])
     order = sorted(table, key=lambda k: (sum(k), k))
     index = {k: i for i, k in enumerate(order)}
     parent, var = np.zeros(len(order), dtype=np.int32), np.zeros(len(order), dtype=np.int32)
     for i, k in enumerate(order[1:], start=1):
-        v = next(j for j, e in enumerate(k) if e)
-        parent[i], var[i] = index[tuple(e - (j == v) for j, e in enumerate(k))], v
-    return order, parent, var
+        lower, var[i] = _lower(k)
+        parent[i] = index[lower]
+    ptr = np.cumsum([0] + [len(p) for p in polys]).astype(np.int32)
+    mono = np.array([index[k] for p in polys for k in p], dtype=np.int32)
+    coef = np.array([c for p in polys for c in p.values()], dtype=np.float64)
+    return parent, var, ptr, mono, coef
 
 
 class _Score:
@@ -209,12 +216,12 @@ class _Score:
         """Row `job` as a polynomial of the signals: ("theta", a) the kept column a; ("resid",) the residual
         r = target - theta . beta; (v, a) g_v of term a = theta_a slope_v + dtheta_a/dy_v r, with
         slope_v = dtarget/dy_v - sum_j beta_j dtheta_j/dy_v."""
+        if job[0] == "theta":
+            return {self.cols[job[1]]: 1.0}
         resid = {self.target: 1.0}
         for b, k in zip(self.beta, self.cols):
             if b:
                 resid = _poly_add(resid, {k: 1.0}, -float(b))
-        if job[0] == "theta":
-            return {self.cols[job[1]]: 1.0}
         if job[0] == "resid":
             return resid
         v, a = job
@@ -258,20 +265,15 @@ def _transform(scores, y, noise):
             by_step.setdefault(step, []).extend((score, job) for job in jobs)
     chunks = [(step, todo[first:first + BATCH * step]) for step, todo in by_step.items()
               for first in range(0, len(todo), BATCH * step)]
-    # one buffer for every chunk's rows, touched once (a new one per chunk paid its pages each time)
+    # one buffer for every chunk's rows, touched once (a new one per chunk paid its pages each time:
+    # 0.6 ms more for the 13 MB of a million-sample record's step-3 rows)
     scratch = np.empty(max((len(chunk) * (noise.nfft // step) for step, chunk in chunks), default=0), dtype=DTYPE)
     for step, chunk in chunks:
         length = noise.nfft // step
         m = polyphase_factor(length, kk - 1)
         width = -(-len(range(0, n, step)) // m)
-        polys = [score.row(job) for score, job in chunk]
-        order, parent, var = _monomials(polys)
-        index = {k: i for i, k in enumerate(order)}
-        ptr = np.cumsum([0] + [len(p) for p in polys]).astype(np.int32)
-        mono = np.array([index[k] for p in polys for k in p], dtype=np.int32)
-        coef = np.array([c for p in polys for c in p.values()], dtype=np.float64)
         buf = scratch[:len(chunk) * length].reshape(len(chunk), m, length // m)
-        _polyrows.poly_rows(y, n, step, m, width, parent, var, ptr, mono, coef, buf)
+        _polyrows.poly_rows(y, n, step, m, width, *packed_rows([score.row(job) for score, job in chunk]), buf)
         spec = polyphase_rfft(buf, length, kk - 1)
         if step > 1:
             spec *= step

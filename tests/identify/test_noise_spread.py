@@ -154,16 +154,11 @@ def test_noise_variance_is_the_formula_evaluated_directly(noise_fraction, monkey
 
 def _poly_call(polys, y, n, step, m, length, dtype):
     from identify import _polyrows
-    from identify.noise_spread import _monomials
+    from identify.noise_spread import packed_rows
 
-    order, parent, var = _monomials(polys)
-    index = {k: i for i, k in enumerate(order)}
-    ptr = np.cumsum([0] + [len(p) for p in polys]).astype(np.int32)
-    mono = np.array([index[k] for p in polys for k in p], dtype=np.int32)
-    coef = np.array([c for p in polys for c in p.values()])
     width = -(-len(range(0, n, step)) // m)
     out = np.full((len(polys), m, length), np.nan, dtype=dtype)
-    args = [y, n, step, m, width, parent, var, ptr, mono, coef, out]
+    args = [y, n, step, m, width, *packed_rows(polys), out]
     _polyrows.poly_rows(*args)
     return out, width, args
 
