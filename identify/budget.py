@@ -106,8 +106,8 @@ def choose_budget(model: SparseModel, names, support: np.ndarray, max_terms: int
         screened.append((screen(s), keep, s))
     screened.sort(key=lambda t: (t[0], t[1]))
     # 3. refit the best on their free-run error, rank on the held-out rows
-    has_heldout = heldout_rows is not None and any(np.any(h) for h in
-                                                   (heldout_rows if isinstance(sig, (list, tuple)) else [heldout_rows]))
+    several = isinstance(sig, (list, tuple))
+    has_heldout = heldout_rows is not None and any(np.any(h) for h in (heldout_rows if several else [heldout_rows]))
     rank_error = free_run_error(sig, heldout_rows if has_heldout else fit_rows, signals, model=model)
     results = []
     for cost, keep, s in screened[:max(n_refit, 1)]:

@@ -103,7 +103,7 @@ def fit_joint(ident, recordings: list):
                                   + ", ".join(f"{r.source} ({r.layout})" for r in recordings))
     from .identifier import effective_samples, holdout_blocks
 
-    lib = ident.library_ = Library(("q1", "q2"), (sigs[0].input_name,), ident.degree, ident.extra_terms)
+    ident.library_ = Library(("q1", "q2"), (sigs[0].input_name,), ident.degree, ident.extra_terms)
     t0 = time.perf_counter()
     parts = [holdout_blocks(s, ident.holdout_fraction) for s in sigs]
     gram = BlockGram.concatenate([ident._gram(s, edges) for s, (edges, _) in zip(sigs, parts)])

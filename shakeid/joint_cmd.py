@@ -17,6 +17,21 @@ from identify.errors import ShakeidError
 from .argtypes import file_and_samples
 
 
+def _refuse_twice(names: list, cuts: list) -> None:
+    """A recording counted twice would shrink every standard error by sqrt(2): one file named twice (by any
+    path to it) is refused, unless both name disjoint sample ranges of it (FILE[START:STOP]).
+    cuts: (path, (start, stop) or None) per name."""
+    seen: dict = {}
+    for name, (path, rows) in zip(names, cuts):
+        for other, other_rows in seen.get(os.path.realpath(path), []):
+            overlap = rows is None or other_rows is None or (rows[0] < other_rows[1] and other_rows[0] < rows[1])
+            if overlap:
+                what = " (overlapping samples)" if rows and other_rows else ""
+                raise ShakeidError(f"{name}: the same recording as {other}{what}; a joint fit takes each recording "
+                                   "once (twice would count its evidence twice and shrink the standard errors)")
+        seen.setdefault(os.path.realpath(path), []).append((name, rows))
+
+
 def cmd_identify_joint(args, make_identifier, read) -> int:
     """`args.files` (two or more); make_identifier(args), read(args) as the single-file command's."""
     from identify.quality import check_identifiable
@@ -26,20 +41,12 @@ def cmd_identify_joint(args, make_identifier, read) -> int:
     if getattr(args, "chunked", False) or getattr(args, "chunk_samples", None):
         raise ShakeidError("--chunked identifies one recording out of core; a joint fit of several reads them "
                            "into memory (drop --chunked, or identify the files one by one)")
-    seen: dict = {}
-    common = getattr(args, "samples", None)
-    cuts = [file_and_samples(name, common) for name in args.files]  # FILE[START:STOP]: that file's rows only
-    for name, (path, rows) in zip(args.files, cuts):  # a recording counted twice would shrink every SE by sqrt(2)
-        key = os.path.realpath(path)
-        for other, other_rows in seen.get(key, []):
-            if rows is None or other_rows is None or (rows[0] < other_rows[1] and other_rows[0] < rows[1]):
-                raise ShakeidError(f"{name}: the same recording as {other}" + (" (overlapping samples)" if rows and
-                                   other_rows else "") + "; a joint fit takes each recording once (twice would "
-                                   "count its evidence twice and shrink the standard errors)")
-        seen.setdefault(key, []).append((name, rows))
+    cuts = [file_and_samples(name, getattr(args, "samples", None)) for name in args.files]
+    _refuse_twice(args.files, cuts)
     ident = make_identifier(args)  # option errors first, before any file is read
     recs, quality = [], []
-    for path, (args.file, args.samples) in zip(args.files, cuts):
+    for path, (file, samples) in zip(args.files, cuts):
+        args.file, args.samples = file, samples  # what read() reads: FILE[START:STOP] gives each its own rows
         rec = read(args)
         quality.append(check_identifiable(rec, path, args.accept_faulty))
         rec.source = path
