@@ -110,6 +110,11 @@ def test_each_file_can_be_cut_to_its_own_samples(files, capsys):
     assert main(["identify", a, "--samples", "15000", "30000", "--json", "--placements", "0",
                  "--bias-replicates", "0"]) == 0
     assert json.loads(capsys.readouterr().out)["model"] == single["model"]  # the same rows as --samples
+    assert main(["explain", cut, "--json"]) == 0  # explain takes the notation too, as its help says
+    by_name = json.loads(capsys.readouterr().out)
+    assert main(["explain", a, "--samples", "15000", "30000", "--json"]) == 0
+    by_option = json.loads(capsys.readouterr().out)
+    assert by_name["effect"] == by_option["effect"] and by_name["effects"] == by_option["effects"]
     for bad, why in (([f"{a}[0:16000]", cut], "overlapping samples"), ([a, cut], f"{cut}: the same recording as {a}"),
                      ([cut, "--samples", "0", "100"], "samples given twice"), ([f"{a}[5:5]"], "empty sample range")):
         assert main(["identify", *bad]) == 2
