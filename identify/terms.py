@@ -21,6 +21,9 @@ from .errors import ModelError
 _FACTOR = re.compile(r"^(?P<base>\|[A-Za-z_]\w*\||(?:sign|stop|contact)\([A-Za-z_]\w*\)|[A-Za-z_]\w*)"
                      r"(?:\^(?P<pow>\d+))?$")
 _STOP = re.compile(r"^(?:stop|contact)\((?P<state>[A-Za-z_]\w*)\)$")
+#: A feature's kind, in the feature order's pattern: per state q, |q|, sign(q); inputs; per state stop(q),
+#: contact(q) (FeatureSpace.describe).
+FEATURE_KINDS = ("value", "abs", "sign", "input", "stop", "contact")
 
 
 @dataclass(frozen=True)
@@ -99,6 +102,18 @@ class FeatureSpace:
                     counts[s] = counts.get(s, 0) + 1
                 out.append(Term(tuple(sorted(counts.items(), key=lambda fp: self.index[fp[0]]))))
         return out
+
+    def describe(self, name: str) -> tuple[str, str]:
+        """(kind, signal) of a feature, decoded from its place in the feature order: kind is one of
+        FEATURE_KINDS (`q2` -> ("value", "q2"), `|q1|` -> ("abs", "q1"), `zdd` -> ("input", "zdd"),
+        `stop(q2)` -> ("stop", "q2")); what a code generator renders a factor from (identify.export)."""
+        idx, ns, ni = self.index[name], len(self.states), len(self.inputs)
+        if idx < 3 * ns:
+            return FEATURE_KINDS[idx % 3], self.states[idx // 3]
+        if idx < 3 * ns + ni:
+            return "input", self.inputs[idx - 3 * ns]
+        i, kind = divmod(idx - 3 * ns - ni, 2)
+        return FEATURE_KINDS[4 + kind], self.states[i]
 
     def encode(self, terms: list[Term]) -> tuple[list[int], list[int], list[int]]:
         """Flatten terms for the compiled kernel: (term_ptr, factor feature index, factor power)."""
