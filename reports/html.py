@@ -132,6 +132,10 @@ class Page:
     def paragraph(self, text: str, cls: str = "") -> None:
         self.parts.append(f"<p{' class=' + repr(cls) if cls else ''}>{esc(text)}</p>")
 
+    def code(self, text: str, caption: str) -> None:
+        """Source text to copy (the model's LaTeX), preformatted, its caption before it."""
+        self.parts.append(f"<p>{esc(caption)}</p><pre>{esc(text)}</pre>")
+
     def table(self, headers, rows, caption: str) -> None:
         """A table with a numbered caption under it; the first column names the row, numeric cells in the
         others are right-aligned."""

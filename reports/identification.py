@@ -22,6 +22,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
+from identify.export.latex import latex_equations  # noqa: E402
+
 from .html import IDENTIFICATION_DOCUMENTS, IDENTIFICATION_FIGURES, Page, report_folder  # noqa: E402
 from .text import (DESIGN_K3_NOTE, coefficient_rows, coefficient_table, fit_text, mass_text,  # noqa: E402
                    physical_rows, plural, unit)
@@ -195,6 +197,8 @@ def _index_html(out: Path, ident, result: dict) -> str:
                   "q2 the relative displacement (m), zdd the table acceleration (m/s²). " if base else "")
                + "P(kept): the share of random held-out placements"
                + (f" ({n_place})" if n_place else "") + " whose selection kept the term.")
+    page.code(latex_equations(ident.model_), "The model's equations in the paper's notation, LaTeX for a paper "
+              "(amsmath's align; `shakeid export model.json --format latex` writes the same as a file):")
     val = result.get("validation")
     if val:
         page.heading("Validation")

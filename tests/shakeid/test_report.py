@@ -49,6 +49,16 @@ def test_report_files(report_dir):
     assert all(f"src='{f}'" in html for f in FIGURES)
 
 
+def test_the_page_carries_the_models_latex(report_dir):
+    """The equations as the paper writes them, each kept term of q1_dot in its notation, escaped for HTML."""
+    out, ident = report_dir
+    html = (out / "index.html").read_text()
+    pre = re.search(r"<pre>(.*?)</pre>", html, re.S).group(1)
+    assert pre.startswith(r"\begin{align}") and r"\dot{q}_{2} &amp;= q_{1}" in pre
+    for piece in (r"\, q_{1}", r"\, q_{2}", r"\, q_{2}^{3}", r"\, q_{1} q_{2}^{2}", r"\, \ddot{z}"):
+        assert piece in pre, piece
+
+
 def test_coefficient_table_has_table1_layout(report_dir):
     out, ident = report_dir
     table = (out / "coefficients.md").read_text()
@@ -72,7 +82,8 @@ def test_index_is_tables_and_captions_not_json(report_dir):
     out, ident = report_dir
     html = (out / "index.html").read_text()
     result = ident.result()
-    assert "<pre>" not in html and "{&quot;" not in html and '{"' not in html  # no JSON dumped on the page
+    # no JSON dumped on the page; its one preformatted block is the model's LaTeX (test_the_page_carries_...)
+    assert html.count("<pre>") == 1 and "{&quot;" not in html and '{"' not in html
     assert html.count("<figcaption>") == len(FIGURES) and html.count("<caption>") >= 4
     # the validation as a table: one row per signal, the held-out fit as model.json has it
     rows = _cells(html, "Free-run simulation of the model")
