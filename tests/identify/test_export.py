@@ -130,21 +130,25 @@ def test_a_long_communication_step_is_integrated_exactly_for_a_linear_model(tmp_
     assert np.all(err < 1e-7)  # RK4 at h omega <= 0.013: measured ~1e-11
 
 
-def test_fmu_input_derivatives_give_a_linearly_interpolated_input(table1_fmu, rng):
-    """With the input's slope set each step (canInterpolateInputs), the FMU sees the input shakeid's free run
-    interpolates linearly: the same run. FMPy's low-level interface, forward slopes."""
+def open_slave(path, name="m"):
     from fmpy import extract
     from fmpy.fmi2 import FMU2Slave
 
-    md = read_model_description(str(table1_fmu))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(table1_fmu)),
-                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName="table1")
-    u = base_excitation(rng, 3001)
+    md = read_model_description(str(path))
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName=name)
     fmu.instantiate()
     fmu.setupExperiment(startTime=0.0)
     fmu.enterInitializationMode()
     fmu.exitInitializationMode()
+    return fmu, {v.name: v.valueReference for v in md.modelVariables}
+
+
+def test_fmu_input_derivatives_give_a_linearly_interpolated_input(table1_fmu, rng):
+    """With the input's slope set each step (canInterpolateInputs), the FMU sees the input shakeid's free run
+    interpolates linearly: the same run. FMPy's low-level interface, forward slopes."""
+    fmu, vr = open_slave(table1_fmu)
+    u = base_excitation(rng, 3001)
     out = [fmu.getReal([vr["q1"], vr["q2"]])]
     for k in range(u.size - 1):
         fmu.setReal([vr["zdd"]], [u[k]])
@@ -183,6 +187,44 @@ def test_table1_fmu_runs_in_a_second_importer(table1_fmu, rng):
     cosim = np.array(out, dtype=float)
     assert np.all(relative_rms(cosim, run_fmu(table1_fmu, u, DT_S)) < 1e-12)  # one binary, two loaders
     assert np.all(relative_rms(cosim, held_input_free_run(TABLE1, DT_S, u)) < 1e-4)
+
+
+def test_fmu_state_is_saved_and_restored(table1_fmu, rng):
+    """fmi2GetFMUstate / fmi2SetFMUstate (canGetAndSetFMUstate): steps after a restore repeat to the bit."""
+    fmu, vr = open_slave(table1_fmu)
+    u = base_excitation(rng, 600)
+
+    def steps(k0, k1):
+        out = []
+        for k in range(k0, k1):
+            fmu.setReal([vr["zdd"]], [u[k]])
+            fmu.doStep(k * DT_S, DT_S)
+            out.append(fmu.getReal([vr["q1"], vr["q2"]]))
+        return np.array(out)
+
+    steps(0, 300)
+    saved = fmu.getFMUstate()
+    first = steps(300, 600)
+    fmu.setFMUstate(saved)
+    again = steps(300, 600)
+    fmu.freeFMUstate(saved)
+    fmu.terminate()
+    fmu.freeInstance()
+    assert np.array_equal(first, again) and np.abs(first).max() > 0
+
+
+def test_a_diverging_model_fails_the_step_saying_so(tmp_path, capfd):
+    """Negative damping: the state grows past 1e12 and fmi2DoStep returns fmi2Error with a logged reason."""
+    from fmpy.fmi1 import FMICallException
+
+    model = SparseModel({"q1_dot": {"q1": 400.0, "q2": -100.0, "zdd": -1.0}, "q2_dot": {"q1": 1.0}})
+    fmu, vr = open_slave(export_model(model, "fmu", tmp_path / "unstable.fmu"))
+    fmu.setReal([vr["zdd"]], [1.0])
+    with pytest.raises(FMICallException, match="fmi2DoStep"):
+        for k in range(1000):
+            fmu.doStep(k * 0.1, 0.1)
+    fmu.freeInstance()
+    assert "state q1 diverged (left +-1e12 or not finite) at t = " in capfd.readouterr().out  # FMPy's logger
 
 
 def compile_c(source, tmp_path, driver):
