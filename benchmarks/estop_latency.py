@@ -1,6 +1,7 @@
 """Emergency stop under load, end to end: HTTP press -> web server -> rig controller -> PLC.
 
-    python benchmarks/estop_latency.py [--presses 20] [--upload-mb 200] [--pollers 50]
+    python benchmarks/estop_latency.py [--presses 20] [--upload-mb 200] [--pollers 50] [--viewers 200]
+                                       [--stalled 10] [--busy 0]
 
 Real processes on loopback: `shakeid sim` (the PLC on Modbus TCP, 10x), `shakeid serve --config` (web
 server + its rig controller child). Each press: start a sweep, wait until the PLC runs, POST
@@ -9,7 +10,13 @@ polling the PLC's state back-to-back (~0.1-0.5 ms a read) sees ESTOP, so it incl
 Run twice in one process: idle (the anchor), then under load (the issue's target: p99 <= 100 ms):
 - uploads: `curl --data-binary` of a CSV of --upload-mb, one after another (each checked and stored),
 - --pollers clients (a separate process) polling GET /api/rig and /api/sweeps back to back,
-- identification jobs of a 60 s sweep queued one after another (a worker busy all the time).
+- identification jobs of a 60 s sweep queued one after another (a worker busy all the time),
+- --viewers clients (another process, asyncio sockets) following the running sweep's live stream
+  (GET /api/recordings/{id}/live, the viewer token, every stream read to its end), --stalled of them
+  connected but never reading (slow readers),
+- --busy processes spinning (`while True: pass`) beside it all, for the run with a busy machine.
+The web server's RSS is read before the load (baseline), during it (peak) and once the load has ended
+and its connections are closed (after; target: within 10 % of the baseline).
 Also: the web server's RSS during one upload of the big CSV (target <= baseline + 2x the file) and the
 largest interval between heartbeats of the sweeps under load (the watchdog must exceed it).
 """
@@ -35,6 +42,7 @@ from sim.server import free_port  # noqa: E402
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 TOKEN = "benchmark-operator-token"
+VIEWER_TOKEN = "benchmark-viewer-token"
 SWEEP = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 300.0, "amplitude_mm": 1.3, "settle_s": 1.0}
 PROBE = """
 import signal, sys, time
@@ -54,6 +62,65 @@ for k in range(n):
     threading.Thread(target=poll, args=(k,), daemon=True).start()
 threading.Event().wait()
 """
+
+VIEWERS = """
+import asyncio, json, socket, sys
+host, port, token, n, stalled = sys.argv[1], int(sys.argv[2]), sys.argv[3], int(sys.argv[4]), int(sys.argv[5])
+state = {"rec": None, "events": 0, "streams": 0}
+
+async def get_json(path):
+    r, w = await asyncio.open_connection(host, port)
+    w.write(f"GET {path} HTTP/1.1\\r\\nHost: x\\r\\nAuthorization: Bearer {token}\\r\\nConnection: close\\r\\n\\r\\n".encode())
+    body = (await r.read()).split(b"\\r\\n\\r\\n", 1)[1]
+    w.close()
+    return json.loads(body)
+
+async def watch():  # the running sweep's recording: what viewers follow
+    while True:
+        try:
+            sweeps = await get_json("/api/sweeps?limit=1")
+            state["rec"] = sweeps[0]["recording_id"] if sweeps and sweeps[0]["state"] == "running" else None
+        except Exception:
+            state["rec"] = None
+        await asyncio.sleep(0.2)
+
+async def viewer(k):
+    done = None
+    while True:
+        rec = state["rec"]
+        if rec is None or rec == done:
+            await asyncio.sleep(0.1)
+            continue
+        sock = socket.socket()
+        if k < stalled:  # a slow reader: a small window, and never a read
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        sock.setblocking(False)
+        try:
+            await asyncio.get_running_loop().sock_connect(sock, (host, port))
+            r, w = await asyncio.open_connection(sock=sock)
+            w.write(f"GET /api/recordings/{rec}/live?access_token={token} HTTP/1.1\\r\\nHost: x\\r\\n\\r\\n".encode())
+            state["streams"] += 1
+            if k < stalled:
+                while state["rec"] == rec:
+                    await asyncio.sleep(0.2)
+            else:
+                while (line := await r.readline()):
+                    if line.startswith(b"event: "):
+                        state["events"] += 1
+                    if line.startswith(b"event: end"):
+                        break
+            w.close()
+        except OSError:
+            await asyncio.sleep(0.2)
+        done = rec
+
+async def main():
+    asyncio.get_running_loop().create_task(watch())
+    await asyncio.gather(*(viewer(k) for k in range(n)))
+
+asyncio.run(main())
+"""
+SPIN = "while True: pass"
 
 
 def write_csv(path: Path, megabytes: float) -> None:
@@ -120,7 +187,11 @@ def main() -> int:
     ap.add_argument("--presses", type=int, default=20)
     ap.add_argument("--upload-mb", type=float, default=200.0)
     ap.add_argument("--pollers", type=int, default=50)
+    ap.add_argument("--viewers", type=int, default=200, help="live-stream clients during the load")
+    ap.add_argument("--stalled", type=int, default=10, help="of the viewers, how many never read")
+    ap.add_argument("--busy", type=int, default=0, help="spinning processes beside the whole run")
     args = ap.parse_args()
+    spinners = [subprocess.Popen([sys.executable, "-c", SPIN]) for _ in range(args.busy)]
     work = Path(tempfile.mkdtemp(prefix="shakeid-estop-"))
     big = work / "big.csv"
     write_csv(big, args.upload_mb)
@@ -134,10 +205,10 @@ def main() -> int:
     procs = [subprocess.Popen(["chrt", "-f", "10", SHAKEID, "sim", "--config", str(cfg)], stdout=subprocess.DEVNULL)]
     port = free_port()
     url = f"http://127.0.0.1:{port}"
-    env = {**os.environ, "SHAKEID_TOKENS": f"{TOKEN}:operator", "SHAKEID_MAX_UPLOAD_MB": str(4 * args.upload_mb)}
+    env = {**os.environ, "SHAKEID_TOKENS": f"{TOKEN}:operator,{VIEWER_TOKEN}:viewer", "SHAKEID_MAX_UPLOAD_MB": str(4 * args.upload_mb)}
     serve = subprocess.Popen([SHAKEID, "serve", "--config", str(cfg), "--data-dir", str(work / "data"), "--port",
                               str(port)], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    procs.append(serve)
+    procs += [serve, *spinners]
     headers = {"Authorization": f"Bearer {TOKEN}"}
     try:
         for _ in range(600):
@@ -150,7 +221,8 @@ def main() -> int:
         client = httpx.Client(base_url=url, headers=headers, timeout=60)
         plc = ModbusPLC("127.0.0.1", modbus)
         print(f"shakeid serve (rig controller as a child) + shakeid sim at 10x; {args.presses} presses each; "
-              f"{os.cpu_count()} cores")
+              f"{os.cpu_count()} cores; {args.busy} spinning process(es) beside; load average "
+              f"{os.getloadavg()[0]:.1f}")
 
         base_rss = rss_mb(serve.pid)
         peak = {"rss": base_rss}
@@ -169,9 +241,18 @@ def main() -> int:
         print(f"idle        press->response {stats(idle[0])}   press->PLC {stats(idle[1])}")
 
         stop = threading.Event()
+        rss_before = rss_mb(serve.pid)
         load = [subprocess.Popen([sys.executable, "-c", POLLER, url, TOKEN, str(args.pollers)],
-                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL),
+                subprocess.Popen([sys.executable, "-c", VIEWERS, "127.0.0.1", str(port), VIEWER_TOKEN,
+                                  str(args.viewers), str(args.stalled)])]
         procs += load
+        rss_peak = {"mb": rss_before}
+
+        def sample_rss():
+            while not stop.is_set():
+                rss_peak["mb"] = max(rss_peak["mb"], rss_mb(serve.pid))
+                time.sleep(0.1)
 
         def uploads():
             while not stop.is_set():
@@ -191,17 +272,24 @@ def main() -> int:
         # notes how late it wakes; a stall it sees is the machine's (the host, the VM), not this program's
         prio = ["chrt", "-f", "10"] if os.geteuid() == 0 and subprocess.run(["which", "chrt"], capture_output=True).returncode == 0 else []
         probe = subprocess.Popen([*prio, sys.executable, "-c", PROBE], stdout=subprocess.PIPE, text=True)
-        threads = [threading.Thread(target=uploads, daemon=True), threading.Thread(target=identifications, daemon=True)]
+        threads = [threading.Thread(target=f, daemon=True) for f in (uploads, identifications, sample_rss)]
         for t in threads:
             t.start()
         time.sleep(3)  # let the load build up: an upload in flight, pollers running, a job in the worker
         loaded = presses(client, plc, args.presses)
         stop.set()
+        for p in load:
+            p.terminate()
+            p.wait(20)
+        for t in threads:
+            t.join(120)  # the upload in flight ends, the job poller stops
+        time.sleep(5)  # the server notices the closed streams
+        rss_after = rss_mb(serve.pid)
         probe.terminate()
         late, wakes = probe.communicate(timeout=10)[0].split()
         print(f"under load  press->response {stats(loaded[0])}   press->PLC {stats(loaded[1])}   (target p99 <= 100 ms)")
-        print(f"            load: {args.pollers} pollers, {size_mb:.0f} MB uploads back to back, identification jobs "
-              f"back to back; anchor before the controller process: 503 after 6-17 s")
+        print(f"            load: {args.viewers} live viewers ({args.stalled} never reading), {args.pollers} pollers, "
+              f"{size_mb:.0f} MB uploads back to back, identification jobs back to back")
         print(f"            the machine: a {'real-time ' if prio else ''}process sleeping 10 ms at a time woke up to "
               f"{1e3 * float(late):.1f} ms late ({wakes} wake-ups)")
         beats = [client.get(f"/api/recordings/{client.get(f'/api/sweeps/{s}').json()['recording_id']}").json()["info"]
@@ -210,7 +298,10 @@ def main() -> int:
         p99 = max(b.get("heartbeat_p99_s", 0) for b in beats)
         write = max(b.get("heartbeat_write_max_s", 0) for b in beats)
         print(f"heartbeat intervals under load (nominal 50 ms): worst p99 {1e3 * p99:.1f} ms, largest {1e3 * worst:.1f} ms "
-              f"over {len(beats)} sweeps (of which the PLC's answer to one beat: at most {1e3 * write:.1f} ms)")
+              f"over {len(beats)} sweeps (of which the PLC's answer to one beat: at most {1e3 * write:.1f} ms)"
+              f"   (target p99 <= 60 ms)")
+        print(f"web server RSS: before the load {rss_before:.0f} MB, peak {rss_peak['mb']:.0f} MB, 5 s after it "
+              f"{rss_after:.0f} MB ({100 * (rss_after / rss_before - 1):+.1f} %; target within 10 %)")
         plc.close()
     finally:
         for p in reversed(procs):
