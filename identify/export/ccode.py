@@ -112,18 +112,20 @@ def c_source(model: SparseModel, title: str) -> str:
 
 
 def _rhs_function(model: SparseModel) -> list[str]:
-    out = ["SHAKEID_API void shakeid_rhs(const double *coef, const double *q, const double *u, double *dqdt) {"]
-    out += [f"    const double {s} = q[{i}];" for i, s in enumerate(model.states)]
-    out += [f"    const double {s} = u[{i}];" for i, s in enumerate(model.inputs)]
+    """shakeid_rhs: its arguments prefixed shakeid_ (a signal may be named u or q), the signals as locals."""
+    out = ["SHAKEID_API void shakeid_rhs(const double *shakeid_coef, const double *shakeid_q, const double *shakeid_u,",
+           "                             double *shakeid_dqdt) {"]
+    out += [f"    const double {s} = shakeid_q[{i}];" for i, s in enumerate(model.states)]
+    out += [f"    const double {s} = shakeid_u[{i}];" for i, s in enumerate(model.inputs)]
     out += [f"    (void){s};" for s in model.states + model.inputs]  # a signal no term uses is no warning
     k = 0
     for e, (eq, terms) in enumerate(model.equations.items()):
         parts = []
         for t in terms:
-            parts.append(f"coef[{k}] * {render.C.term(model.space, model.space.parse(t))}")
+            parts.append(f"shakeid_coef[{k}] * {render.C.term(model.space, model.space.parse(t))}")
             k += 1
-        out.append(f"    dqdt[{e}] = " + ("\n        + ".join(parts) if parts else "0.0") + f"; /* {eq} */")
-    out += ["    (void)coef;", "}", ""]
+        out.append(f"    shakeid_dqdt[{e}] = " + ("\n        + ".join(parts) if parts else "0.0") + f"; /* {eq} */")
+    out += ["    (void)shakeid_coef;", "}", ""]
     return out
 
 

@@ -33,11 +33,11 @@ def python_source(model: SparseModel, title: str) -> str:
               "    q = np.asarray(q, dtype=float)",
               *(f"    {s} = q[..., {i}]" for i, s in enumerate(states)),
               *(f"    {s} = np.asarray({s}, dtype=float)" for s in inputs),
-              f"    zero = np.zeros(np.broadcast_shapes(q.shape[:-1], {', '.join(f'np.shape({s})' for s in inputs)}))",
-              "    c = COEFFICIENTS", "    return np.stack(["]
+              f"    _zero = np.zeros(np.broadcast_shapes(q.shape[:-1], {', '.join(f'np.shape({s})' for s in inputs)}))",
+              "    _c = COEFFICIENTS", "    return np.stack(["]
     for eq, terms in model.equations.items():
-        parts = [f"c[{eq!r}][{t!r}] * {render.NUMPY.term(model.space, model.space.parse(t))}" for t in terms]
-        lines.append("        zero" + "".join(f"\n        + {p}" for p in parts) + ",")
+        parts = [f"_c[{eq!r}][{t!r}] * {render.NUMPY.term(model.space, model.space.parse(t))}" for t in terms]
+        lines.append("        _zero" + "".join(f"\n        + {p}" for p in parts) + ",")
     lines += ["    ], axis=-1)", "", ""]
     lines += _SIMULATE.format(args=args, first=inputs[0], n_states=len(states),
                               columns=", ".join(f"np.asarray({s}, dtype=float)" for s in inputs)).splitlines()
@@ -47,22 +47,22 @@ def python_source(model: SparseModel, title: str) -> str:
 _SIMULATE = '''def simulate({args}, dt, q0=None, substeps=1):
     """States (n, {n_states}) at the input's n samples (spacing dt, s) from q0 (default rest), RK4 with `substeps`
     steps per sample; the input between samples linearly interpolated."""
-    u = np.stack([{columns}], axis=-1)
-    n = u.shape[0]
-    h = dt / substeps
-    q = np.zeros({n_states}) if q0 is None else np.array(q0, dtype=float)
-    out = np.empty((n, {n_states}))
-    out[0] = q
-    for k in range(n - 1):
-        for s in range(substeps):
-            ua = u[k] + (u[k + 1] - u[k]) * (s / substeps)
-            ub = u[k] + (u[k + 1] - u[k]) * ((s + 0.5) / substeps)
-            uc = u[k] + (u[k + 1] - u[k]) * ((s + 1) / substeps)
-            k1 = rhs(q, *ua)
-            k2 = rhs(q + 0.5 * h * k1, *ub)
-            k3 = rhs(q + 0.5 * h * k2, *ub)
-            k4 = rhs(q + h * k3, *uc)
-            q = q + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        out[k + 1] = q
-    return out
+    _u = np.stack([{columns}], axis=-1)
+    _h = dt / substeps
+    _x = np.zeros({n_states}) if q0 is None else np.array(q0, dtype=float)
+    _out = np.empty((_u.shape[0], {n_states}))
+    _out[0] = _x
+    for _k in range(_u.shape[0] - 1):
+        _du = _u[_k + 1] - _u[_k]
+        for _s in range(substeps):
+            _ua = _u[_k] + _du * (_s / substeps)
+            _ub = _u[_k] + _du * ((_s + 0.5) / substeps)
+            _uc = _u[_k] + _du * ((_s + 1) / substeps)
+            _k1 = rhs(_x, *_ua)
+            _k2 = rhs(_x + 0.5 * _h * _k1, *_ub)
+            _k3 = rhs(_x + 0.5 * _h * _k2, *_ub)
+            _k4 = rhs(_x + _h * _k3, *_uc)
+            _x = _x + _h / 6.0 * (_k1 + 2.0 * _k2 + 2.0 * _k3 + _k4)
+        _out[_k + 1] = _x
+    return _out
 '''

@@ -21,7 +21,8 @@ _C_KEYWORDS = frozenset(
     "auto break case char const continue default do double else enum extern float for goto if inline int long "
     "register restrict return short signed sizeof static struct switch typedef union unsigned void volatile while "
     "fabs copysign".split())
-_PY_RESERVED = frozenset("np rhs simulate q x u h COEFFICIENTS TRAVEL STATES INPUTS".split())
+#: names the Python module uses beside the signals (rhs's q; simulate's dt, q0, substeps; its module names)
+_PY_RESERVED = frozenset("np rhs simulate q dt q0 substeps COEFFICIENTS TRAVEL STATES INPUTS".split())
 
 
 class Syntax:

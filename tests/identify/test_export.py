@@ -23,6 +23,9 @@ ALL_KINDS = SparseModel({"q1_dot": {"1": 0.3, "sign(q1)": -0.2, "q1*|q1|": 4.0, 
                                     "q1^2*q2^2*zdd": 2.0, "zdd": -1.0, "stop(q2)": -5e5, "q1*contact(q2)": -30.0,
                                     "sign(q2)^2*q1": -1.5},
                          "q2_dot": {"q1": 1.0, "q2^2": 5.0}}, travel={"q2": 0.02})
+#: the force layout's model (Silverbox-like): input u, a constant, no rig units
+FORCE = SparseModel({"q1_dot": {"q1": -2.0, "q2": -1e4, "q2^3": -3e5, "u": 2.5, "1": 0.01}, "q2_dot": {"q1": 1.0}},
+                    inputs=("u",))
 DT_S = 1e-3  # the communication step the brief asks for
 F_BASE_HZ = 5.0
 
@@ -90,6 +93,14 @@ def test_table1_fmu_validates_and_matches_the_free_run(table1_fmu, rng):
     print(f"FMU (held input, 1 ms steps) vs shakeid's free run: relative RMS q1 {err[0]:.2e}, q2 {err[1]:.2e}")
     # measured 7e-8 to 9e-8: the FMU's 10 RK4 steps per 1 ms against the one step shakeid chooses (h omega <= 0.065)
     assert np.all(err < 1e-4)
+
+
+def test_a_force_layout_fmu_is_valid_and_its_input_is_u(tmp_path):
+    path = export_model(FORCE, "fmu", tmp_path / "silverbox.fmu")
+    assert validate_fmu(str(path)) == []
+    md = read_model_description(str(path))
+    assert [v.name for v in md.modelVariables if v.causality == "input"] == ["u"]
+    assert all(v.unit is None for v in md.modelVariables if v.name in ("q1", "q2", "u"))  # volts, not the rig's m
 
 
 def test_fmu_coefficients_and_start_values_are_tunable(table1_fmu, rng):
@@ -295,7 +306,7 @@ def random_rows(model, rng, n=2000):
     return np.column_stack([rng.uniform(-0.5, 0.5, n), rng.uniform(-0.03, 0.03, n), rng.uniform(-20, 20, n)])
 
 
-@pytest.mark.parametrize("model", [TABLE1, ALL_KINDS], ids=["table1", "all-kinds"])
+@pytest.mark.parametrize("model", [TABLE1, ALL_KINDS, FORCE], ids=["table1", "all-kinds", "force"])
 def test_c_right_hand_side_is_the_models(model, tmp_path, rng):
     src = export_model(model, "c", tmp_path / "m.c")
     exe = compile_c(src, tmp_path, DRIVER)
@@ -314,7 +325,7 @@ def import_module(path):
     return mod
 
 
-@pytest.mark.parametrize("model", [TABLE1, ALL_KINDS], ids=["table1", "all-kinds"])
+@pytest.mark.parametrize("model", [TABLE1, ALL_KINDS, FORCE], ids=["table1", "all-kinds", "force"])
 def test_python_export_rhs_is_the_models(model, tmp_path, rng):
     mod = import_module(export_model(model, "python", tmp_path / "m.py"))
     rows = random_rows(model, rng)
