@@ -32,6 +32,19 @@ CREATE TABLE IF NOT EXISTS campaigns (
     id TEXT PRIMARY KEY, created REAL, updated REAL, name TEXT, state TEXT, reason TEXT, operator TEXT,
     plan TEXT, sweeps TEXT, progress TEXT, recording_ids TEXT);
 """
+#: the lists' and lookups' indices (the dashboard pages through months of recordings; every recording's
+#: latest job is found by recording and kind)
+INDICES = """
+CREATE INDEX IF NOT EXISTS recordings_by_created ON recordings (created);
+CREATE INDEX IF NOT EXISTS recordings_by_status ON recordings (status, created);
+CREATE INDEX IF NOT EXISTS recordings_by_origin ON recordings (origin, created);
+CREATE INDEX IF NOT EXISTS sweeps_by_created ON sweeps (created);
+CREATE INDEX IF NOT EXISTS jobs_by_recording ON jobs (recording_id, kind, created);
+CREATE INDEX IF NOT EXISTS jobs_by_state ON jobs (state, created);
+CREATE INDEX IF NOT EXISTS campaigns_by_created ON campaigns (created);
+"""
+#: columns added after the first release: (table, column, type); added to an older catalog when opened
+ADDED_COLUMNS = (("recordings", "archived", "REAL"),)  # archived: when an operator archived it (None: not)
 #: columns stored as JSON text, per table (a name can mean a number in one table and JSON in another)
 JSON_FIELDS = {"recordings": {"info"}, "sweeps": {"request"}, "jobs": {"options"},
                "campaigns": {"plan", "sweeps", "progress", "recording_ids"}}
@@ -52,7 +65,15 @@ class Catalog:
         self.db.row_factory = sqlite3.Row
         self.db.execute("PRAGMA journal_mode=WAL")
         self.db.executescript(SCHEMA)
+        for table, column, kind in ADDED_COLUMNS:
+            if column not in {r[1] for r in self.db.execute(f"PRAGMA table_info({table})")}:
+                try:
+                    self.db.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
+                except sqlite3.OperationalError:  # the other process (web server, controller) added it first
+                    pass
+        self.db.executescript(INDICES)
         self.lock = threading.Lock()
+        self.queries = NamedQueries(self)
 
     def close(self) -> None:
         with self.lock:
@@ -129,3 +150,74 @@ class Catalog:
                         error="the service stopped during the sweep (the PLC watchdog stopped the table)")
             notes.append(f"sweep {sweep['id']}: marked aborted")
         return notes
+
+
+#: the dashboard's page of recordings: each with its sweep and its latest identify and explain job, in one
+#: statement (the jobs found through jobs_by_recording); {where} is made by NamedQueries.recordings_where
+RECORDINGS_PAGE = """
+SELECT r.id, r.created, r.origin, r.filename, r.status, r.sweep_id, r.info, r.archived,
+       s.state AS sweep_state, s.progress AS sweep_progress, s.error AS sweep_error, s.request AS sweep_request,
+       s.operator AS sweep_operator,
+       ji.id AS identify_id, ji.state AS identify_state, ji.error AS identify_error, ji.updated AS identify_updated,
+       je.id AS explain_id, je.state AS explain_state, je.error AS explain_error, je.updated AS explain_updated
+FROM recordings r
+LEFT JOIN sweeps s ON s.id = r.sweep_id
+LEFT JOIN jobs ji ON ji.id = (SELECT id FROM jobs WHERE recording_id = r.id AND kind = 'identify'
+                              ORDER BY created DESC LIMIT 1)
+LEFT JOIN jobs je ON je.id = (SELECT id FROM jobs WHERE recording_id = r.id AND kind = 'explain'
+                              ORDER BY created DESC LIMIT 1)
+WHERE {where} ORDER BY r.created DESC LIMIT ? OFFSET ?
+"""
+RECORDINGS_COUNT = "SELECT COUNT(*) FROM recordings r LEFT JOIN sweeps s ON s.id = r.sweep_id WHERE {where}"
+#: the recordings of a campaign: every sweep it started (aborted ones too), from its `sweeps` JSON
+CAMPAIGN_RECORDINGS = ("r.id IN (SELECT json_extract(c.value, '$.recording_id') FROM campaigns, "
+                       "json_each(campaigns.sweeps) AS c WHERE campaigns.id = ?)")
+#: what the dashboard's search looks in: id, file name, the sweep's note, who started or uploaded it
+SEARCHED = ("r.id", "r.filename", "json_extract(r.info, '$.sweep.note')", "s.operator",
+            "json_extract(r.info, '$.uploaded_by')")
+
+
+class NamedQueries:
+    """The catalog's composite queries, each one SQL statement (no query per listed row)."""
+
+    def __init__(self, catalog: Catalog):
+        self.catalog = catalog
+
+    @staticmethod
+    def recordings_where(since: float | None = None, until: float | None = None, origin: str | None = None,
+                         status: str | None = None, campaign: str | None = None, search: str | None = None,
+                         archived: bool = False) -> tuple[str, tuple]:
+        """The filters as a WHERE clause and its arguments (values always as parameters)."""
+        clauses, args = ["r.archived IS NOT NULL" if archived else "r.archived IS NULL"], []
+        for sql, value in (("r.created >= ?", since), ("r.created < ?", until), ("r.origin = ?", origin),
+                           ("r.status = ?", status), (CAMPAIGN_RECORDINGS, campaign)):
+            if value is not None:
+                clauses.append(sql)
+                args.append(value)
+        if search:
+            pattern = "%" + search.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_") + "%"
+            clauses.append("(" + " OR ".join(f"{col} LIKE ? ESCAPE '\\'" for col in SEARCHED) + ")")
+            args += [pattern] * len(SEARCHED)
+        return " AND ".join(clauses), tuple(args)
+
+    def recordings_page(self, offset: int = 0, limit: int = 50, **filters) -> tuple[list[dict], int]:
+        """A page of recordings, newest first, with their sweep and latest jobs; and how many match."""
+        where, args = self.recordings_where(**filters)
+        cat = self.catalog
+        with cat.lock:
+            total = int(cat.db.execute(RECORDINGS_COUNT.format(where=where), args).fetchone()[0])
+            rows = cat.db.execute(RECORDINGS_PAGE.format(where=where), (*args, limit, offset)).fetchall()
+        return [_page_row(dict(r)) for r in rows], total
+
+
+def _page_row(row: dict) -> dict:
+    """A RECORDINGS_PAGE row as the dashboard shows a recording: its sweep and its jobs nested."""
+    rec = {k: row[k] for k in ("id", "created", "origin", "filename", "status", "sweep_id", "archived")}
+    rec["info"] = json.loads(row["info"]) if row["info"] else {}
+    rec["sweep"] = None if row["sweep_state"] is None else {
+        "state": row["sweep_state"], "progress": row["sweep_progress"], "error": row["sweep_error"],
+        "request": json.loads(row["sweep_request"]) if row["sweep_request"] else {}, "operator": row["sweep_operator"]}
+    rec["jobs"] = {kind: {"state": "none"} if row[f"{kind}_id"] is None else
+                   {"state": row[f"{kind}_state"], "id": row[f"{kind}_id"], "error": row[f"{kind}_error"],
+                    "updated": row[f"{kind}_updated"]} for kind in ("identify", "explain")}
+    return rec

@@ -1,0 +1,46 @@
+"""Security headers on every response: a Content-Security-Policy, no framing, no type sniffing.
+
+A pure ASGI middleware (it only adds headers to the response's start message), so streamed responses
+(the live view's server-sent events, file downloads) pass through unbuffered. A route that needs another
+policy (the interactive API docs, a report page) sets its own Content-Security-Policy header; the
+middleware never overrides one.
+"""
+from __future__ import annotations
+
+from starlette.datastructures import MutableHeaders
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+#: the dashboard's policy: its own scripts and styles only, figures as blob: URLs (fetched with the token
+#: in a header), never inside a frame (frame-ancestors; X-Frame-Options for browsers without CSP 2)
+DASHBOARD_CSP = ("default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' blob: data:; "
+                 "connect-src 'self'; object-src 'none'; base-uri 'none'; form-action 'self'; "
+                 "frame-ancestors 'none'")
+#: FastAPI's /docs and /redoc load their script and style from a CDN and start with an inline script
+DOCS_CSP = ("default-src 'self'; script-src 'self' 'unsafe-inline' https://cdn.jsdelivr.net; "
+            "style-src 'self' 'unsafe-inline' https://cdn.jsdelivr.net; img-src 'self' data: https:; "
+            "worker-src blob:; object-src 'none'; base-uri 'none'; frame-ancestors 'none'")
+DOCS_PATHS = ("/docs", "/redoc")
+#: set on every response (a route's own value wins)
+HEADERS = {"X-Frame-Options": "DENY", "X-Content-Type-Options": "nosniff", "Referrer-Policy": "no-referrer"}
+
+
+class SecurityHeaders:
+    """app = SecurityHeaders(app), or `app.add_middleware(SecurityHeaders)`."""
+
+    def __init__(self, app: ASGIApp):
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        csp = DOCS_CSP if scope.get("path", "").startswith(DOCS_PATHS) else DASHBOARD_CSP
+
+        async def send_with_headers(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                headers = MutableHeaders(scope=message)
+                headers.setdefault("Content-Security-Policy", csp)
+                for name, value in HEADERS.items():
+                    headers.setdefault(name, value)
+            await send(message)
+
+        await self.app(scope, receive, send_with_headers)
