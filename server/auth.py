@@ -15,12 +15,15 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from .settings import ROLES, Settings
 
 
-def require(settings: Settings, role: str):
-    """A dependency (async: it runs on the event loop, no thread hop) that returns who calls ("operator 3fa0c2d1": role and a token fingerprint) or raises."""
+def require_role(role: str):
+    """A dependency (async: it runs on the event loop, no thread hop) that returns who calls ("operator
+    3fa0c2d1": role and a token fingerprint) or raises; the tokens are those of the app serving the request
+    (request.app.state.services.settings), so module-level routers (server/routers/) can use it."""
     rank = ROLES.index(role)
     bearer = HTTPBearer(auto_error=False, description=f"a token with the {role} role (or above)")
 
     async def check(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> str:
+        settings: Settings = request.app.state.services.settings
         token = creds.credentials if creds else ""
         if not token and request.method == "GET":
             token = request.query_params.get("access_token", "")

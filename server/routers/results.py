@@ -1,0 +1,70 @@
+"""A recording's results: the latest model, explanation and the report's figures."""
+from __future__ import annotations
+
+import json
+from pathlib import Path as FsPath
+from typing import Literal
+
+from fastapi import APIRouter, Depends, HTTPException, Path
+from fastapi.responses import FileResponse
+
+from .. import schemas
+from ..deps import ERRORS, Id, Services, services, viewer
+
+PLOT_NAME = r"^[a-z0-9_]{1,40}\.png$"
+router = APIRouter(tags=["jobs"], dependencies=[viewer], responses={**ERRORS, 404: {"model": schemas.Problem}})
+
+
+def latest_result(svc: Services, rec_id: str, kind: str, name: str) -> FsPath:
+    """The file or folder `name` of the recording's newest job of `kind` that has one; 404 saying why not."""
+    rec = svc.recording_or_404(rec_id)
+    for job in svc.catalog.list("jobs", "recording_id = ? AND kind = ? AND state IN ('running', 'completed')",
+                                (rec_id, kind)):
+        path = FsPath(job["result_dir"]) / name
+        if path.exists():
+            return path
+    raise HTTPException(404, why_no_result(svc, rec, kind))
+
+
+def why_no_result(svc: Services, rec: dict, kind: str) -> str:
+    """Why a recording has no result of `kind`: its latest job's state (failed: with the reason), or,
+    with no job, whether one will come by itself (a completed sweep is identified automatically)."""
+    rec_id = rec["id"]
+    latest = svc.catalog.list("jobs", "recording_id = ? AND kind = ?", (rec_id, kind), limit=1)
+    if latest:
+        job = latest[0]
+        if job["state"] == "failed":
+            return f"no {kind} result for recording {rec_id}: its latest {kind} job {job['id']} failed: {job['error']}"
+        return f"no {kind} result for recording {rec_id} yet: job {job['id']} is {job['state']}"
+    auto = kind == "identify" and rec.get("origin") == "sweep" and rec.get("status") in ("complete", "running")
+    return (f"no {kind} result for recording {rec_id} yet: it is identified when its sweep completes" if auto else
+            f"no {kind} result for recording {rec_id}: none was asked for (POST /api/recordings/{rec_id}/{kind})")
+
+
+@router.get("/api/recordings/{rec_id}/model")
+def model(rec_id: str = Id(), svc: Services = Depends(services)) -> dict:
+    """The latest identified model: the same JSON as `shakeid identify --json`."""
+    return json.loads(latest_result(svc, rec_id, "identify", "model.json").read_text())
+
+
+@router.get("/api/recordings/{rec_id}/explanation")
+def explanation(rec_id: str = Id(), svc: Services = Depends(services)) -> dict:
+    """The latest discrepancy analysis: the same JSON as `shakeid explain --json`."""
+    return json.loads(latest_result(svc, rec_id, "explain", "explain.json").read_text())
+
+
+@router.get("/api/recordings/{rec_id}/plots")
+def plots(rec_id: str = Id(), kind: Literal["identify", "explain"] = "identify",
+          svc: Services = Depends(services)) -> list[str]:
+    """Names of the report's figures (PNG) of the latest identification (or explanation)."""
+    report = latest_result(svc, rec_id, kind, "report")
+    return sorted(p.name for p in report.glob("*.png"))
+
+
+@router.get("/api/recordings/{rec_id}/plots/{name}", response_class=FileResponse)
+def plot(rec_id: str = Id(), name: str = Path(pattern=PLOT_NAME), kind: Literal["identify", "explain"] = "identify",
+         svc: Services = Depends(services)):
+    report = latest_result(svc, rec_id, kind, "report")
+    if name not in {p.name for p in report.glob("*.png")}:  # only files that are there, by exact name
+        raise HTTPException(404, f"no figure {name}")
+    return FileResponse(report / name, media_type="image/png")
