@@ -33,7 +33,7 @@ import numpy as np
 
 from identify.errors import RecordingError
 from identify.quality import QualityMonitor, clip_level, verdict, with_status
-from identify.recording import CSV_SUFFIXES, H5_SUFFIXES, LAYOUTS, MAT_SUFFIXES, Recording, check_file
+from identify.recording import LAYOUTS, Recording, check_file
 
 #: The channels a sweep records, and the (input, output) pair identification reads from a recording
 #: unless told otherwise: the table's and the mass's accelerometers (the base layout's names).
@@ -368,28 +368,4 @@ def read_h5_recording(path, input: str = DEFAULT_CHANNELS[0], output: str = DEFA
                         {"status": info["status"], "status_reason": info.get("status_reason", ""),
                          "full_scale": full_scale, "first_row": a, "t0_s": float(d["time"][a]),
                          "moving_mass_kg": _rig_config(info).get("moving_mass_kg")})
-    return rec
-
-
-def open_recording(path, layout: str = "base", input: str | None = None, output: str | None = None,
-                   time_column: str | None = None, fs_hz: float | None = None,
-                   samples: tuple[int, int] | None = None) -> Recording:
-    """Any recording file, cut to rows samples=[a, b) if given: the DAQ's HDF5 (never across a gap),
-    else CSV / MAT with identify's readers (layout, column names, sample rate as there)."""
-    suffix = Path(path).suffix.lower()
-    if suffix not in H5_SUFFIXES + CSV_SUFFIXES + MAT_SUFFIXES:
-        raise RecordingError(f"{path}: unsupported file type {suffix!r} (HDF5 .h5 from `shakeid sweep`, CSV .csv "
-                             "or MAT .mat)")
-    if suffix in H5_SUFFIXES:
-        return read_h5_recording(path, input or DEFAULT_CHANNELS[0], output or DEFAULT_CHANNELS[1], samples)
-    from identify.recording import read_recording
-
-    rec = read_recording(path, layout, input, output, time_column, fs_hz)
-    if samples:
-        a, b = samples
-        if not 0 <= a < b <= rec.n_samples:
-            raise RecordingError(f"{path}: samples [{a}, {b}) requested: need 0 <= start < stop <= {rec.n_samples}, the recording's length")
-        rec = rec.slice(a, b)
-        Recording.__post_init__(rec)  # the cut must still be a usable recording
-        rec.metadata["first_row"] = a
     return rec

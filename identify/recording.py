@@ -1,4 +1,5 @@
-"""Recordings: uniformly sampled input/output channels, and readers for CSV and MAT files.
+"""Recordings: uniformly sampled input/output channels; readers for CSV and MAT files, and the one path
+from any file's channels to a Recording (recording_from_channels: daq.formats reads the other formats).
 
 Two layouts:
 - ``base`` (the shaker rig): input = table acceleration, output = mass (absolute) acceleration, m/s^2.
@@ -10,12 +11,14 @@ Every problem a file can have ends in a RecordingError naming the file and what 
 """
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from .channels import (ACCELERATION_UNITS_TO_M_S2, TIME_UNITS_TO_S, Channel, NotASignal, SampleClock,
+                       clock_from_time, unit_factor)
+from .csvfile import read_csv
 from .errors import RecordingError
 
 LAYOUTS = {
@@ -81,23 +84,6 @@ class Recording:
                          dict(self.metadata))
 
 
-def _sample_rate_from_time(t: np.ndarray, source: str, name: str) -> float:
-    if t.size < 2:
-        raise RecordingError(f"{source}: time column {name!r} needs at least two samples")
-    d = np.diff(t)
-    if not np.all(np.isfinite(d)) or np.any(d <= 0):
-        raise RecordingError(f"{source}: time column {name!r} is not strictly increasing")
-    dt = np.median(d)
-    # A uniform clock drifts by float rounding only; a dropped or doubled sample shows as a whole dt.
-    worst = np.max(np.abs(d - dt))
-    if worst > 1e-3 * dt:
-        k = int(np.argmax(np.abs(d - dt)))
-        raise RecordingError(f"{source}: time column {name!r} is not uniformly sampled: step {d[k]:.6g} s at "
-                             f"sample {k + 1}, median step {dt:.6g} s (gaps must be repaired, not spliced)")
-    # the whole span is far less sensitive to the rounding of printed time stamps than any one step
-    return (t.size - 1) / (t[-1] - t[0])
-
-
 #: File types read_recording reads, and the DAQ's HDF5 recordings' (read by daq.recorder, which needs h5py:
 #: named here so that a command can tell them apart without importing it).
 CSV_SUFFIXES, MAT_SUFFIXES, H5_SUFFIXES = (".csv", ".txt"), (".mat",), (".h5", ".hdf5")
@@ -115,131 +101,118 @@ def check_file(path) -> Path:
 
 def read_recording(path, layout: str = "base", input: str | None = None, output: str | None = None,
                    time: str | None = None, fs_hz: float | None = None) -> Recording:
-    """Read a CSV or MAT recording (HDF5 recordings of the DAQ arrive with the DAQ)."""
+    """Read a CSV or MAT recording (daq.formats reads every format, these two through here)."""
     path = Path(path)
     if layout not in LAYOUTS:
         raise RecordingError(f"unknown layout {layout!r} (base or force)")
-    names = LAYOUTS[layout]
-    input = input or names["input"]
-    output = output or names["output"]
-    time = time or names["time"]
     check_file(path)
     suffix = path.suffix.lower()
     if suffix in MAT_SUFFIXES:
-        columns = _read_mat(path)
+        channels = read_mat(path)
     elif suffix in CSV_SUFFIXES:
-        columns = _read_csv(path)
+        channels = read_csv(path)
     else:
         raise RecordingError(f"{path}: unsupported file type {suffix!r} (csv or mat)")
+    return recording_from_channels(channels, str(path), layout, input, output, time, fs_hz)
+
+
+#: A sample rate stored coarser than this (relative) is named in the recording's warnings when no --fs
+#: gives it exactly: UFF's E13.5 increment stores 1/2048 s as 4.88281e-04, 2048.001 Hz (docs/recordings.md).
+RATE_RESOLUTION_WARNING = 1e-7
+
+
+def recording_from_channels(channels: dict, source: str, layout: str = "base", input: str | None = None,
+                            output: str | None = None, time: str | None = None, fs_hz: float | None = None,
+                            noun: str = "column") -> Recording:
+    """The one path from a file's channels to a Recording, whatever the format: channels chosen by name (the
+    layout's names by default), units checked (g converted to m/s^2, others refused), the sample rate from
+    the time column, else from the channels' own clock, else from fs_hz (--fs), which must agree with the
+    file's. channels: {name: samples | Channel | NotASignal (saying why it is none) | None (not loaded)};
+    noun: what the format calls them (column, channel, dataset)."""
+    if layout not in LAYOUTS:
+        raise RecordingError(f"{source}: unknown layout {layout!r} (base or force)")
+    names = LAYOUTS[layout]
+    input, output, time = input or names["input"], output or names["output"], time or names["time"]
     for c in (input, output, time):
-        if isinstance(columns.get(c), TextColumn):
-            raise RecordingError(f"{path}: column {c!r} holds text, not numbers ({columns[c]})")
-    columns = {c: v for c, v in columns.items() if not isinstance(v, TextColumn)}
-    missing = [c for c in (input, output) if c not in columns]
+        if isinstance(channels.get(c), NotASignal):
+            why = channels[c].why() if hasattr(channels[c], "why") else str(channels[c])
+            raise RecordingError(f"{source}: {noun} {c!r} {why}")
+    found = [c for c, v in channels.items() if not isinstance(v, NotASignal)]
+    missing = [c for c in (input, output) if c not in found]
     if missing:
-        raise RecordingError(f"{path}: missing column(s) {', '.join(map(repr, missing))}; "
-                             f"found {', '.join(map(repr, columns)) or 'none'}")
-    if time in columns:
-        fs = _sample_rate_from_time(columns[time], str(path), time)
-        if fs_hz is not None and abs(float(fs_hz) / fs - 1) > 1e-3:  # a wrong rate scales every coefficient
-            raise RecordingError(f"{path}: the sample rate given ({float(fs_hz):g} Hz, --fs) disagrees with the "
-                                 f"time column {time!r} ({fs:.6g} Hz); the sample rate is for a file without one")
-    elif fs_hz is not None:
-        fs = float(fs_hz)
+        raise RecordingError(f"{source}: missing {noun}(s) {', '.join(map(repr, missing))}; "
+                             f"found {', '.join(map(repr, found)) or 'none'}")
+    notes: list[str] = []
+    x_in, unit_in, clock_in = _in_layout_units(channels[input], input, names["units"][0], source, noun, notes)
+    x_out, unit_out, clock_out = _in_layout_units(channels[output], output, names["units"][1], source, noun, notes)
+    clock = _sample_clock(channels.get(time), time, [(input, clock_in), (output, clock_out)], fs_hz, source, noun)
+    rec = Recording(x_in, x_out, clock.fs_hz, layout, input, output, (unit_in, unit_out), source)
+    if fs_hz is None and clock.rel_resolution > RATE_RESOLUTION_WARNING:
+        notes.append(_rate_warning(clock))
+    if notes:
+        rec.metadata["warnings"] = notes
+    return rec
+
+
+def _in_layout_units(value, name: str, unit: str, source: str, noun: str, notes: list) -> tuple:
+    """(samples in the layout's unit, that unit, the channel's own clock or None)."""
+    if not isinstance(value, Channel):
+        return value, unit, None
+    if unit != "m/s^2":  # the force layout takes the file's units as they are
+        return value.values, value.unit, value.clock
+    factor = unit_factor(value.unit, ACCELERATION_UNITS_TO_M_S2)
+    if factor is None:
+        raise RecordingError(f"{source}: {noun} {name!r} is in {value.unit!r}, not an acceleration: the base layout "
+                             f"reads the table's and the mass's accelerations in m/s^2 (g is converted); scale it to "
+                             f"an acceleration in the acquisition software, or name the right {noun} (--input, --output)")
+    if factor != 1.0:
+        notes.append(f"{noun} {name!r} converted from {value.unit} to m/s^2 (x {factor:g})")
+    return value.values * factor, unit, value.clock
+
+
+def _sample_clock(time_value, time: str, clocks: list, fs_hz, source: str, noun: str) -> SampleClock:
+    """The recording's clock: a time column, else the channels' own (which must agree), else --fs; a --fs
+    beside a clock must agree with it (within 1e-3), and replaces it when within the file's stored resolution."""
+    own = [(n, c) for n, c in clocks if c is not None]
+    if time_value is not None and not isinstance(time_value, NotASignal):
+        t, unit = (time_value.values, time_value.unit) if isinstance(time_value, Channel) else (time_value, "")
+        factor = unit_factor(unit, TIME_UNITS_TO_S)
+        if factor is None:
+            raise RecordingError(f"{source}: time {noun} {time!r} is in {unit!r}; time is read in s or ms")
+        clock = clock_from_time(np.asarray(t, dtype=float) * factor, source, time)
+    elif own:
+        (a, ca), (b, cb) = own[0], own[-1]
+        if abs(ca.fs_hz / cb.fs_hz - 1) > max(ca.rel_resolution, cb.rel_resolution) + 1e-12:
+            raise RecordingError(f"{source}: {noun} {a!r} is sampled at {ca.fs_hz:.9g} Hz, {b!r} at {cb.fs_hz:.9g} Hz: "
+                                 "input and output must share one clock")
+        if abs(ca.start_s - cb.start_s) > 1e-3 / ca.fs_hz:
+            raise RecordingError(f"{source}: {noun} {a!r} starts at {ca.start_s:.9g} s, {b!r} at {cb.start_s:.9g} s: "
+                                 "input and output must start together (they would be misaligned)")
+        clock = ca
+    elif fs_hz is None:
+        raise RecordingError(f"{source}: no time {noun} {time!r} and no sample clock in the file; give the sample "
+                             "rate (--fs)")
     else:
-        raise RecordingError(f"{path}: no time column {time!r}; give the sample rate (--fs)")
-    return Recording(columns[input], columns[output], fs, layout, input, output, names["units"], str(path))
+        return SampleClock(float(fs_hz), what="--fs")
+    if fs_hz is not None:
+        rel = abs(float(fs_hz) / clock.fs_hz - 1)
+        if rel > 1e-3:  # a wrong rate scales every coefficient
+            raise RecordingError(f"{source}: the sample rate given ({float(fs_hz):g} Hz, --fs) disagrees with the "
+                                 f"{clock.what} ({clock.fs_hz:.6g} Hz); the sample rate is for a file without one")
+        if rel <= clock.rel_resolution * (1 + 1e-9):  # the file stores it coarser than --fs says it
+            clock = SampleClock(float(fs_hz), clock.start_s, 0.0, f"--fs, within the {clock.what}'s resolution")
+    return clock
 
 
-#: CSV rows parsed at a time: memory stays near the parsed floats (8 bytes a value), whatever the file size
-CSV_CHUNK_ROWS = 1 << 16
+def _rate_warning(clock: SampleClock) -> str:
+    nearest = round(clock.fs_hz)
+    hint = (f"; if the acquisition ran at {nearest:g} Hz, give --fs {nearest:g}"
+            if abs(nearest / clock.fs_hz - 1) <= clock.rel_resolution else "; give the exact rate with --fs")
+    return (f"sample rate {clock.fs_hz:.10g} Hz from the {clock.what}, which the file stores only to "
+            f"{clock.rel_resolution:.1e} relative (every coefficient carries that error){hint}")
 
 
-def _read_csv(path: Path) -> dict[str, np.ndarray]:
-    """Streamed: rows are parsed in chunks of CSV_CHUNK_ROWS into float arrays, so a 200 MB file never
-    exists as Python strings (the whole-file reader took 19x the file size in memory)."""
-    try:
-        with path.open(newline="") as f:
-            return _parse_csv(path, f)
-    except UnicodeDecodeError:
-        raise RecordingError(f"{path}: not a text CSV file") from None
-    except OSError as exc:
-        raise RecordingError(f"{path}: cannot read: {exc.strerror}") from None
-
-
-def _parse_csv(path: Path, f) -> dict[str, np.ndarray]:
-    lines = ((k, ln) for k, ln in enumerate(f, start=1) if ln.strip() and not ln.lstrip().startswith("#"))
-    first = next(lines, None)
-    if first is None:
-        raise RecordingError(f"{path}: empty file")
-    try:
-        delim = csv.Sniffer().sniff(first[1], delimiters=",;\t ").delimiter
-    except csv.Error:
-        delim = ","
-    header = [h.strip() for h in next(csv.reader([first[1]], delimiter=delim))]
-    if any(_is_number(h) for h in header):
-        raise RecordingError(f"{path}: first line must be a header naming the columns, got {first[1].strip()!r}")
-    chunks, numbers, rows = [], [], []
-    text: dict[str, str] = {}  # columns of words (an operator, a comment): kept out, named if asked for
-    used = list(range(len(header)))
-    for k, ln in lines:
-        if not numbers and not chunks:  # the first data row says which columns are text
-            fields = _fields(ln, delim)
-            text = {header[j]: f"line {k}: {v.strip()!r}" for j, v in enumerate(fields[:len(header)])
-                    if not _is_number(v)}
-            used = [j for j, h in enumerate(header) if h not in text]
-        numbers.append(k)
-        rows.append(ln)
-        if len(rows) == CSV_CHUNK_ROWS:
-            chunks.append(_parse_rows(path, rows, numbers, delim, len(header), used))
-            numbers, rows = [], []
-    if rows:
-        chunks.append(_parse_rows(path, rows, numbers, delim, len(header), used))
-    data = np.concatenate(chunks) if chunks else np.empty((0, len(used)))
-    return {**{header[j]: data[:, i] for i, j in enumerate(used)}, **{h: TextColumn(v) for h, v in text.items()}}
-
-
-class TextColumn(str):
-    """A CSV column of words, not numbers (where its first value is, e.g. "line 2: 'alice'"): left out of
-    the signals, and named if a signal is asked of it."""
-
-
-def _fields(line: str, delim: str) -> list[str]:
-    return line.split() if delim == " " else next(csv.reader([line], delimiter=delim))
-
-
-def _parse_rows(path: Path, rows: list[str], numbers: list[int], delim: str, n_cols: int, used: list[int]) -> np.ndarray:
-    """rows (text lines, file line numbers `numbers`) -> (len(rows), len(used)) floats of the columns
-    `used` (the numeric ones), or the first bad line named."""
-    try:
-        data = np.loadtxt(rows, delimiter=None if delim == " " else delim, ndmin=2, dtype=float, comments=None,
-                          usecols=used if len(used) < n_cols else None)
-        if data.shape == (len(rows), len(used)):
-            # loadtxt reads only `used`: a row with too few or too many fields is caught below
-            if len(used) == n_cols or all(len(_fields(ln, delim)) == n_cols for ln in rows):
-                return data
-    except ValueError:
-        pass
-    for k, ln in zip(numbers, rows):  # the slow path, only to say which line is wrong
-        row = _fields(ln, delim)
-        if len(row) != n_cols:
-            raise RecordingError(f"{path}: line {k} has {len(row)} fields, header has {n_cols}")
-        try:
-            [float(row[j]) for j in used]
-        except ValueError:
-            raise RecordingError(f"{path}: line {k} has a non-numeric value: {ln.strip()[:80]!r}") from None
-    raise RecordingError(f"{path}: lines {numbers[0]}-{numbers[-1]} could not be read as numbers")
-
-
-def _is_number(s: str) -> bool:
-    try:
-        float(s)
-        return True
-    except ValueError:
-        return False
-
-
-def _read_mat(path: Path) -> dict[str, np.ndarray]:
+def read_mat(path: Path) -> dict[str, np.ndarray]:
     from scipy.io import loadmat
 
     try:

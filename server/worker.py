@@ -53,7 +53,7 @@ def _write_json(path: Path, obj) -> None:
 
 def read(path: str, options: dict):
     """The recording at path with the job's read options (as `shakeid identify`'s)."""
-    from daq.recorder import open_recording
+    from daq.formats import open_recording
 
     return open_recording(path, options.get("layout", "base"), options.get("input"), options.get("output"),
                           options.get("time"), options.get("fs_hz"),

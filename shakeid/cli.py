@@ -111,12 +111,16 @@ def _identifier(args):
 
 
 def _read(args):
-    """The recording named on the command line, cut to --samples if given."""
-    from daq.recorder import open_recording
+    """The recording named on the command line (any format daq.formats reads), cut to --samples if given;
+    what the reader noticed (a unit converted, a sample rate stored coarsely) is printed to stderr."""
+    from daq.formats import open_recording
 
     samples = getattr(args, "samples", None)
-    return open_recording(args.file, args.layout, args.input, args.output, args.time, args.fs,
-                          tuple(samples) if samples else None)
+    rec = open_recording(args.file, args.layout, args.input, args.output, args.time, args.fs,
+                         tuple(samples) if samples else None)
+    for note in rec.metadata.get("warnings", ()):
+        print(f"shakeid: warning: {args.file}: {note}", file=sys.stderr)
+    return rec
 
 
 def cmd_identify(args) -> int:

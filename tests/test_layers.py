@@ -14,7 +14,10 @@ REPO = Path(__file__).resolve().parents[1]
 ALLOWED = {
     "identify": {"numpy", "scipy", "identify"},
     "sim": {"numpy", "scipy", "identify", "sim", "pymodbus", "pyads", "can", "serial"},
-    "daq": {"numpy", "scipy", "h5py", "identify", "sim", "daq", "pymodbus", "pyads", "can", "serial"},
+    # daq is the acquisition and file layer: the readers of the lab's file formats (daq/formats/) use npTDMS
+    # (TDMS), pyuff (UFF 58) and asammdf (MDF4)
+    "daq": {"numpy", "scipy", "h5py", "identify", "sim", "daq", "pymodbus", "pyads", "can", "serial",
+            "nptdms", "pyuff", "asammdf"},
     "reports": {"numpy", "matplotlib", "identify", "reports"},
     # the service composes the layers; nothing below it may import it (checked by the sets above), and it
     # does not import the CLI (shakeid/): both use reports/
