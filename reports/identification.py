@@ -30,6 +30,7 @@ from .text import (DESIGN_K3_NOTE, coefficient_rows, coefficient_table, fit_text
 
 FIGURES, DOCUMENTS = IDENTIFICATION_FIGURES, IDENTIFICATION_DOCUMENTS
 RESIDUAL = "#c0392b"  # the residual traces' colour, the same in every panel
+MEASURED, SIMULATED = "#9ecae1", "#08306b"  # validation: the measurement light and broad, the simulation dark and thin
 
 
 def write_report(ident, out_dir, result: dict | None = None) -> Path:
@@ -93,8 +94,21 @@ def _save(fig, path):
 def _path_figure(ident, path):
     """Per equation: MSE along the path (left axis, log), terms in the model (right axis, integers); the
     legend below the axes, where it covers no data."""
-    fig, axes = plt.subplots(1, len(ident.selections_), figsize=(11, 4.4), squeeze=False)
-    for ax, (eq, s) in zip(axes[0], ident.selections_.items()):
+    # one panel per row at a width the page shows near its own size, text at PATH_FONT_PT: the figure is
+    # read at page scale (the dashboard shows it at most 900 px wide), not zoomed into
+    n = len(ident.selections_)
+    with plt.rc_context({"font.size": PATH_FONT_PT}):
+        fig, axes = plt.subplots(n, 1, figsize=(8, 3.6 * n + 0.8), squeeze=False)
+        _path_panels(ident, axes[:, 0])
+    _save(fig, path)
+
+
+#: the lambda-path figure's text size, pt (at 110 dpi and 8 in wide it reads as 11 pt at 880 px)
+PATH_FONT_PT = 11
+
+
+def _path_panels(ident, axes):
+    for ax, (eq, s) in zip(axes, ident.selections_.items()):
         k = np.arange(1, s.path_mse.size + 1)
         floor = 1e-16 * max(float(np.max(s.path_mse)), 1e-300)  # exactly-fitting equations: keep the axis readable
         lines = ax.semilogy(k, np.maximum(s.path_mse, floor), ".-", lw=0.8, ms=3, label="training MSE (path)")
@@ -110,9 +124,8 @@ def _path_figure(ident, path):
         ax2.set_ylim(0, max(int(np.max(s.path_nnz)), 1) + 0.5)
         ax2.set_ylabel("terms in the model", color="0.4")
         ax.set(xlabel=f"path point ({ident.path_.param_name} decreasing)", ylabel="MSE", title=eq)
-        ax.legend(lines, [ln.get_label() for ln in lines], fontsize=7, ncol=3, loc="upper center",
-                  bbox_to_anchor=(0.5, -0.18), frameon=False)
-    _save(fig, path)
+        ax.legend(lines, [ln.get_label() for ln in lines], fontsize=PATH_FONT_PT - 1, ncol=3, loc="upper center",
+                  bbox_to_anchor=(0.5, -0.22), frameon=False)
 
 
 def _validation_figure(ident, path, labels):
@@ -140,9 +153,10 @@ def _validation_figure(ident, path, labels):
                labels["acc_unit"], False)]
     for i, (title, sl, meas, sim, ylabel, u, shade) in enumerate(panels):
         ax, axr = axes[2 * i], axes[2 * i + 1]
-        ax.plot(t[sl], meas[sl], lw=0.6 if shade else 1.0, label="measured")
-        ax.plot(t[sl], sim[sl], lw=0.6 if shade else 1.0, ls="-" if shade else "--", alpha=0.85,
-                label="free-run simulation")
+        # the measurement broad and light underneath, the simulation thin and dark on top: where they agree
+        # the thin line runs inside the broad one, and neither hides the other
+        ax.plot(t[sl], meas[sl], lw=2.2 if shade else 3.0, color=MEASURED, label="measured", zorder=2)
+        ax.plot(t[sl], sim[sl], lw=0.5 if shade else 1.0, color=SIMULATED, label="free-run simulation", zorder=3)
         axr.plot(t[sl], meas[sl] - sim[sl], lw=0.5, color=RESIDUAL)
         axr.axhline(0, color="0.6", lw=0.6)
         if shade:
@@ -170,13 +184,14 @@ def _index_html(out: Path, ident, result: dict) -> str:
     rec, sig, labels = ident.recording_, ident.states_, _labels(ident)
     base = sig.input_name == "zdd"
     chain = result.get("chain") or {}
-    page = Page(f"Identification report: {rec.source}", "identification")
+    # the file's name, not its path: a report the service wrote would show the server's folders
+    page = Page(f"Identification report: {Path(str(rec.source)).name}", "identification")
     if result.get("status") == "failed":
         page.paragraph(f"MODEL FAILED its validation: {result['reason']}")
     band = chain.get("band_hz") or list(sig.band_hz)
     page.heading("Data")
     page.table(["quantity", "value"], [
-        ["recording", rec.source],
+        ["recording", Path(str(rec.source)).name],
         ["layout", "base: table and mass accelerations (m/s²)" if base else
          f"force: input {rec.input_name}, output {rec.output_name}"],
         ["samples", f"{rec.n_samples} at {rec.fs_hz:g} Hz ({rec.n_samples / rec.fs_hz:.1f} s)"],
