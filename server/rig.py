@@ -36,7 +36,8 @@ class RigBusy(Exception):
 
 
 class LiveBuffer:
-    """Decimated samples of the running recording, numbered so each SSE client can follow on."""
+    """Decimated samples of the running recording, numbered so each SSE client can follow on; t is the
+    time into the sweep (s since the recording's first sample), not the accelerometers' clock."""
 
     def __init__(self, recording_id: str, channels, fs_hz: float, maxlen: int = 20000):
         self.recording_id, self.channels, self.fs_hz = recording_id, list(channels), fs_hz
@@ -44,13 +45,16 @@ class LiveBuffer:
         self.points: deque = deque(maxlen=maxlen)  # (seq, t_s, values...)
         self.seq = 0
         self.done = False
+        self.first_index: int | None = None  # the recording's first sample on the accelerometers' clock
 
     def add(self, first_index: int, block: np.ndarray) -> None:
         # keep every step-th sample (aligned to the sample index, so decimation is the same across blocks)
+        if self.first_index is None:
+            self.first_index = first_index
         k0 = (-first_index) % self.step
         for k in range(k0, block.shape[0], self.step):
             self.seq += 1
-            self.points.append((self.seq, (first_index + k) / self.fs_hz, *map(float, block[k])))
+            self.points.append((self.seq, (first_index + k - self.first_index) / self.fs_hz, *map(float, block[k])))
 
     def since(self, seq: int) -> list[tuple]:
         """Points numbered above seq: the numbers are consecutive, so skip straight to them."""
