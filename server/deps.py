@@ -19,6 +19,7 @@ from .auth import require_role
 from .catalog import ID_PATTERN, Catalog
 from .ipc import ControllerRefused, ControllerUnavailable
 from .jobs import JobQueue
+from .livefeed import LiveFeeds
 from .rigclient import RigLink
 from .settings import Settings
 
@@ -43,6 +44,8 @@ class Services:
     shutting_down: threading.Event = field(default_factory=threading.Event)  # set by `shakeid serve` on SIGTERM
     #: GET /api/rig's copy of the controller's status (server/routers/rig.py)
     rig_cache: dict = field(default_factory=lambda: {"t": -1e9, "value": None, "lock": asyncio.Lock()})
+    #: the live view's shared feeds, one per recording being watched (server/routers/live.py makes it)
+    live_feeds: LiveFeeds | None = None
 
     def recording_or_404(self, rec_id: str) -> dict:
         rec = self.catalog.get("recordings", rec_id)

@@ -67,6 +67,7 @@ class Viewer:
         self.queue: deque[Frame] = deque()
         self.wake = asyncio.Event()
         self.seen = after  # the last sample number it was given (or asked to start after)
+        self.fresh = after == 0  # a new viewer starts with whatever the feed holds: nothing counts as missed
         self.missed_samples = 0  # since it was last told
         self.dropped_frames = 0  # over its whole connection (for GET /api/live)
 
@@ -84,6 +85,8 @@ class Viewer:
         if not self.queue:
             return None
         frame = self.queue[0]
+        if self.fresh:
+            self.fresh, self.seen = False, frame.first - 1
         if frame.first > self.seen + 1:  # samples between what it saw and this frame were dropped
             gap = frame.first - self.seen - 1
             self.missed_samples += gap
