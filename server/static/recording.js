@@ -14,6 +14,8 @@ const CAPTIONS = {  // the report's figures; any other figure is shown under its
   "residual_state.png": "Residual over the state (displacement, velocity): where the textbook model misses.",
   "residual_time.png": "Residual over time and excitation frequency.",
 };
+//: the model's downloads (GET /api/recordings/{id}/model.<suffix>, server/routers/export.py): suffix, button
+const EXPORTS = [["fmu", "FMU (FMI 2.0)"], ["c", "C"], ["py", "Python"], ["tex", "LaTeX"]];
 const num = (x, digits = 4) => x == null ? "–" : Math.abs(x) >= 1e5 || (Math.abs(x) < 1e-3 && x !== 0) ? x.toExponential(digits - 1) : (+x.toPrecision(digits)).toString();
 
 async function showRecording(id) {
@@ -46,6 +48,11 @@ async function refreshRecording() {
     try { const a = document.createElement("a"); a.href = await blobUrl(`/api/recordings/${id}/file`); a.download = r.filename; a.click(); }
     catch (e) { fail("download")(e); }
   };
+  $("rec-body").querySelectorAll("button[data-export]").forEach(b => b.onclick = async () => {
+    const suffix = b.dataset.export;
+    try { const a = document.createElement("a"); a.href = await blobUrl(`/api/recordings/${id}/model.${suffix}`); a.download = `model_${id}.${suffix}`; a.click(); }
+    catch (e) { fail(`${b.textContent} export`)(e); }
+  });
   if (model) await figures(id, "identify", "rec-model-figures");
   if (explanation) await figures(id, "explain", "rec-explain-figures");
 }
@@ -94,7 +101,9 @@ function modelSection(r, m) {
     `<p class="bad" id="rec-faulty">identified although refused at first (accept_faulty): ${esc(m.accepted_faulty.join("; "))}; read it with care</p>` : "";
   let html = faulty + `<p>${m.status === "ok" ? "" : `<b>${esc(m.status)}</b>: `}${esc(m.reason || "")}</p>` +
     `<table class="data" id="rec-terms"><tr><th>equation</th><th>term</th><th class="num">coefficient</th><th class="num">standard error</th>` +
-    `<th class="num">inclusion probability</th></tr>${rows.join("")}</table>`;
+    `<th class="num">inclusion probability</th></tr>${rows.join("")}</table>` +
+    `<p id="rec-export">the model as a file: ${EXPORTS.map(([s, label]) => `<button data-export="${s}">${label}</button>`).join(" ")} ` +
+    `<span class="hint">(as <code>shakeid export</code> writes it, docs/export.md)</span></p>`;
   const p = m.physical;
   if (p) {
     const row = (label, key, unit) => p[key] ? `<tr><td>${label}</td><td class="num">${num(p[key].value)}</td><td class="num">${num(p[key].std_error, 2)}</td><td>${unit}</td></tr>` : "";
