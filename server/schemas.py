@@ -7,6 +7,8 @@ from pydantic import BaseModel, ConfigDict, Field, StrictFloat, field_validator
 
 from daq.campaign import MAX_SWEEPS, NAME_PATTERN
 
+from .uploads import FILENAME_WORDS
+
 SweepState = Literal["queued", "running", "completed", "aborted", "failed"]
 JobState = Literal["queued", "running", "completed", "failed"]
 CampaignState = Literal["running", "pausing", "paused", "completed", "aborted"]
@@ -224,8 +226,7 @@ class Problem(BaseModel):
 
 #: What a pattern asks for, in words, by the parameter's name: pydantic's message quotes the regex.
 PATTERN_WORDS = {
-    "filename": "a recording's file name: letters, digits, '.', '-' and '_' (up to 100), ending in .csv, .mat, .h5 "
-                "or .hdf5",
+    "filename": FILENAME_WORDS,
     "name": "a plot's file name: lower-case letters, digits and '_', ending in .png",
 }
 

@@ -18,9 +18,13 @@ from pathlib import Path
 
 from fastapi import HTTPException, Request
 
+from daq.formats import FORMATS, check_upload
 from identify.errors import ShakeidError
-from identify.recording import H5_SUFFIXES
 
+#: An upload's file name: its type (suffix) picks the reader, so only the types daq.formats reads are taken.
+FILENAME_PATTERN = r"^[\w.\-]{1,100}\.(" + "|".join(sx.lstrip(".") for f in FORMATS for sx in f.suffixes) + ")$"
+FILENAME_WORDS = ("a recording's file name: letters, digits, '.', '-' and '_' (up to 100), ending in "
+                  + ", ".join(sx for f in FORMATS for sx in f.suffixes))
 CHECKS_AT_ONCE = 2
 CHECK_TIMEOUT_S = 600.0
 #: address space the checking process may use: the interpreter with numpy/scipy/h5py (~1 GB of mostly
@@ -86,23 +90,10 @@ async def _check_in_process(path: Path, suffix: str, filename: str, options: dic
 
 
 def check(path: Path, suffix: str, filename: str, options: dict) -> dict:
-    """Read the file as a job will; a RecordingError names what is wrong with it (as the client's name)."""
+    """Read the file as a job will (daq.formats: every format the CLI reads); a RecordingError names what is
+    wrong with it (as the client's name)."""
     try:
-        if suffix in H5_SUFFIXES:
-            from daq.recorder import DEFAULT_CHANNELS, describe
-
-            d = describe(path)
-            # the channels a job will read (its options, else identify's pair): refused now, not at the job
-            wanted = [options.get("input") or DEFAULT_CHANNELS[0], options.get("output") or DEFAULT_CHANNELS[1]]
-            missing = [c for c in wanted if c not in d["channels"]]
-            if missing:
-                raise ShakeidError(f"{filename}: missing channel(s) {missing}; found {d['channels']}")
-            return {"samples": d["samples"], "fs_hz": d["fs_hz"], "gaps": len(d["gaps"]), "status_in_file": d["status"]}
-        from identify.recording import read_recording
-
-        rec = read_recording(path, options.get("layout", "base"), options.get("input"), options.get("output"),
-                             options.get("time"), options.get("fs_hz"))
-        return {"samples": rec.n_samples, "fs_hz": rec.fs_hz}
+        return check_upload(path, options)
     except ShakeidError as exc:
         raise ShakeidError(str(exc).replace(str(path), filename)) from None
     except MemoryError:

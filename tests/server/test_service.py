@@ -163,8 +163,8 @@ def test_uploads_jobs_and_clear_errors(service, tmp_path, table1_run):
     assert bad.status_code == 422 and "junk.csv" in bad.json()["detail"]
     assert op.post("/api/recordings", params={"filename": "../etc/passwd.csv"}, content=b"x").status_code == 422
     # a file name the service does not take is said in words, not as pydantic's regex
-    txt = op.post("/api/recordings", params={"filename": "notes.txt"}, content=b"x")
-    assert txt.status_code == 422 and "ending in .csv, .mat, .h5 or .hdf5" in txt.json()["detail"][0]["msg"]
+    txt = op.post("/api/recordings", params={"filename": "notes.xlsx"}, content=b"x")
+    assert txt.status_code == 422 and "ending in .h5, .hdf5, .csv, .txt, .mat, .tdms" in txt.json()["detail"][0]["msg"]
     assert "^[" not in txt.text
     assert op.post(f"/api/recordings/{rec['id']}/identify", json={"selection": "magic"}).status_code == 422
     assert op.post(f"/api/recordings/{rec['id']}/identify", json={"budget_refit": "heldout"}).status_code == 422
