@@ -3,7 +3,9 @@ channel groups is refused, naming them), its time from the channel's own time st
 uniform), its unit from the channel. A file its writer never finalised (UnFinMF) is refused."""
 from __future__ import annotations
 
+import gc
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,15 +19,32 @@ from . import FileFormat
 FINALISED, UNFINISHED = b"MDF     ", b"UnFinMF "
 
 
-def channels(path: Path, wanted: set[str]) -> dict:
+def _open(path: Path):
+    """asammdf's MDF(path). On a damaged file it fails leaving a half-built object whose collection prints an
+    AttributeError from MDF4.__del__ on stderr: collected here without that noise, and the failure named."""
     from asammdf import MDF
 
+    hook = sys.unraisablehook
+    sys.unraisablehook = lambda u: None if "MDF" in repr(u.object) else hook(u)
+    problem = ""
+    try:
+        return MDF(path)
+    except Exception as exc:
+        problem = f"{type(exc).__name__}: {exc}"
+    finally:
+        if problem:
+            gc.collect()
+        sys.unraisablehook = hook
+    raise RecordingError(f"{path}: not a readable MDF4 file, cut short or damaged ({problem})")
+
+
+def channels(path: Path, wanted: set[str]) -> dict:
     with open(path, "rb") as f:
         if f.read(len(UNFINISHED)) == UNFINISHED:
             raise RecordingError(f"{path}: its writer did not finalise this MDF file (UnFinMF): the recording may be "
                                  "incomplete; finalise it in the acquisition software first")
     out: dict = {}
-    with MDF(path) as mdf:
+    with _open(path) as mdf:
         for name, where in mdf.channels_db.items():
             if len(where) > 1:
                 out[name] = NotASignal(f"is in {len(where)} channel groups ({', '.join(str(g) for g, _ in where)}): "
