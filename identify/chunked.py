@@ -29,8 +29,8 @@ import numpy as np
 from scipy.fft import next_fast_len
 
 from .band import band_from_psd, welch_length
-from .chain import (EDGE_FRACTION, AT_REST_FRACTION, PAD_PERIODS, STATE_DTYPE, STATE_REQUESTS, StateSignals,
-                    band_and_taper, band_bins, band_filter, detrend_rows, taper_ramp)
+from .chain import (EDGE_FRACTION, AT_REST_FRACTION, PAD_PERIODS, STATE_DTYPE, STATE_REQUESTS, BandSpectra,
+                    StateSignals, band_and_taper, band_bins, band_filter, detrend_rows, taper_ramp)
 from .errors import IdentificationError
 from .spectral import BandLimitedSignal, lowband_irfft, lowband_rfft, welch_psd
 
@@ -79,6 +79,9 @@ class ChunkedChain:
     lasts: np.ndarray   # (2,) last samples
     live_guard: int     # samples guarded at an edge that is not at rest (chain.band_and_taper)
     dtype: type = STATE_DTYPE  # the transforms' precision, as the whole-record chain's (reconstruct_states)
+    #: the Welch spectra the band search read (base layout, automatic band), as StateSignals.spectra: the
+    #: noise floors are read from them (identify.uncertainty.noise_floors)
+    spectra: BandSpectra | None = None
 
     @property
     def input_name(self) -> str:
@@ -116,10 +119,15 @@ class ChunkedChain:
         means = shift + sums / n
         rms = np.sqrt(np.maximum(sumsq / n - (sums / n) ** 2, 0.0))
         psd = psd / n_seg
-        (lo, hi), taper_n, live_guard = band_and_taper(
-            fs, n, layout, band_hz, harmonics, taper_s,
-            lambda: (band_from_psd(f, psd[1], n, nper), band_from_psd(f, psd[0], n, nper)[0] if layout == "base"
-                     else None))
+        read = {}
+
+        def excited():
+            if layout != "base":
+                return band_from_psd(f, psd[1], n, nper), None
+            read["spectra"] = BandSpectra(f, psd[1], psd[0], n_seg)
+            return band_from_psd(f, psd[1], n, nper), band_from_psd(f, psd[0], n, nper)[0]
+
+        (lo, hi), taper_n, live_guard = band_and_taper(fs, n, layout, band_hz, harmonics, taper_s, excited)
         m = max(taper_n, 1)
         head = _regressed(layout, *source.read(0, min(m, n)))
         tail = _regressed(layout, *source.read(max(n - m, 0), n))
@@ -134,7 +142,7 @@ class ChunkedChain:
         reach_hz = lo if lo > 0 else hi * EDGE_FRACTION / 2
         overlap = int(np.ceil(OVERLAP_PERIODS * fs / reach_hz))
         return cls(fs, n, layout, (lo, hi), taper_n, slice(trims[0], n - trims[1]), overlap, means,
-                   head[:, 0].copy(), tail[:, -1].copy(), live_guard)
+                   head[:, 0].copy(), tail[:, -1].copy(), live_guard, spectra=read.get("spectra"))
 
     def _line(self, row: int, idx: np.ndarray) -> np.ndarray:
         """The straight line through the record's end samples of signal `row`, at sample indices idx."""
@@ -198,4 +206,5 @@ class ChunkedChain:
         """StateSignals without samples: band, valid rows, sample rate and input name of the record (what
         the identifier's selection and result need of the states when they are never held together)."""
         e = np.empty(0)
-        return StateSignals(e, e, e, e, self.fs_hz, self.band_hz, self.valid, self.input_name, self.taper_n)
+        return StateSignals(e, e, e, e, self.fs_hz, self.band_hz, self.valid, self.input_name, self.taper_n,
+                            spectra=self.spectra)

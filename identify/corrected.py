@@ -84,12 +84,16 @@ class CorrectedSums:
     monomial the Gram lacks, from the signals), corrected with its noise covariance."""
 
     def __init__(self, cov: np.ndarray, raw: dict, signals):
-        """raw : {exponents: sum over the fitted rows}; signals : (q1, q2, q1_dot, input) on those rows,
+        """raw : {exponents: sum over the fitted rows}; signals : (q1, q2, q1_dot, input) on those rows, or
+        a function exponents -> that sum (a record read in chunks: out_of_core.ChunkedNoise.moment_sum),
         summed only for a moment missing from raw."""
         self.mu, self.raw, self._signals, self._poly = GaussianMoments(cov), dict(raw), signals, {}
 
     def raw_sum(self, k: tuple) -> float:
         if k not in self.raw:
+            if callable(self._signals):
+                self.raw[k] = float(self._signals(k))
+                return self.raw[k]
             y = self._signals
             col = np.ones_like(y[0])
             for v, p in enumerate(k):

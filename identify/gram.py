@@ -56,6 +56,18 @@ class BlockGram:
         self.segment = np.zeros(self.edges.size - 1, dtype=int)
 
     @classmethod
+    def zeros(cls, edges, width: int, n_targets: int) -> "BlockGram":
+        """Empty per-block sums over `edges` of `width` columns (the last n_targets the targets), to be
+        added into block by block (a record read in chunks: identify.out_of_core)."""
+        self = cls.__new__(cls)
+        self._setup(edges, width, n_targets)
+        return self
+
+    def add(self, blocks, C: np.ndarray) -> None:
+        """Add cross-products C (len(blocks), width, width) into the given blocks."""
+        self.C[blocks] += C
+
+    @classmethod
     def concatenate(cls, grams) -> "BlockGram":
         """One BlockGram of several recordings' (same library and targets): blocks stacked in order,
         edges continued across recordings (rows of the concatenated records), segment = the recording's

@@ -47,13 +47,11 @@ import time
 import numpy as np
 
 from . import uncertainty as unc
-from .chain import reconstruct_states
 from .errors import IdentificationError
+from .fitting import effective_samples, make_optimizer, select_supports
 from .gram import BlockGram
-from .inband import has_even_force
-from .library import Library
 from .model import SparseModel
-from .validation import SIGNALS, first_equation, fit_metrics, fit_verdict, model_verdict, validate
+from .validation import SIGNALS, model_verdict
 
 #: |own - joint| / own SE of a q1_dot coefficient above which a recording's rig differs (with the practical
 #: condition below). One rig, 54 recordings at 0.5-5 % noise: at most 4.7 (benchmarks/joint_change.py).
@@ -82,10 +80,9 @@ def _refuse_copies(recordings: list) -> None:
         seen[key] = r.source
 
 
-def fit_joint(ident, recordings: list):
-    """SparseIdentifier.fit for several recordings (see the module doc); sets the identifier's usual
-    fitted attributes (model_, standard_errors_, validation_, verdict_, ...) plus recordings_,
-    joint_states_ and joint_ (the per-recording account)."""
+def refuse(ident, recordings: list) -> None:
+    """What a joint fit refuses before any work: no recordings, the paper's split of one record
+    (holdout_samples), a recording given twice."""
     if not recordings:
         raise IdentificationError("no recordings to identify")
     if ident.holdout_samples is not None:
@@ -93,63 +90,24 @@ def fit_joint(ident, recordings: list):
                                   "holdout_samples (the first N samples of one record); identify the recordings "
                                   "one by one for it")
     _refuse_copies(recordings)
-    timings = {}
-    t0 = time.perf_counter()
-    sigs = [reconstruct_states(r, ident.band_hz, ident.harmonics, ident.taper_s) for r in recordings]
-    timings["chain"] = time.perf_counter() - t0
-    inputs = {s.input_name for s in sigs}
-    if len(inputs) != 1 or len({r.layout for r in recordings}) != 1:
+
+
+def refuse_mixed_layouts(sources: list) -> None:
+    """One model needs one layout (the same input) in every recording: refused after the chains ran."""
+    if len({s.sig.input_name for s in sources}) != 1 or len({s.recording.layout for s in sources}) != 1:
         raise IdentificationError("joint identification needs recordings of one layout: got "
-                                  + ", ".join(f"{r.source} ({r.layout})" for r in recordings))
-    from .identifier import effective_samples, holdout_blocks
+                                  + ", ".join(f"{s.name} ({s.recording.layout})" for s in sources))
 
-    ident.library_ = Library(("q1", "q2"), (sigs[0].input_name,), ident.degree, ident.extra_terms)
+
+def check_consistency(ident, runs: list, timings: dict) -> None:
+    """After the fit sequence (identify.fitting) on several recordings: each recording's account
+    (module doc) in joint_, and the verdict failed when one model does not explain them all."""
     t0 = time.perf_counter()
-    parts = [holdout_blocks(s, ident.holdout_fraction) for s in sigs]
-    gram = BlockGram.concatenate([ident._gram(s, edges) for s, (edges, _) in zip(sigs, parts)])
-    held = np.concatenate([h for _, h in parts])
-    timings["library_gram"] = time.perf_counter() - t0
-    n_eff = sum(effective_samples(s) for s in sigs)
-    train, _, coefs = ident._fit_pass(n_eff, gram, held, timings)
-    training = SparseModel(coefs, ("q1", "q2"), (sigs[0].input_name,))
-    even = [r.source for r, s in zip(recordings, sigs) if s.band_hz[0] > 0 and has_even_force(training, s)]
-    if even:
-        raise IdentificationError(
-            "the joint fit has a force with an even part (" + ", ".join(training.equations["q1_dot"]) + "): its "
-            "displacement below the band is carried per record (identify.inband), which joint identification "
-            "does not do; identify the recordings one by one")
-    ident.recording_, ident.recordings_, ident.joint_states_ = None, list(recordings), sigs
-    ident.states_ = sigs[0]  # names the states and input; bands and rows are per recording (joint_)
-    ident.offset_ = {"carried": False, "passes": 0}
-    ident.heldout_rows_ = np.concatenate([np.repeat(h, np.diff(e)) for e, h in parts])
-    coefs = ident._budget_by_free_run(sigs, train, held, coefs, timings)
-    ident.training_model_ = training = SparseModel(coefs, ("q1", "q2"), (sigs[0].input_name,))
-
-    t0 = time.perf_counter()
-    bias_of = None
-    if ident.bias_replicates != 0:
-        def gram_of(noisy, columns):
-            return BlockGram.concatenate([ident._gram(s, e, columns) for s, (e, _) in zip(noisy, parts)])
-
-        def bias_of(sups, coefs):
-            return unc.estimate_chain_bias(ident.bias_method, list(recordings), sigs, gram, ident.library_, sups,
-                                           coefs, gram_of, ident.bias_replicates)
-    reported, ident.standard_errors_, ident.uncertainty_ = ident._trust(gram, held, n_eff, bias_of)
-    timings["refit_uncertainty"] = time.perf_counter() - t0
-    ident.model_ = SparseModel(reported, ("q1", "q2"), (sigs[0].input_name,), ident.standard_errors_)
-    validated = ident._free_run_choice(sigs, timings)  # the training fit, or its free-run refit
-
-    t0 = time.perf_counter()
-    per = [_recording(ident, gram, validated, i, r, s, e, h)
-           for i, (r, s, (e, h)) in enumerate(zip(recordings, sigs, parts))]
+    per = [_recording(ident, i, src, run) for i, (src, run) in enumerate(zip(ident.sources_, runs))]
     timings["per_recording"] = time.perf_counter() - t0
-    runs = [p.pop("_runs") for p in per]
-    ident.validation_ = _pooled(validated, runs) if ident.validate else None
     if ident.validation_ is not None and ident.budget_ is not None and ident.budget_refit == "all":
-        ident.validation_["heldout_fitted"] = True  # the winner's coefficients saw these rows
         for p in per:
-            p["validation"]["heldout_fitted"] = True
-    ident.verdict_ = fit_verdict(ident.validation_, validated, ident.model_, sigs[0].input_name)
+            p["validation"]["heldout_fitted"] = True  # the winner's coefficients saw these rows
     flagged = [p for p in per if p["status"] == "inconsistent"]
     failed = [p for p in per if p["status"] == "failed"]
     if flagged or failed:  # the per-recording findings first: they say what is wrong with the set
@@ -160,37 +118,33 @@ def fit_joint(ident, recordings: list):
     ident.joint_ = {"recordings": per, "rule": {"z_change": Z_CHANGE, "change_ratio": CHANGE_RATIO,
                                                 "change_floor_nrmse": CHANGE_FLOOR,
                                                 "compared": [SIGNALS[k] for k in COMPARED]}}
-    ident.timings_ = timings
-    return ident
 
 
-def _recording(ident, gram: BlockGram, model: SparseModel, i: int, rec, sig, edges, held) -> dict:
-    """One recording's account: its chain, the joint model's held-out free run on it (`model`, the one
+def _recording(ident, i: int, source, run) -> dict:
+    """One recording's account: its chain, the joint model's held-out free run on it (the one
     validated), the recording identified alone, the consistency of its coefficients with the joint
     ones, and its status."""
+    rec, sig, (edges, held) = source.recording, source.sig, ident.blocks_[i]
+    model, gram = ident.validated_model_, ident.gram_
     rows = np.repeat(held, np.diff(edges))
     part = gram.part(i)
     out = {"source": rec.source, "samples": int(rec.input.size), "fs_hz": float(rec.fs_hz),
            "band_hz": list(sig.band_hz), "valid_samples": [sig.valid.start, sig.valid.stop],
            "fit_samples": int(np.count_nonzero(~rows)), "heldout_samples": int(np.count_nonzero(rows)),
-           "status": "unvalidated", "reason": "the free-run validation was not run", "_runs": None}
+           "status": "unvalidated", "reason": "the free-run validation was not run"}
     out["coefficient_z"] = _coefficient_z(ident, gram, part)
     # the recording alone: same path and rule on its own blocks
-    from .identifier import effective_samples
-
     train, heldout = part.equations(~held), part.equations(held) if held.any() else None
-    sels = ident._select(ident._optimizer().fit_path(train), train, heldout, effective_samples(sig))
+    sels = select_supports(ident, make_optimizer(ident).fit_path(train), train, heldout, effective_samples(sig))
     names = ident.library_.names
     alone = SparseModel({eq: {names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)} for eq, s in sels.items()},
                         ("q1", "q2"), (sig.input_name,))
     out["alone"] = {"model": alone.to_dict()["model"]}
-    if not ident.validate:
+    if run is None:
         return out
-    mask = rows if held.any() else np.ones_like(rows)
-    val, sim_states, sim_qdot = validate(model, sig, mask)
+    val = run[4]
     out["validation"] = val
-    out["_runs"] = (sig, mask, sim_states, sim_qdot, val)
-    alone_val = validate(alone, sig, mask)[0]
+    alone_val = source.validate(alone, edges, held)[0]
     out["alone"]["validation"] = {k: alone_val[k] for k in ("diverged", "heldout")}
     verdict = model_verdict(val, model, sig.input_name)
     out["status"], out["reason"] = verdict["status"], verdict["reason"]
@@ -230,34 +184,6 @@ def _coefficient_z(ident, gram: BlockGram, part: BlockGram) -> dict:
         se = np.sqrt(np.maximum(np.diag(cov), 0.0))
         out[eq] = {names[j]: (float((own[j] - joint[j]) / s) if s > 0 else 0.0)
                    for j, s in zip(np.flatnonzero(sel.support), se)}
-    return out
-
-
-def _pooled(model: SparseModel, runs: list) -> dict:
-    """The joint model's free-run metrics over all recordings' held-out (and all valid) rows pooled, in
-    the shape of validation.validate's (so the verdict and the report read it as a single record's);
-    runs: per recording (sig, held-out mask, simulated states, simulated q1_dot, its validation)."""
-    measured = {k: [] for k in SIGNALS}
-    simulated = {k: [] for k in SIGNALS}
-    one_step = []
-    for sig, mask, sim_states, sim_qdot, _ in runs:
-        v = sig.valid
-        for k, m, s in (("q1_dot", sig.q1_dot[v], sim_qdot), ("q1", sig.q1[v], sim_states[:, 0]),
-                        ("q2", sig.q2[v], sim_states[:, 1])):
-            measured[k].append(m)
-            simulated[k].append(s)
-        x = sig.states[v]
-        one_step.append(first_equation(model, x[:, 0], x[:, 1], sig.input[v][:, None]))
-    mask = np.concatenate([r[1] for r in runs])
-    out = {"diverged": any(r[4]["diverged"] for r in runs), "substeps": max(r[4]["substeps"] for r in runs),
-           "samples_per_step": min(r[4]["samples_per_step"] for r in runs), "heldout": {}, "all": {},
-           "heldout_samples": int(np.count_nonzero(mask)), "pooled_recordings": len(runs)}
-    for k in SIGNALS:
-        m, s = np.concatenate(measured[k]), np.concatenate(simulated[k])
-        out["heldout"][k] = fit_metrics(m[mask], s[mask])
-        out["all"][k] = fit_metrics(m, s)
-    acc = np.concatenate(measured["q1_dot"])
-    out["equation_error"] = {"q1_dot": fit_metrics(acc[mask], np.concatenate(one_step)[mask])}
     return out
 
 

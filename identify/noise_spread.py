@@ -285,7 +285,9 @@ def noise_variance(parts, supports: dict, coefs: dict, G: np.ndarray, col_exps: 
     """{equation: (m,) variance of the refit from the sensor noise, linearised}.
 
     parts : per recording (signals, noise, (std_in, std_out)): signals the (q1, q2, q1_dot, input) rows
-    the Gram was summed over, noise its chain_noise.BandLimitedNoise; G : the all-rows normal matrix (all
+    the Gram was summed over, noise its chain_noise.BandLimitedNoise; or, for a record read in chunks,
+    per chunk (signals, noise, floors, core): the chunk's rows with an overlap on each side, the noise
+    on that stretch, and the slice of the chunk's own rows in it (any iterable: consumed once); G : the all-rows normal matrix (all
     recordings); coefs : {equation: (m,) all-rows coefficients}; col_exps, target_exps : monomial
     exponents of the columns and of each equation's target (identify.corrected). Exact responses
     H_v = gain (j w)^p on the bins (chain_noise.BandLimitedNoise), as the chain and the noise draws have them."""
@@ -294,21 +296,44 @@ def noise_variance(parts, supports: dict, coefs: dict, G: np.ndarray, col_exps: 
     kept = {e: np.flatnonzero(sup) for e, sup in supports.items()
             if sup.any() and not (sup.sum() == 1 and col_exps[np.flatnonzero(sup)[0]] == target_exps[e])}
     V = {e: np.zeros((S.size, S.size)) for e, S in kept.items()}
-    for y, noise, (s_in, s_out) in parts:
+
+    def sums(y, noise) -> dict:
+        """{equation: (2, |S|, kk) U} of rows y on noise's bins."""
         scores = {e: _Score(y[0].size, noise, [col_exps[j] for j in S], target_exps[e], coefs[e][S])
                   for e, S in kept.items()}
         _transform(scores.values(), y, noise)
-        c, w = noise.white_covariance(s_in, s_out), noise.bin_weights()
+        out = {}
         for e, score in scores.items():
-            U = np.zeros((2, kept[e].size, noise.responses[0].size), dtype=complex)
-            score.accumulate(U)
+            out[e] = np.zeros((2, kept[e].size, noise.responses[0].size), dtype=complex)
+            score.accumulate(out[e])
+        return out
+
+    for part in parts:
+        y, noise, (s_in, s_out) = part[:3]
+        U_all = sums(y, noise)
+        U_core = U_all
+        if len(part) > 3:
+            # a stretch of a record read in chunks (identify.out_of_core): the rows `core` of y, paired with
+            # all of y (core and its overlap on each side), so the sum over chunks pairs every row with the
+            # rows within the overlap of it, as the whole record's transform does up to the noise's
+            # correlation beyond the overlap; the core's transform is shifted to y's time origin
+            core = part[3]
+            U_core = sums(tuple(x[core] for x in y), noise)
+            shift = np.exp(-2j * np.pi * np.arange(noise.responses[0].size) * core.start / noise.nfft)
+            for U in U_core.values():
+                U *= shift
+        c, w = noise.white_covariance(s_in, s_out), noise.bin_weights()
+        for e in kept:
             # sum_ij c_ij / nfft sum_k w_k Re(U_i U_j^H): every (i, j) block of one (2|S|, 2|S|) product, in
             # real arithmetic (Re(a conj b) = a_re b_re + a_im b_im: U's real view), with w_k = 2 on every
             # bin and the few bins of another weight (DC, Nyquist) corrected after: no weighted copy of U
-            Ur = U.reshape(U.shape[0] * U.shape[1], -1).view(float)
-            P = 2.0 * (Ur @ Ur.T)
+            Ur = U_all[e].reshape(2 * kept[e].size, -1).view(float)
+            Uc = Ur if U_core is U_all else U_core[e].reshape(2 * kept[e].size, -1).view(float)
+            P = 2.0 * (Uc @ Ur.T)
             for k in np.flatnonzero(w != 2.0):
-                P += (w[k] - 2.0) * (Ur[:, 2 * k:2 * k + 2] @ Ur[:, 2 * k:2 * k + 2].T)
+                P += (w[k] - 2.0) * (Uc[:, 2 * k:2 * k + 2] @ Ur[:, 2 * k:2 * k + 2].T)
+            if Uc is not Ur:
+                P = 0.5 * (P + P.T)
             P = P.reshape(2, kept[e].size, 2, kept[e].size)
             V[e] += np.einsum("ij,iajb->ab", c, P) / noise.nfft
     out = {}

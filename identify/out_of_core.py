@@ -11,16 +11,19 @@ Steps, each with memory bounded by the chunk (identify.chunked):
    added into the blocks it overlaps (a block spans chunks, a chunk spans blocks: the sums are the
    same either way). Chunks are independent given the scan, so `map_chunks` may spread them over
    Dask workers (shakeid.cli passes a client's map);
-3. from the summed BlockGram on: SparseIdentifier's own path, selection, all-rows refit, block-robust
-   standard errors and inclusion probabilities (inherited, not copied: identical decisions on identical
-   normal equations);
+3. from the summed BlockGram on: the one fit sequence (identify.fitting): path, selection, all-rows
+   refit, the chain's bias in closed form, standard errors and inclusion probabilities, the same code
+   as in core on the same normal equations. The closed-form bias (identify.corrected) reads the noise
+   floors from the scan's spectra and the noise covariance from the band, and its raw moments from the
+   Gram: no pass over the record. The noise's share of the variance (identify.noise_spread) needs the
+   score's transforms: one more pass, chunk by chunk, each chunk's rows paired with an overlap of
+   NOISE_OVERLAP (the chain's overlap) on each side (ChunkedNoise.score_pieces);
 4. validation: free run on held-out windows (below), each started from the measured state.
 
 What is not done out of core, and why (also in result()["out_of_core"]):
-- SIMEX chain bias (identify.uncertainty.chain_bias): 16 replicates of the chain on fresh noise would
-  read and transform the whole record 16 more times; the coefficients are reported without the bias
-  correction and the standard errors are the block-robust ones (on long records the bias, a multiple
-  of the noise variance, stays while the standard errors shrink: a known limitation).
+- SIMEX (bias_method="simex", or kept terms that are not monomials of the states and input, sign(q1),
+  |q1|, ...): its replicates would read and transform the whole record once each; the coefficients of
+  such a fit are reported without the chain-bias correction, and uncertainty.chain_bias_skipped says so.
 - the displacement below the band for even forces (identify.inband.carry_offset): it solves for a slow
   displacement over the whole record. When the selected force has an even part the result says so.
 - budget="free-run" and refine="free-run": both simulate the whole fit rows repeatedly; refused.
@@ -42,20 +45,27 @@ from collections import Counter
 
 import numpy as np
 
+from .chain_noise import BandLimitedNoise
 from .chunked import CHUNK_SAMPLES, ChunkedChain, chunk_ranges
 from .errors import IdentificationError
+from .fitting import fit_sources
 from .gram import BlockGram
-from .identifier import SparseIdentifier, effective_samples, holdout_blocks
+from .identifier import SparseIdentifier
 from .inband import has_even_force
 from .library import Library
 from .model import SparseModel
-from .validation import first_equation, fit_metrics, fit_verdict, free_run
+from .uncertainty import floors_read, noise_floors
+from .validation import first_equation, fit_metrics, free_run
 
 #: Scored length of each held-out validation window (s); the 10 held-out blocks of a 13-hour record
 #: give 10 minutes of free run in all.
 VALIDATION_WINDOW_S = 60.0
-SIMEX_SKIPPED = ("not done out of core: its replicates would read and transform the whole record once "
-                 "each; coefficients are not corrected for the chain's bias and standard errors are block-robust only")
+SIMEX_SKIPPED = ("SIMEX is not done out of core: its replicates would read and transform the whole record once "
+                 "each; coefficients are not corrected for the chain's bias (the closed form needs every kept term "
+                 "a monomial of the states and input)")
+#: The noise covariance (a lag-0 sum over the band's bins, nearly independent of the length it is taken
+#: on) from at most this many samples' bins: 1e8 samples' would hold ~400 MB of filter responses.
+COVARIANCE_SAMPLES = 1 << 22
 
 
 def chunk_gram(source, chain: ChunkedChain, library: Library, edges: np.ndarray, a: int, b: int):
@@ -74,6 +84,141 @@ def chunk_gram(source, chain: ChunkedChain, library: Library, edges: np.ndarray,
 def _serial_map(fn, jobs):
     for job in jobs:
         yield fn(*job)
+
+
+class ChunkedEquations:
+    """A record read in chunks as the fit sequence's source (identify.sources.NormalEquationsSource):
+    the chunked chain's Grams (chunk_gram, over map_chunks), its noise read chunk by chunk, and the free
+    run on held-out windows."""
+
+    in_core = False
+
+    def __init__(self, source, chain: ChunkedChain, chunk_samples: int, window_s: float, progress=None,
+                 map_chunks=None):
+        self.source, self.chain, self.chunk_samples, self.window_s = source, chain, int(chunk_samples), window_s
+        self.progress, self.map_chunks, self.name = progress, map_chunks, source.source
+        self.sig = chain.summary()
+        self.computed_on: dict = {}
+
+    def _ranges(self, stop: int) -> list:
+        return chunk_ranges(0, stop, self.chunk_samples)
+
+    def gram(self, library, edges, columns=None) -> BlockGram:
+        """BlockGram over `edges` summed from per-chunk Grams (chunk_gram)."""
+        if columns is not None:
+            raise IdentificationError("Grams of library columns re-read the record: not done out of core")
+        gram = BlockGram.zeros(edges, len(library) + 2, 2)
+        jobs = [(self.source, self.chain, library, edges, a, b) for a, b in self._ranges(int(edges[-1]))]
+        where = Counter()
+        for done, (blocks, C, host) in enumerate((self.map_chunks or _serial_map)(chunk_gram, jobs), start=1):
+            gram.add(blocks, C)
+            where[host] += 1
+            if self.progress:
+                self.progress("gram", done, len(jobs))
+        self.computed_on = dict(where)  # chunks per process ("host:pid")
+        return gram
+
+    def even_force(self, model: SparseModel) -> bool:
+        return False  # not carried out of core: the validation windows say when it has one
+
+    def carry_offset(self, library, edges, fit_blocks):
+        raise IdentificationError("the displacement below the band is not carried out of core")
+
+    def noise_floors(self):
+        s = self.sig
+        if s.spectra is not None:
+            return noise_floors(self.source, s.band_hz, s.spectra)  # the scan's spectra: fs_hz is all it reads
+        return floors_read(lambda a, b: self.source.read(a, b), int(self.chain.n), s.fs_hz, s.band_hz)
+
+    def noise_model(self) -> BandLimitedNoise:
+        c = self.chain
+        return BandLimitedNoise(min(int(c.n), COVARIANCE_SAMPLES), c.fs_hz, c.band_hz, c.layout)
+
+    def _valid_states(self, a: int, b: int):
+        """(q1, q2, q1_dot, input) on valid rows [a, b) (valid-row coordinates)."""
+        v0 = self.chain.valid.start
+        return self.chain.states(self.source, v0 + a, v0 + b)
+
+    def moment_sum(self, k: tuple) -> float:
+        """A raw moment the Gram lacks: one pass over the valid rows."""
+        total = 0.0
+        for a, b in self._ranges(self.chain.valid.stop - self.chain.valid.start):
+            y = self._valid_states(a, b)
+            col = np.ones_like(y[0])
+            for v, p in enumerate(k):
+                if p:
+                    col = col * y[v] ** p
+            total += float(col.sum())
+        return total
+
+    def score_pieces(self, noise, floor):
+        """Per chunk of valid rows, (its rows with NOISE_OVERLAP on each side, the noise on that stretch,
+        floor, the chunk's slice in it): noise_spread.noise_variance pairs each chunk's rows with those
+        within the overlap, which is the whole record's sum up to the noise's correlation beyond it."""
+        c, nv = self.chain, self.chain.valid.stop - self.chain.valid.start
+        reach = c.overlap
+        ranges = self._ranges(nv)
+        for i, (a, b) in enumerate(ranges):
+            ea, eb = max(a - reach, 0), min(b + reach, nv)
+            y = self._valid_states(ea, eb)
+            yield y, BandLimitedNoise(eb - ea, c.fs_hz, c.band_hz, c.layout), floor, slice(a - ea, b - ea)
+            if self.progress:
+                self.progress("noise share", i + 1, len(ranges))
+
+    def simex_inputs(self):
+        return None
+
+    def bias_unavailable(self, method: str) -> str:
+        return SIMEX_SKIPPED
+
+    def windows(self, edges, held) -> list[tuple[int, int, int, int]]:
+        """(start, stop, scored start, scored stop) in record samples of each validation window: the
+        middle of a held-out block, up to window_s long, scored; a guard on each side (into the
+        neighbouring blocks, never scored) lets the start's transient and the band's edge effects decay."""
+        chain = self.chain
+        guard = chain.taper_n + chain.live_guard
+        scored = int(round(self.window_s * chain.fs_hz))
+        v0, nv = chain.valid.start, int(edges[-1])
+        out = []
+        for k in np.flatnonzero(held) if held.any() else range(len(edges) - 1):
+            a, b = int(edges[k]), int(edges[k + 1])
+            s = min(scored, b - a)
+            sa = a + (b - a - s) // 2
+            out.append((v0 + max(sa - guard, 0), v0 + min(sa + s + guard, nv), v0 + sa, v0 + sa + s))
+        return out
+
+    def validate(self, model: SparseModel, edges, held):
+        """identify.validation.validate's document, over the held-out windows (module doc); no run to
+        pool (one record out of core)."""
+        names = ("q1_dot", "q1", "q2")
+        measured, simulated = {k: [] for k in names}, {k: [] for k in names}
+        one_step = []
+        diverged, substeps, samples_per_step, even = False, 0, None, False
+        windows = self.windows(edges, held)
+        for i, (a, b, ka, kb) in enumerate(windows):
+            sig = self.chain.signals(self.source, a, b)
+            even = even or has_even_force(model, sig)
+            sim, qdot, used, div, stride = free_run(model, sig)
+            substeps = max(substeps, int(used))
+            samples_per_step = int(stride) if samples_per_step is None else min(samples_per_step, int(stride))
+            diverged = diverged or bool(div)
+            keep = slice(ka - a, kb - a)
+            for k, m, s in zip(names, (sig.q1_dot, sig.q1, sig.q2), (qdot, sim[:, 0], sim[:, 1])):
+                measured[k].append(m[keep])
+                simulated[k].append(s[keep])
+            one_step.append(first_equation(model, sig.q1[keep], sig.q2[keep], sig.input[keep][:, None]))
+            if self.progress:
+                self.progress("validation windows", i + 1, len(windows))
+        cat = {k: (np.concatenate(measured[k]), np.concatenate(simulated[k])) for k in names}
+        metrics = {k: fit_metrics(*cat[k]) for k in names}
+        self.even_force_seen = even
+        return {"diverged": diverged, "substeps": substeps, "samples_per_step": samples_per_step, "heldout": metrics,
+                "all": {k: None for k in names},  # not simulated: the whole record is never free-run
+                "heldout_samples": int(cat["q1"][0].size),
+                "equation_error": {"q1_dot": fit_metrics(cat["q1_dot"][0], np.concatenate(one_step))},
+                "windows": {"count": len(windows), "scored_s": float(self.window_s),
+                            "scored_starts": [int(w[2]) for w in windows],
+                            "method": "free run from the measured state on each held-out window"}}, None
 
 
 class ChunkedIdentifier(SparseIdentifier):
@@ -95,116 +240,35 @@ class ChunkedIdentifier(SparseIdentifier):
         if self.refine is not None or (self.budget == "free-run" and self.max_terms is not None):
             raise IdentificationError("free-run budgets and refinement simulate the whole record repeatedly: "
                                       "not available out of core")
-        self._optimizer()
+        self._check_options()
         timings = {}
         t0 = time.perf_counter()
         chain = ChunkedChain.scan(source, self.band_hz, self.harmonics, self.taper_s, self.chunk_samples, progress)
         timings["scan"] = time.perf_counter() - t0
-        sig = chain.summary()
-        self.recording_ = None  # no SIMEX (see module doc)
-        self.source_, self.chain_, self.states_ = source, chain, sig
-        self.library_ = lib = Library(("q1", "q2"), (sig.input_name,), self.degree, self.extra_terms)
-        edges, held = holdout_blocks(sig, self.holdout_fraction, self.holdout_samples)
-        self.edges_, self.held_ = edges, held
-        t0 = time.perf_counter()
-        gram = self._chunked_gram(source, chain, edges, progress, map_chunks)
-        timings["chain_library_gram"] = time.perf_counter() - t0
-        train, heldout, coefs = self._fit_pass(effective_samples(sig), gram, held, timings)
-        self.training_model_ = SparseModel(coefs, ("q1", "q2"), (sig.input_name,))
-        self.budget_, self.refinement_ = None, None
-        self.offset_ = {"carried": False, "passes": 0}
-        t0 = time.perf_counter()
-        reported, self.standard_errors_, self.uncertainty_ = self._trust(gram, held, effective_samples(sig), None)
-        self.uncertainty_["chain_bias_skipped"] = SIMEX_SKIPPED
-        timings["refit_uncertainty"] = time.perf_counter() - t0
-        self.model_ = SparseModel(reported, ("q1", "q2"), (sig.input_name,), self.standard_errors_)
-        self.validation_ = None
-        if self.validate:
-            t0 = time.perf_counter()
-            self.validation_ = self._validate_windows(self.training_model_, progress)
-            timings["validation"] = time.perf_counter() - t0
-        if self.validation_ is not None and self.validation_.pop("even_force"):
+        eqs = ChunkedEquations(source, chain, self.chunk_samples, self.window_s, progress, map_chunks)
+        self.recording_, self.joint_, self.source_, self.chain_ = None, None, source, chain
+        self.states_ = eqs.sig
+        self.library_ = Library(("q1", "q2"), (eqs.sig.input_name,), self.degree, self.extra_terms)
+        fit_sources(self, [eqs], timings)
+        timings["chain_library_gram"] = timings.pop("library_gram")
+        self.computed_on_ = eqs.computed_on
+        if getattr(eqs, "even_force_seen", False):
             self.offset_["note"] = ("the selected force has an even part; its displacement below the band is "
                                     "not carried out of core (identify.out_of_core)")
-        self.verdict_ = fit_verdict(self.validation_, self.training_model_, self.model_, sig.input_name)
         self.timings_ = timings
         return self
 
-    def _chunked_gram(self, source, chain, edges, progress, map_chunks) -> BlockGram:
-        """BlockGram over `edges` summed from per-chunk Grams (chunk_gram)."""
-        lib = self.library_
-        gram = BlockGram.__new__(BlockGram)
-        gram._setup(edges, len(lib) + 2, 2)
-        jobs = [(source, chain, lib, edges, a, b) for a, b in chunk_ranges(0, int(edges[-1]), self.chunk_samples)]
-        where = Counter()
-        for done, (blocks, C, host) in enumerate((map_chunks or _serial_map)(chunk_gram, jobs), start=1):
-            gram.C[blocks] += C
-            where[host] += 1
-            if progress:
-                progress("gram", done, len(jobs))
-        self.computed_on_ = dict(where)  # chunks per process ("host:pid")
-        return gram
-
-    def _windows(self) -> list[tuple[int, int, int, int]]:
-        """(start, stop, scored start, scored stop) in record samples of each validation window: the
-        middle of a held-out block, up to window_s long, scored; a guard on each side (into the
-        neighbouring blocks, never scored) lets the start's transient and the band's edge effects decay."""
-        chain, edges = self.chain_, self.edges_
-        guard = chain.taper_n + chain.live_guard
-        scored = int(round(self.window_s * chain.fs_hz))
-        v0, nv = chain.valid.start, int(edges[-1])
-        out = []
-        for k in np.flatnonzero(self.held_) if self.held_.any() else range(len(edges) - 1):
-            a, b = int(edges[k]), int(edges[k + 1])
-            s = min(scored, b - a)
-            sa = a + (b - a - s) // 2
-            out.append((v0 + max(sa - guard, 0), v0 + min(sa + s + guard, nv), v0 + sa, v0 + sa + s))
-        return out
-
-    def _validate_windows(self, model: SparseModel, progress=None) -> dict:
-        """identify.validation.validate's document, over the held-out windows (module doc)."""
-        names = ("q1_dot", "q1", "q2")
-        measured, simulated = {k: [] for k in names}, {k: [] for k in names}
-        one_step = []
-        diverged, substeps, samples_per_step, even = False, 0, None, False
-        windows = self._windows()
-        for i, (a, b, ka, kb) in enumerate(windows):
-            sig = self.chain_.signals(self.source_, a, b)
-            even = even or has_even_force(model, sig)
-            sim, qdot, used, div, stride = free_run(model, sig)
-            substeps = max(substeps, int(used))
-            samples_per_step = int(stride) if samples_per_step is None else min(samples_per_step, int(stride))
-            diverged = diverged or bool(div)
-            keep = slice(ka - a, kb - a)
-            for k, m, s in zip(names, (sig.q1_dot, sig.q1, sig.q2), (qdot, sim[:, 0], sim[:, 1])):
-                measured[k].append(m[keep])
-                simulated[k].append(s[keep])
-            one_step.append(first_equation(model, sig.q1[keep], sig.q2[keep], sig.input[keep][:, None]))
-            if progress:
-                progress("validation windows", i + 1, len(windows))
-        cat = {k: (np.concatenate(measured[k]), np.concatenate(simulated[k])) for k in names}
-        metrics = {k: fit_metrics(*cat[k]) for k in names}
-        return {"diverged": diverged, "substeps": substeps, "samples_per_step": samples_per_step, "heldout": metrics,
-                "all": {k: None for k in names},  # not simulated: the whole record is never free-run
-                "heldout_samples": int(cat["q1"][0].size),
-                "equation_error": {"q1_dot": fit_metrics(cat["q1_dot"][0], np.concatenate(one_step))},
-                "windows": {"count": len(windows), "scored_s": float(self.window_s),
-                            "scored_starts": [int(w[2]) for w in windows],
-                            "method": "free run from the measured state on each held-out window"},
-                "even_force": even}
-
     def result(self) -> dict:
-        """SparseIdentifier.result(), its row counts from the blocks, plus an "out_of_core" section."""
-        self.heldout_rows_ = np.zeros(0, dtype=bool)  # never materialised: counted from the blocks below
+        """SparseIdentifier.result() plus an "out_of_core" section."""
         out = super().result()
-        counts = np.diff(self.edges_)
-        out["chain"]["fit_samples"] = int(counts[~self.held_].sum())
-        out["chain"]["heldout_samples"] = int(counts[self.held_].sum())
+        edges = self.blocks_[0][0]
+        bias = self.uncertainty_.get("chain_bias")
         out["out_of_core"] = {
             "samples": int(self.chain_.n), "chunk_samples": int(self.chunk_samples),
             "overlap_samples": int(self.chain_.overlap),
-            "chunks": len(chunk_ranges(0, int(self.edges_[-1]), self.chunk_samples)),
-            "chain_bias": SIMEX_SKIPPED, "computed_on": self.computed_on_,
+            "chunks": len(chunk_ranges(0, int(edges[-1]), self.chunk_samples)),
+            "chain_bias": bias["method"] if bias else self.uncertainty_.get("chain_bias_skipped"),
+            "computed_on": self.computed_on_,
             "validation": f"free run on {self.validation_['windows']['count'] if self.validation_ else 0} "
                           f"held-out windows of {self.window_s:g} s, each from its measured state",
         }

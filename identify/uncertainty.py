@@ -35,6 +35,7 @@ measurement chain:
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 from scipy.stats import chi2
@@ -203,46 +204,96 @@ TARGET_EXPONENTS = [(0, 0, 1, 0), (1, 0, 0, 0)]
 ANALYTIC, SIMEX = "analytic (corrected score)", "SIMEX"
 
 
-def analytic_chain_bias(recording, sig, gram: BlockGram, library, supports: dict, coefs: dict) -> dict | None:
+class RecordNoise:
+    """What the closed-form chain bias and the noise's share of the variance read of one recording held
+    in memory (identify.out_of_core.ChunkedNoise reads the same chunk by chunk): its noise floors, the
+    chain's image of white noise, raw moment sums the Gram lacks, and the rows the score is built of."""
+
+    def __init__(self, recording, sig):
+        self.recording, self.sig = recording, sig
+
+    def noise_floors(self):
+        return noise_floors(self.recording, self.sig.band_hz, self.sig.spectra)
+
+    def noise_model(self) -> BandLimitedNoise:
+        r, s = self.recording, self.sig
+        return BandLimitedNoise(r.input.size, s.fs_hz, s.band_hz, r.layout)
+
+    def signals(self):
+        v = self.sig.valid
+        return self.sig.q1[v], self.sig.q2[v], self.sig.q1_dot[v], self.sig.input[v]
+
+    def moment_sum(self, k: tuple) -> float:
+        """sum over the valid rows of the monomial with exponents k over (q1, q2, q1_dot, input)."""
+        y = self.signals()
+        col = np.ones_like(y[0])
+        for v, p in enumerate(k):
+            if p:
+                col = col * y[v] ** p
+        return float(col.sum())
+
+    def score_pieces(self, noise, floor) -> list:
+        """noise_spread.noise_variance's parts: the valid rows whole."""
+        return [(self.signals(), noise, floor)]
+
+
+def closed_form_bias(records: list, gram: BlockGram, library, supports: dict, coefs: dict) -> dict | None:
     """The chain's bias in closed form (identify.corrected), in chain_bias's shape with
     "method": ANALYTIC, "replicates": 0 and no Monte Carlo error (mc_var 0); spread_var is the noise's
     share of the refit's variance, linearised on the band's bins (identify.noise_spread). None when SIMEX
     must do it: a kept term is not a monomial of the states and input, an offset is carried (the
     columns then go through the band: not monomials of the noisy states), or a noise floor cannot be read.
-    recording, sig : one of each, or lists (a joint fit; gram's segments are the recordings)."""
-    several = isinstance(recording, (list, tuple))
-    pairs = list(zip(recording, sig)) if several else [(recording, sig)]
-    if any(s.q2_offset is not None for _, s in pairs):
+    records : per recording (gram's segments) a RecordNoise, or anything that reads the same (its .sig
+    names the band and input; out of core: identify.out_of_core.ChunkedNoise)."""
+    several = len(records) > 1
+    if any(r.sig.q2_offset is not None for r in records):
         return None
-    col_exps = [term_exponents(t, pairs[0][1].input_name) for t in library.terms]
+    col_exps = [term_exponents(t, records[0].sig.input_name) for t in library.terms]
     if any(col_exps[j] is None for sup in supports.values() for j in np.flatnonzero(sup)):
         return None
-    floors = [noise_floors(r, s.band_hz, s.spectra) for r, s in pairs]
+    floors = [r.noise_floors() for r in records]
     if any(f is None for fl in floors for f in fl):
         return None
     parts, covs, spread_parts = [], [], []
-    for i, ((r, s), floor) in enumerate(zip(pairs, floors)):
-        noise = BandLimitedNoise(r.input.size, s.fs_hz, s.band_hz, r.layout)
+    for i, (r, floor) in enumerate(zip(records, floors)):
+        noise = r.noise_model()
         covs.append(noise.covariance(*floor))
         C = (gram.part(i) if several else gram).C.sum(0)
-        v = s.valid
-        signals = (s.q1[v], s.q2[v], s.q1_dot[v], s.input[v])
-        parts.append(CorrectedSums(covs[-1], gram_moments(C, col_exps + TARGET_EXPONENTS[:gram.p]), signals))
-        spread_parts.append((signals, noise, floor))
+        parts.append(CorrectedSums(covs[-1], gram_moments(C, col_exps + TARGET_EXPONENTS[:gram.p]), r.moment_sum))
+        spread_parts.append(r.score_pieces(noise, floor))  # lazily: out of core, chunk by chunk
     bias = analytic_bias(parts, supports, coefs, col_exps, TARGET_EXPONENTS)
     G = gram.equations(np.ones(gram.n_blocks, dtype=bool)).G
-    spread = noise_variance(spread_parts, supports, coefs, G, col_exps, TARGET_EXPONENTS)
+    spread = noise_variance(itertools.chain.from_iterable(spread_parts), supports, coefs, G, col_exps,
+                            TARGET_EXPONENTS)
     zero = {e: np.zeros(sup.size) for e, sup in supports.items()}
     return {"noise_std": floors if several else floors[0], "bias": bias, "spread_var": spread, "mc_var": zero,
             "replicates": 0, "method": ANALYTIC, "noise_cov": covs if several else covs[0]}
 
 
-def estimate_chain_bias(method: str, recording, sig, gram: BlockGram, library, supports: dict, coefs: dict,
+def analytic_chain_bias(recording, sig, gram: BlockGram, library, supports: dict, coefs: dict) -> dict | None:
+    """closed_form_bias of recordings in memory: recording, sig one of each, or lists (a joint fit)."""
+    several = isinstance(recording, (list, tuple))
+    pairs = list(zip(recording, sig)) if several else [(recording, sig)]
+    return closed_form_bias([RecordNoise(r, s) for r, s in pairs], gram, library, supports, coefs)
+
+
+def estimate_chain_bias(method: str, sources: list, gram: BlockGram, library, supports: dict, coefs: dict,
                         gram_of, n_replicates: int | None = N_REPLICATES) -> dict | None:
-    """The chain's bias as `method` asks ("auto": in closed form where it applies, analytic_chain_bias;
-    SIMEX, chain_bias, otherwise or for "simex"). Arguments as those two take them."""
-    return ((method == "auto" and analytic_chain_bias(recording, sig, gram, library, supports, coefs))
-            or chain_bias(recording, sig, supports, coefs, gram_of, n_replicates))
+    """The chain's bias as `method` asks ("auto": in closed form where it applies, closed_form_bias;
+    SIMEX, chain_bias, otherwise or for "simex", where every source holds its recording in memory:
+    source.simex_inputs() -> (recording, sig), else None and no correction). sources: one per recording
+    (identify.sources.NormalEquationsSource: each is a RecordNoise's reader); gram_of as chain_bias's."""
+    if method == "auto":
+        closed = closed_form_bias(sources, gram, library, supports, coefs)
+        if closed is not None:
+            return closed
+    held = [s.simex_inputs() for s in sources]
+    if any(h is None for h in held):
+        return None
+    recs, sigs = [h[0] for h in held], [h[1] for h in held]
+    if len(held) == 1:
+        return chain_bias(recs[0], sigs[0], supports, coefs, gram_of, n_replicates)
+    return chain_bias(recs, sigs, supports, coefs, gram_of, n_replicates)
 
 
 #: The noise floors are read from at most this many stretches of FLOOR_STRETCH Welch segments, spread
@@ -268,17 +319,22 @@ def noise_floors(recording, band_hz, spectra: BandSpectra | None = None) -> tupl
         if s_in is None or s_resp is None:
             return s_in, s_resp
         return s_in, float(np.sqrt(max(s_resp**2 - s_in**2, 0.0)))
-    nper = int(min(1024, max(recording.input.size // 8, 64)))
-    x = np.vstack([recording.input, recording.output])
+    return floors_read(lambda a, b: (recording.input[a:b], recording.output[a:b]), recording.input.size, fs, band_hz)
+
+
+def floors_read(read, n: int, fs: float, band_hz) -> tuple[float | None, float | None]:
+    """noise_floors' Welch of the two channels, read(a, b) -> (input, output) samples [a, b) of a record of
+    n samples (a Recording's arrays, or a chunk source's reads out of core)."""
+    nper = int(min(1024, max(n // 8, 64)))
     length = FLOOR_STRETCH * nper
-    if x.shape[1] > 2 * FLOOR_STRETCHES * length:
-        starts = np.linspace(0, x.shape[1] - length, FLOOR_STRETCHES).astype(int)
-        f, p = welch_psd(np.concatenate([x[:, a:a + length] for a in starts]), fs, nper)
+    if n > 2 * FLOOR_STRETCHES * length:
+        starts = np.linspace(0, n - length, FLOOR_STRETCHES).astype(int)
+        f, p = welch_psd(np.concatenate([np.vstack(read(a, a + length)) for a in starts]), fs, nper)
         p = p.reshape(FLOOR_STRETCHES, 2, -1).mean(0)
         segments = FLOOR_STRETCHES * welch_segments(length, nper)
     else:
-        f, p = welch_psd(x, fs, nper)
-        segments = welch_segments(x.shape[1], nper)
+        f, p = welch_psd(np.vstack(read(0, n)), fs, nper)
+        segments = welch_segments(n, nper)
     return floor_std(f, p[0], segments, fs, band_hz), floor_std(f, p[1], segments, fs, band_hz)
 
 

@@ -123,6 +123,34 @@ def validate(model: SparseModel, sig: StateSignals, heldout_rows: np.ndarray, su
     return out, sim_states, sim_qdot
 
 
+def pooled_validation(model: SparseModel, runs: list) -> dict:
+    """A model's free-run metrics over several recordings' held-out (and all valid) rows pooled (a joint
+    fit, identify.joint), in the shape of validate's (so the verdict and the report read it as a single record's);
+    runs: per recording (sig, held-out mask, simulated states, simulated q1_dot, its validation)."""
+    measured = {k: [] for k in SIGNALS}
+    simulated = {k: [] for k in SIGNALS}
+    one_step = []
+    for sig, mask, sim_states, sim_qdot, _ in runs:
+        v = sig.valid
+        for k, m, s in (("q1_dot", sig.q1_dot[v], sim_qdot), ("q1", sig.q1[v], sim_states[:, 0]),
+                        ("q2", sig.q2[v], sim_states[:, 1])):
+            measured[k].append(m)
+            simulated[k].append(s)
+        x = sig.states[v]
+        one_step.append(first_equation(model, x[:, 0], x[:, 1], sig.input[v][:, None]))
+    mask = np.concatenate([r[1] for r in runs])
+    out = {"diverged": any(r[4]["diverged"] for r in runs), "substeps": max(r[4]["substeps"] for r in runs),
+           "samples_per_step": min(r[4]["samples_per_step"] for r in runs), "heldout": {}, "all": {},
+           "heldout_samples": int(np.count_nonzero(mask)), "pooled_recordings": len(runs)}
+    for k in SIGNALS:
+        m, s = np.concatenate(measured[k]), np.concatenate(simulated[k])
+        out["heldout"][k] = fit_metrics(m[mask], s[mask])
+        out["all"][k] = fit_metrics(m, s)
+    acc = np.concatenate(measured["q1_dot"])
+    out["equation_error"] = {"q1_dot": fit_metrics(acc[mask], np.concatenate(one_step)[mask])}
+    return out
+
+
 def _runs(rows: np.ndarray) -> list[slice]:
     """The runs of True of a boolean mask (the held-out blocks), as slices."""
     rows = np.asarray(rows, dtype=bool)

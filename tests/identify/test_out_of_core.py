@@ -16,10 +16,10 @@ TOLERANCE = {"q1*q2^2": 0.05}
 
 @pytest.fixture(scope="module")
 def fits(table1_run):
-    """The acceptance sweep (60 s at 2048 Hz) in 2^15-sample chunks (4 chunks of the 123 k), and in core
-    without the SIMEX bias step, which the out-of-core path does not take (its result says so)."""
+    """The acceptance sweep (60 s at 2048 Hz) in 2^15-sample chunks (4 chunks of the 123 k), and in core,
+    both with their defaults (the chain bias in closed form)."""
     rec = table1_run.recording
-    return (ChunkedIdentifier(chunk_samples=1 << 15).fit(rec), SparseIdentifier(bias_replicates=0).fit(rec))
+    return ChunkedIdentifier(chunk_samples=1 << 15).fit(rec), SparseIdentifier().fit(rec)
 
 
 def test_chunked_identification_recovers_the_table1_model(fits, table1_truth, true_q1_terms):
@@ -35,14 +35,17 @@ def test_chunked_identification_recovers_the_table1_model(fits, table1_truth, tr
     assert not val["diverged"] and val["windows"]["count"] == 10
     assert val["heldout"]["q1_dot"]["fit_percent"] > 98.0 and val["heldout"]["q2"]["fit_percent"] > 97.0
     assert res["out_of_core"]["chunks"] == 4
-    assert res["uncertainty"]["chain_bias"] is None and "not done out of core" in res["uncertainty"]["chain_bias_skipped"]
+    # the chain's bias is removed as in core, in closed form; nothing says it was skipped
+    assert res["uncertainty"]["chain_bias"]["method"] == res["out_of_core"]["chain_bias"] == "analytic (corrected score)"
+    assert "chain_bias_skipped" not in res["uncertainty"]
 
 
 def test_chunked_equals_in_core(fits):
-    """Same data, same blocks, the same method on normal equations that differ by the chain's 1e-6: the
-    same support, coefficients to 1e-6, the same row counts and inclusion probabilities; standard errors
-    to 1e-3 (they rest on the residuals, the small difference of target and fit, which carries the
-    chains' 1e-6 relative difference amplified: 1.2e-4 measured on q2)."""
+    """Same data, same blocks, the same fit sequence on normal equations that differ by the chain's 1e-6:
+    the same support, coefficients (chain bias removed in closed form) to 1e-6, the same row counts and
+    inclusion probabilities; standard errors to 1e-3 (they rest on the residuals, the small difference
+    of target and fit, which carries the chains' 1e-6 relative difference amplified, and on the noise's
+    share of the variance, summed chunk by chunk over an overlap: 2e-4 measured on q2^3)."""
     chunked, incore = fits
     a, b = chunked.result(), incore.result()
     for eq, terms in b["model"].items():
@@ -53,6 +56,7 @@ def test_chunked_equals_in_core(fits):
     for key in ("band_hz", "valid_samples", "fit_samples", "heldout_samples"):
         assert a["chain"][key] == pytest.approx(b["chain"][key]), key
     assert a["inclusion_probability"] == b["inclusion_probability"]
+    assert a["uncertainty"]["chain_bias"]["noise_std"] == pytest.approx(b["uncertainty"]["chain_bias"]["noise_std"])
     # the windows (10 s in the middle of each 2.4 s held-out block = the block) score like the whole run
     for k in ("q1_dot", "q1", "q2"):
         assert a["validation"]["heldout"][k]["fit_percent"] == pytest.approx(

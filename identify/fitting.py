@@ -1,0 +1,261 @@
+"""The one fit sequence: recordings' normal equations in, a validated sparse model with its trust out.
+
+    path -> selection -> (displacement below the band) -> (free-run budget) -> all-rows refit, chain
+    bias, standard errors, inclusion probabilities -> (free-run refinement) -> validation -> verdict
+
+Internally there is always a list of recordings, each a *normal-equations source*
+(identify.sources.NormalEquationsSource): its chain's states (or, out of core, their summary), its
+per-block normal equations on given block edges, what the chain bias and the noise's share of the
+variance need of it, and its free-run validation. In core (sources.RecordingEquations) and out of core
+(out_of_core.ChunkedEquations) differ only in how they produce those; the decisions made from them are
+the same code. Joint identification (identify.joint) is this sequence on several sources plus the
+consistency check across them.
+
+The identifier (identify.identifier.SparseIdentifier) holds the parameters and receives the fitted
+attributes; this module reads its parameters and sets them (model_, standard_errors_, validation_, ...).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from . import uncertainty as unc
+from .budget import choose_budget
+from .chain import StateSignals
+from .errors import IdentificationError
+from .gram import BlockGram
+from .model import SparseModel
+from .optimizers import ADMMLasso, STLSQ
+from .optimizers.base import least_squares
+from .refine import refine_free_run
+from .selection import heldout_supports, select
+from .sources import state_gram
+from .validation import fit_verdict, pooled_validation
+
+N_BLOCKS = 50
+STATES = ("q1", "q2")
+EQUATIONS = ("q1_dot", "q2_dot")
+
+
+def holdout_blocks(sig: StateSignals, fraction: float = 0.2, first_samples: int | None = None):
+    """Block edges over the valid rows, and which blocks are held out.
+
+    Default: N_BLOCKS equal blocks, `fraction` of them held out, spread evenly over the record.
+    `first_samples`: hold out the record's first N samples instead (the paper's split)."""
+    n = sig.valid.stop - sig.valid.start
+    if first_samples is not None:
+        n1 = int(np.clip(first_samples - sig.valid.start, 0, n))
+        if n - n1 < 64:
+            raise IdentificationError(f"holding out {first_samples} samples leaves {n - n1} to fit")
+        nb1 = max(int(round(N_BLOCKS * n1 / n)), 1) if n1 else 0
+        e1 = np.linspace(0, n1, nb1 + 1).round().astype(int) if n1 else np.array([0])
+        e2 = np.linspace(n1, n, N_BLOCKS - nb1 + 1).round().astype(int)
+        edges = np.concatenate([e1, e2[1:]])
+        return edges, np.arange(edges.size - 1) < nb1
+    nb = int(min(N_BLOCKS, max(n // 64, 2)))
+    edges = np.linspace(0, n, nb + 1).round().astype(int)
+    n_ho = int(round(fraction * nb))
+    held = np.zeros(nb, dtype=bool)
+    if n_ho:
+        held[((np.arange(n_ho) + 0.5) * nb / n_ho).astype(int)] = True
+    return edges, held
+
+
+def effective_samples(sig: StateSignals) -> float:
+    """Independent samples a band-limited record carries, 2 B T (the bic rule's n_eff)."""
+    return 2 * (sig.band_hz[1] - sig.band_hz[0]) * (sig.valid.stop - sig.valid.start) / sig.fs_hz
+
+
+def per_record(rows: np.ndarray, sig):
+    """f -> f(rows) for one recording (sig a StateSignals); for several (sig a list, rows a mask over
+    all their valid rows, one after the other), f -> [f(part) for each recording's part of rows]."""
+    if not isinstance(sig, (list, tuple)):
+        return lambda f: f(rows)
+    parts = np.split(rows, np.cumsum([s.valid.stop - s.valid.start for s in sig])[:-1])
+    return lambda f: [f(p) for p in parts]
+
+
+def make_optimizer(params):
+    """The path's optimizer from the identifier's method, n_lambdas, lambda_eps, threshold."""
+    if params.method == "admm":
+        return ADMMLasso(n_lambdas=params.n_lambdas, eps=params.lambda_eps)
+    if params.method == "stlsq":
+        return STLSQ(threshold=params.threshold, n_thresholds=params.n_lambdas, eps=params.lambda_eps,
+                     normalize=params.normalize_threshold)
+    raise IdentificationError(f"unknown method {params.method!r} (admm or stlsq)")
+
+
+def select_supports(params, path, train, heldout, n_eff: float) -> dict:
+    """The rule's choice per equation on a path (no side effects: the inclusion probabilities rerun it)."""
+    by_free_run = params.budget == "free-run" and params.max_terms is not None  # then chosen after the offset
+    return {eq: select(path, e, train, heldout, params.selection, params.tolerance, n_eff,
+                       None if by_free_run and e == 0 else params.max_terms)
+            for e, eq in enumerate(EQUATIONS)}
+
+
+def placement_supports(params, path, trains, heldouts, n_eff: float) -> list:
+    """Per held-out placement, the supports (one per equation) the path and rule choose on its training
+    and held-out normal equations; the paths run as one batch, started from the fit's own `path` (a
+    placement moves a few blocks: its solutions are near the fit's)."""
+    paths = make_optimizer(params).fit_paths(trains, start=path)
+    if params.selection == "heldout" and params.max_terms is None:  # the default: all placements at once
+        by_eq = [heldout_supports(paths, e, trains, heldouts, params.tolerance) for e in range(2)]
+        return [list(supports) for supports in zip(*by_eq)]
+    return [[s.support for s in select_supports(params, p, train, heldout, n_eff).values()]
+            for p, train, heldout in zip(paths, trains, heldouts)]
+
+
+def _named(selections: dict, names) -> dict:
+    return {eq: {names[j]: float(s.coef[j]) for j in np.flatnonzero(s.coef)} for eq, s in selections.items()}
+
+
+def fit_pass(ident, n_eff: float, gram: BlockGram, held, timings: dict):
+    """Path, selection and refit per equation on the normal equations (sets path_, selections_).
+    Returns (training normal equations, coefficients by equation)."""
+    train, heldout = gram.equations(~held), gram.equations(held) if held.any() else None
+    t0 = time.perf_counter()
+    ident.path_ = make_optimizer(ident).fit_path(train)
+    timings["path"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    ident.selections_ = select_supports(ident, ident.path_, train, heldout, n_eff)
+    timings["selection_refit"] = time.perf_counter() - t0
+    return train, _named(ident.selections_, ident.library_.names)
+
+
+def fit_sources(ident, sources: list, timings: dict) -> list:
+    """The sequence (module doc) on one or several sources; sets the identifier's fitted attributes and
+    returns the per-recording validation runs (source.validate's second value; None unvalidated)."""
+    input_name, lib = sources[0].sig.input_name, ident.library_
+    t0 = time.perf_counter()
+    blocks = [holdout_blocks(s.sig, ident.holdout_fraction, ident.holdout_samples) for s in sources]
+    grams = [s.gram(lib, edges) for s, (edges, _) in zip(sources, blocks)]
+    gram = grams[0] if len(grams) == 1 else BlockGram.concatenate(grams)
+    held = np.concatenate([h for _, h in blocks])
+    timings["library_gram"] = timings.get("library_gram", 0.0) + time.perf_counter() - t0
+    n_eff = sum(effective_samples(s.sig) for s in sources)
+    train, coefs = fit_pass(ident, n_eff, gram, held, timings)
+    # The terms are those of the true displacement: when the selected force has an even part (an
+    # asymmetric spring) it rectifies into a displacement below the band the chain cannot see; the
+    # source finds it (identify.inband) and the pass runs again on q2 + offset. An odd force needs none.
+    t0 = time.perf_counter()
+    ident.offset_ = {"carried": False, "passes": 0}
+    training = SparseModel(coefs, STATES, (input_name,))
+    even = [s for s in sources if s.sig.band_hz[0] > 0 and s.even_force(training)]
+    if even and len(sources) > 1:
+        raise IdentificationError(
+            "the joint fit has a force with an even part (" + ", ".join(training.equations["q1_dot"]) + "): its "
+            "displacement below the band is carried per record (identify.inband), which joint identification "
+            "does not do; identify the recordings one by one")
+    if even:
+        sources[0], gram, ident.offset_ = sources[0].carry_offset(lib, blocks[0][0], ~held)
+        train, coefs = fit_pass(ident, n_eff, gram, held, timings)
+    timings["offset"] = time.perf_counter() - t0
+    sigs = [s.sig for s in sources]
+    each = sigs[0] if len(sigs) == 1 else sigs  # what per_record, budget and refine take
+    ident.heldout_rows_ = np.concatenate([np.repeat(h, np.diff(e)) for e, h in blocks]) if sources[0].in_core else None
+    ident.blocks_ = blocks
+    coefs = _budget_by_free_run(ident, each, train, held, coefs, timings)
+    t0 = time.perf_counter()
+    # the selection-time fit (training blocks only) is what the held-out validation scores; the
+    # reported coefficients are the kept terms refit on all rows, less the chain's bias
+    # (identify.uncertainty, docs/identification.md section 5)
+    ident.training_model_ = SparseModel(coefs, STATES, (input_name,))
+    reported, ident.standard_errors_, ident.uncertainty_ = trust(ident, sources, blocks, gram, held, n_eff)
+    timings["refit_uncertainty"] = time.perf_counter() - t0
+    ident.model_ = SparseModel(reported, STATES, (input_name,), ident.standard_errors_)
+    validated = _free_run_choice(ident, each, timings)
+    ident.validation_, runs = None, [None] * len(sources)
+    if ident.validate:
+        t0 = time.perf_counter()
+        docs_runs = [s.validate(validated, e, h) for s, (e, h) in zip(sources, blocks)]
+        runs = [r for _, r in docs_runs]
+        ident.validation_ = docs_runs[0][0] if len(sources) == 1 else pooled_validation(validated, runs)
+        timings["validation"] = time.perf_counter() - t0
+        if ident.budget_ is not None and ident.budget_refit == "all":
+            ident.validation_["heldout_fitted"] = True  # the winner's coefficients saw these rows
+    # a fitted model that does not reproduce the motion is kept (a library user may inspect it) but
+    # reported as failed, judged on the validated fit and, when the reported all-rows fit differs, on its
+    # physics too (validation.fit_verdict)
+    ident.verdict_ = fit_verdict(ident.validation_, validated, ident.model_, input_name)
+    ident.sources_, ident.gram_, ident.validated_model_ = sources, gram, validated
+    return runs
+
+
+def _budget_by_free_run(ident, sig, train, held, coefs: dict, timings: dict) -> dict:
+    """With budget="free-run", the first equation's max_terms terms chosen by free-run error
+    (identify.budget); sets budget_ (None otherwise) and returns the coefficients by equation.
+    sig: the StateSignals, or a list of them for several recordings (heldout_rows_ then spans them all)."""
+    ident.budget_ = None
+    sel = ident.selections_["q1_dot"]
+    if ident.budget != "free-run" or ident.max_terms is None or sel.support.sum() <= ident.max_terms:
+        return coefs
+    lib = ident.library_
+    start = SparseModel(coefs, STATES, ((sig[0] if isinstance(sig, list) else sig).input_name,))
+    each = per_record(ident.heldout_rows_, sig)  # f -> f(mask), or [f(mask) per recording] for several
+    ident.budget_ = choose_budget(start, lib.names, sel.support, ident.max_terms, train, sig,
+                                  each(np.logical_not), each(np.asarray) if held.any() else None,
+                                  final_rows=each(np.ones_like) if ident.budget_refit == "all" else None)
+    timings["budget"] = ident.budget_.seconds
+    sel.support = ident.budget_.support.copy()
+    sel.coef = least_squares(train.G, train.B[:, 0], sel.support)
+    return _named(ident.selections_, lib.names)
+
+
+def _free_run_choice(ident, sig, timings: dict) -> SparseModel:
+    """The model the free run validates: the training fit; or, with the free-run budget, its winner
+    (chosen after its free-run refit), or, with refine="free-run", the training fit refit on the fit
+    rows' free-run error; both are then reported too (with the equation-error standard errors)."""
+    ident.refinement_ = None
+    inputs = ident.model_.inputs
+    if ident.budget_ is not None:
+        ident.model_ = SparseModel(ident.budget_.model.equations, STATES, inputs, ident.standard_errors_)
+        ident.refinement_ = ident.budget_.refinement
+        return ident.model_
+    if ident.refine is None:
+        return ident.training_model_
+    t0 = time.perf_counter()
+    refined, ident.refinement_ = refine_free_run(ident.training_model_, sig,
+                                                 per_record(ident.heldout_rows_, sig)(np.logical_not))
+    ident.model_ = SparseModel(refined.equations, refined.states, refined.inputs, ident.standard_errors_)
+    timings["refine"] = time.perf_counter() - t0
+    return ident.model_
+
+
+def trust(ident, sources: list, blocks: list, gram: BlockGram, held, n_eff: float) -> tuple[dict, dict, dict]:
+    """Reported coefficients, standard errors and inclusion probabilities (identify.uncertainty), the
+    chain bias from the sources (closed form where every source can give it, SIMEX in core otherwise)."""
+    names, eqs = ident.library_.names, list(ident.selections_)
+    sups = {e: s.support for e, s in enumerate(ident.selections_.values())}
+    bias_of = None
+    if ident.bias_replicates != 0:
+        def gram_of(noisy, columns):
+            noisy = noisy if isinstance(noisy, list) else [noisy]
+            parts = [state_gram(ident.library_, s, e, columns) for s, (e, _) in zip(noisy, blocks)]
+            return parts[0] if len(parts) == 1 else BlockGram.concatenate(parts)
+
+        def bias_of(sups, coefs):
+            return unc.estimate_chain_bias(ident.bias_method, sources, gram, ident.library_, sups, coefs, gram_of,
+                                           ident.bias_replicates)
+
+    def fit_and_select(trains, heldouts):
+        return placement_supports(ident, ident.path_, trains, heldouts, n_eff)
+
+    coefs, var, info = unc.assess(gram, held, sups, bias_of, fit_and_select, ident.placements)
+    named = {eqs[e]: {names[j]: j for j in np.flatnonzero(sups[e])} for e in sups}
+    info = unc.name_info(info, eqs, names, sups)
+    if bias_of is not None and info["chain_bias"] is None:
+        why = [w for w in (s.bias_unavailable(ident.bias_method) for s in sources) if w]
+        if why:
+            info["chain_bias_skipped"] = why[0]
+    info["exact"] = {}
+    if "q2_dot" in eqs and list(named["q2_dot"]) == ["q1"]:
+        # the second target is the chain's q1, the derivative of its q2 on the band's bins: q2_dot = q1
+        # holds by construction, and its least-squares coefficient is 1 and its standard error 0 to
+        # rounding (0.9999999999999999 +- 6e-17 on a Table 1 sweep), which would read as a measurement
+        e = eqs.index("q2_dot")
+        coefs[e][named["q2_dot"]["q1"]], var[e][named["q2_dot"]["q1"]] = 1.0, 0.0
+        info["exact"]["q2_dot"] = "q2_dot = q1 by construction: the chain's velocity is the derivative of its displacement"
+    return ({eq: {n: float(coefs[e][j]) for n, j in named[eq].items()} for e, eq in enumerate(eqs)},
+            {eq: {n: float(np.sqrt(var[e][j])) for n, j in named[eq].items()} for e, eq in enumerate(eqs)},
+            info)
