@@ -1,23 +1,26 @@
-"""Out-of-core identification of long HDF5 recordings: time per sample and peak RSS from 1e6 to 1e8 samples,
-beside the in-core run of 1e6 samples and the plain h5py read of the same files.
+"""Out-of-core identification of long HDF5 recordings: time per sample, peak RSS and how far the truth is
+from each coefficient in standard errors (z), from 1e6 to 1e8 samples, beside the in-core run and the
+plain h5py read of the same files.
 
     python benchmarks/out_of_core.py [--samples 1e6 1e7 1e8] [--in-core 1e6] [--fs-hz 2048] [--keep DIR]
+                                     [--seed N]
 
-The records: a 60 s sweep of the paper's Table 1 rig (1-20 Hz, 1.3 mm, 0.5 % noise, 2048 Hz; it starts
-and ends at rest) simulated with four noise seeds, the four cycled and concatenated up to N samples
-(simulating a 13-hour sweep is not the workload; identifying it is), written in the DAQ's HDF5 layout
-(daq/recorder.py: /entry/data/{time, table_acc, mass_acc}, float32 channels, @fs_hz, status complete) by
-h5py in blocks. Each figure is one fresh process (`shakeid identify FILE --json`, via shakeid.cli.main,
+The records (daq.long_record.write_long_sweep): the paper's Table 1 rig swept 1-20 Hz over 60 s at
+1.3 mm (it starts and ends at rest), the motion repeated up to N samples, with fresh sensor noise (0.5 %
+of each channel's std) on every sample: the seed is fresh each run and printed (--seed repeats one).
+Written in the DAQ's HDF5 layout (/entry/data/{time, table_acc, mass_acc}, float32 channels, @fs_hz,
+status complete). Each figure is one fresh process (`shakeid identify FILE --json`, via shakeid.cli.main,
 stdout discarded, imports done before the clock starts), so its peak RSS (VmHWM) is that run's alone:
 
-- in core: the default identification (SIMEX chain bias with 16 replicates included) and the same with
-  --bias-replicates 0, which is what the out-of-core path does (it skips SIMEX: identify/out_of_core.py);
-- out of core: --chunked (2^20-sample chunks), one process;
+- in core: the default identification (chain bias in closed form, identify.corrected);
+- out of core: --chunked (2^20-sample chunks), one process: the same fit sequence (identify.fitting),
+  the same closed-form chain bias and standard errors;
 - read: h5py reading both channels of the file in 2^20-row blocks, nothing else.
 
-Printed side by side: seconds, microseconds per sample, the ratio to the in-core 1e6 run without SIMEX
-(target: <= 1.5, i.e. linear), peak RSS (target: flat, <= 1 GB), the read's share. Files are deleted
-at the end unless --keep.
+Printed side by side: seconds, microseconds per sample, the ratio to the in-core run of the smallest
+--in-core size (target: <= 1.5, i.e. linear), peak RSS (target: flat, <= 1 GB), and the z-score of
+each q1_dot coefficient against the truth ((estimate - truth) / its standard error: honest standard
+errors keep |z| below 3 but for 0.3 % of the terms). Files are deleted at the end unless --keep.
 """
 from __future__ import annotations
 
@@ -38,39 +41,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 BLOCK = 1 << 20
 
 
-def write_record(path: Path, n: int, fs_hz: float, seeds: int = 4) -> float:
-    """A DAQ-layout HDF5 file of n samples: sweeps cycled (module doc). Returns seconds spent."""
-    import h5py
+def write_record(path: Path, n: int, fs_hz: float, seed: int) -> dict:
+    """A DAQ-layout HDF5 file of n samples with fresh noise throughout (module doc): the truth and seconds."""
+    from daq.long_record import write_long_sweep
 
-    from sim.sensors import Accelerometer
-    from sim.sweep import SineSweep
-    from sim.synth import run_sweep
-
-    t0 = time.perf_counter()
-    sensor = Accelerometer(noise_fraction=0.005)
-    parts = [run_sweep(sweep=SineSweep(1.0, 20.0, 60.0, 1.3), fs_hz=fs_hz, table_sensor=sensor, mass_sensor=sensor,
-                       seed=s).recording for s in range(seeds)]
-    cycle_in = np.concatenate([p.input for p in parts]).astype("f4")
-    cycle_out = np.concatenate([p.output for p in parts]).astype("f4")
-    with h5py.File(path, "w") as f:
-        e = f.create_group("entry")
-        e.attrs.update(NX_class="NXentry", status="complete", status_reason="", fs_hz=fs_hz, samples_written=n)
-        e.create_group("sweep")
-        inst = e.create_group("instrument")
-        d = e.create_group("data")
-        ds = {"time": d.create_dataset("time", (n,), dtype="f8", chunks=(4096,))}
-        for ch in ("table_acc", "mass_acc"):
-            inst.create_group(ch).attrs.update(units="m/s^2", sensitivity=1.0)
-            ds[ch] = d.create_dataset(ch, (n,), dtype="f4", chunks=(4096,))
-            ds[ch].attrs["units"] = "m/s^2"
-        e.create_dataset("gaps", (0, 2), dtype="i8")
-        for a in range(0, n, BLOCK):
-            b = min(a + BLOCK, n)
-            idx = np.arange(a, b) % cycle_in.size
-            ds["time"][a:b] = np.arange(a, b) / fs_hz
-            ds["table_acc"][a:b] = cycle_in[idx]
-            ds["mass_acc"][a:b] = cycle_out[idx]
-    return time.perf_counter() - t0
+    return write_long_sweep(path, n, fs_hz, seed=seed)
 
 
 def peak_rss_mb() -> float:
@@ -110,7 +85,7 @@ def child(kind: str, path: str, extra: list[str]) -> None:
         with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(io.StringIO()):
             code = main(["identify", path, "--json", *extra])
         res = json.loads(buf.getvalue())
-        out.update(code=code, status=res["status"], model=res["model"]["q1_dot"],
+        out.update(code=code, status=res["status"], model=res["model"]["q1_dot"], se=res["standard_errors"]["q1_dot"],
                    timings=res.get("timings_s"), chunks=res.get("out_of_core", {}).get("chunks"))
     out["seconds"] = time.perf_counter() - t0
     out["rss_mb"] = peak_rss_mb()
@@ -124,6 +99,11 @@ def measure(kind: str, path: Path, extra=()) -> dict:
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
+def z_scores(r: dict, truth: dict) -> dict:
+    """{term: (estimate - truth) / standard error} of the q1_dot terms both have."""
+    return {t: (c - truth[t]) / r["se"][t] for t, c in r["model"].items() if t in truth and r["se"].get(t)}
+
+
 def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "--child":
         return child(sys.argv[2], sys.argv[3], sys.argv[4:])
@@ -132,46 +112,50 @@ def main() -> None:
     ap.add_argument("--in-core", type=float, nargs="*", default=[1e6], help="sizes also identified in core")
     ap.add_argument("--fs-hz", type=float, default=2048.0)
     ap.add_argument("--keep", metavar="DIR", help="write the files here and keep them")
+    ap.add_argument("--seed", type=int, help="noise seed (default: fresh, printed)")
     args = ap.parse_args()
+    seed = args.seed if args.seed is not None else int(np.random.SeedSequence().generate_state(1)[0])
     folder = Path(args.keep or tempfile.mkdtemp(prefix="ooc-bench-"))
     folder.mkdir(parents=True, exist_ok=True)
-    print(f"machine: {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}")
+    print(f"machine: {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}; noise seed {seed} (each size: seed + size)")
     rows = []
     sizes = sorted({int(s) for s in args.samples} | {int(s) for s in args.in_core})
     try:
         for n in sizes:
             path = folder / f"record_{n}.h5"
-            if not path.exists():
-                sec = write_record(path, n, args.fs_hz)
-                print(f"wrote {path.name}: {n} samples, {path.stat().st_size / 1e9:.2f} GB in {sec:.1f} s", flush=True)
+            written = write_record(path, n, args.fs_hz, seed + n)
+            truth = written["model"]["q1_dot"]
+            print(f"wrote {path.name}: {n} samples, {path.stat().st_size / 1e9:.2f} GB in {written['seconds']:.1f} s",
+                  flush=True)
             read = measure("read", path)
-            rows.append(("h5py read", n, read))
+            rows.append(("h5py read", n, read, None))
             print(f"  read {n:.0e}: {read['seconds']:.2f} s, {read['rss_mb']:.0f} MB", flush=True)
-            if n in {int(s) for s in args.in_core}:
-                for label, extra in (("in core", []), ("in core, no SIMEX", ["--bias-replicates", "0"])):
-                    r = measure("identify", path, extra)
-                    rows.append((label, n, r))
-                    print(f"  {label} {n:.0e}: {r['seconds']:.2f} s, {r['rss_mb']:.0f} MB, {r['status']}", flush=True)
-            if n in {int(s) for s in args.samples}:
-                r = measure("identify", path, ["--chunked"])
-                rows.append(("out of core", n, r))
-                print(f"  out of core {n:.0e}: {r['seconds']:.2f} s, {r['rss_mb']:.0f} MB, {r['status']}, "
-                      f"timings {json.dumps({k: round(v, 2) for k, v in (r['timings'] or {}).items()})}", flush=True)
-            if not args.keep and n != sizes[-1]:
+            runs = ([("in core", [])] if n in {int(s) for s in args.in_core} else []) + \
+                ([("out of core", ["--chunked"])] if n in {int(s) for s in args.samples} else [])
+            for label, extra in runs:
+                r = measure("identify", path, extra)
+                z = z_scores(r, truth)
+                rows.append((label, n, r, z))
+                print(f"  {label} {n:.0e}: {r['seconds']:.2f} s, {r['rss_mb']:.0f} MB, {r['status']}, z "
+                      f"{json.dumps({t: round(v, 2) for t, v in z.items()})}, timings "
+                      f"{json.dumps({k: round(v, 2) for k, v in (r['timings'] or {}).items()})}", flush=True)
+            if not args.keep:
                 path.unlink()
     finally:
         if not args.keep:
             for p in folder.glob("*.h5"):
                 p.unlink()
             folder.rmdir()
-    ref = next((r for lbl, n, r in rows if lbl == "in core, no SIMEX" and n == int(min(args.in_core or [0]))), None)
+    ref = next((r for lbl, n, r, _ in rows if lbl == "in core" and n == int(min(args.in_core or [0]))), None)
     ref_us = ref["seconds"] / min(args.in_core) * 1e6 if ref else None
-    print(f"\n{'run':<20}{'samples':>10}{'seconds':>10}{'us/sample':>11}{'x in-core 1e6':>15}{'peak RSS MB':>13}  status / model q2^3")
-    for label, n, r in rows:
+    print(f"\n{'run':<14}{'samples':>10}{'seconds':>10}{'us/sample':>11}{'x in-core':>11}{'peak RSS MB':>13}"
+          f"  status, max |z| (term)")
+    for label, n, r, z in rows:
         us = r["seconds"] / n * 1e6
         ratio = f"{us / ref_us:.2f}" if ref_us and label != "h5py read" else "-"
-        extra = "" if label == "h5py read" else f"  {r['status']} / {r['model'].get('q2^3', float('nan')):.6g}"
-        print(f"{label:<20}{n:>10.0e}{r['seconds']:>10.2f}{us:>11.3f}{ratio:>15}{r['rss_mb']:>13.0f}{extra}")
+        worst = max(z, key=lambda t: abs(z[t])) if z else None
+        extra = "" if z is None else f"  {r['status']}, {abs(z[worst]):.2f} ({worst})"
+        print(f"{label:<14}{n:>10.0e}{r['seconds']:>10.2f}{us:>11.3f}{ratio:>11}{r['rss_mb']:>13.0f}{extra}")
 
 
 if __name__ == "__main__":
