@@ -114,7 +114,7 @@ def _end_stop(fitter: Fitter, cur: Structure, effect: Effect, sig):
             if d not in memo:
                 st = cur.adding("end_stop", effect.terms, travel=float(d), side=side)
                 fit = fitter.equation_fit(st)
-                sane = not admissibility.check("end_stop", fit.coef, {}, {})
+                sane = not admissibility.check("end_stop", fit.coef, {}, {}, fit.se)
                 memo[d] = (st, fit, sane, fit.mse_heldout * (1.0 if sane else 10.0))
             return memo[d]
 

@@ -72,3 +72,18 @@ def test_wald_test_of_a_one_sided_stop_counts_its_free_coefficients():
     assert p == pytest.approx(stats.chi2.sf(w, 2), rel=1e-9)
     two_sided = Fit(coef, {}, np.diag([1e-4, 1e-2, 4.0, 4.0, 1e-2, 1e-2]), list(terms), 0.0)
     assert wald_p(two_sided, STOP)[1] == pytest.approx(stats.chi2.sf(wald_p(two_sided, STOP)[0], 4), rel=1e-9)
+
+
+def test_a_sign_within_its_uncertainty_of_zero_is_not_a_violation():
+    """The sign rules are statistical: contact damping of +0.05 +- 0.04 per side (the issue's stops had
+    +0.02..+0.1, statistically zero, and were rejected) and a side pushing outwards by 1 +- 2 are zero,
+    not violations; the same values with standard errors ten times smaller are."""
+    zero_damping = dict(zip(STOP, (-100.0, -100.0, 0.03, 0.02)))          # both sides +0.05 and +0.01
+    wide = dict(zip(STOP, (5.0, 5.0, 0.03, 0.03)))
+    assert check("end_stop", zero_damping, {}, {}, wide) == ""
+    assert "injects energy" in check("end_stop", zero_damping, {}, {}, {t: v / 10 for t, v in wide.items()})
+    outwards_a_hair = dict(zip(STOP, (-100.0, -101.0, -2.0, -2.0)))       # lower side: +1
+    assert check("end_stop", outwards_a_hair, {}, {}, dict(zip(STOP, (1.5, 1.5, 0.1, 0.1)))) == ""
+    assert "outwards" in check("end_stop", outwards_a_hair, {}, {}, dict(zip(STOP, (0.15, 0.15, 0.1, 0.1))))
+    assert check("quadratic_damping", {"q1*|q1|": 0.3}, {}, {}, {"q1*|q1|": 0.2}) == ""
+    assert "injects energy" in check("quadratic_damping", {"q1*|q1|": 0.3}, {}, {}, {"q1*|q1|": 0.1})
