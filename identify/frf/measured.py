@@ -1,0 +1,157 @@
+"""The measured counterpart of the frequency response: from a sweep recording, the response envelope
+against the table's instantaneous frequency and the jump, with its uncertainty from the sweep rate; and
+the comparison with a model's predicted folds, with the sweep-rate bias stated.
+
+    env = sweep_envelope(rec)                 # one row per table cycle: t_s, frequency_hz, response_mm, table_mm
+    jump = measured_jump(env)                 # the up-sweep's drop / the down-sweep's rise, or None
+    cmp = compare_sweep(model, rec)           # measured vs predicted jump, the bias, agreement
+
+A sweep passes a fold at a finite rate: the response stays on its branch past the steady-state fold (the
+slow passage through a saddle-node lags by ~ rate^(2/3)) and then needs the transient's decay time to
+reach the other branch, so an up-sweep jumps down above the fold and a down-sweep jumps up below it. The
+bias is the model's own: its free run driven by the recorded table acceleration, read by the same
+detector, minus its steady-state fold (docs/frf.md gives figures).
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import hilbert
+
+from ..chain import reconstruct_states
+from ..errors import IdentificationError
+from ..simulate import simulate
+from .response import frequency_response
+
+#: A measured jump: the steepest change of the per-cycle envelope in the sweep's jump direction, its
+#: transition the cycles around it changing at >= TRANSITION_SHARE of that rate, by >= MIN_JUMP_RATIO in all...
+MIN_JUMP_RATIO = 1.3
+TRANSITION_SHARE = 0.5
+#: ... where the response is at least JUMP_LEVEL of its largest (not the sweep's quiet ends).
+JUMP_LEVEL = 0.3
+#: Cycles whose table amplitude is off the median by more than this share are left out (the fades).
+STEADY_TABLE = 0.1
+#: Cycles left out at each end of the valid rows (the analytic signal's edge).
+EDGE_CYCLES = 3
+
+
+def cycle_envelope(q2: np.ndarray, zdd: np.ndarray, fs_hz: float) -> dict:
+    """Per table cycle (boundaries where the table acceleration's analytic phase passes a multiple of
+    2 pi): mid time (s, from the first sample), frequency (Hz, 1 / the cycle's length), the response's
+    and the table's half peak-to-peak (mm; the table's displacement from its acceleration / w^2)."""
+    phase = np.unwrap(np.angle(hilbert(zdd)))
+    k = np.floor((phase - phase[0]) / (2 * np.pi))
+    edges = np.flatnonzero(np.diff(k) != 0) + 1
+    edges = edges[EDGE_CYCLES:-EDGE_CYCLES] if edges.size > 2 * EDGE_CYCLES + 2 else edges
+    if edges.size < 3:
+        raise IdentificationError("the recording holds fewer than 3 cycles of the table: no sweep to read")
+    t, f, resp, table = [], [], [], []
+    for a, b in zip(edges[:-1], edges[1:]):
+        freq = fs_hz * (phase[b] - phase[a]) / (2 * np.pi) / (b - a)
+        t.append(0.5 * (a + b) / fs_hz)
+        f.append(freq)
+        resp.append(0.5 * np.ptp(q2[a:b]) * 1e3)
+        table.append(0.5 * np.ptp(zdd[a:b]) / (2 * np.pi * freq) ** 2 * 1e3)
+    return {"t_s": np.array(t), "frequency_hz": np.array(f), "response_mm": np.array(resp), "table_mm": np.array(table)}
+
+
+def sweep_envelope(rec) -> dict:
+    """The recording's per-cycle envelope (cycle_envelope) from the chain's relative displacement and
+    band-limited table acceleration (identify.chain), plus the sweep's direction ("up" | "down") and
+    rate (Hz/s) and the table amplitude (mm, median over the cycles)."""
+    if rec.layout != "base":
+        raise IdentificationError(f"{rec.source}: a measured frequency response needs the base layout (table "
+                                  "and mass accelerations)")
+    sig = reconstruct_states(rec, dtype=np.float64)
+    rows = sig.valid
+    env = cycle_envelope(np.asarray(sig.q2[rows]), np.asarray(sig.input[rows]), rec.fs_hz)
+    env["t_s"] = env["t_s"] + rec_offset(rows, rec.fs_hz)
+    table = np.median(env["table_mm"])
+    keep = (env["frequency_hz"] > 0) & (np.abs(env["table_mm"] - table) < STEADY_TABLE * table)
+    env = {k: v[keep] for k, v in env.items()}
+    rate = float(np.polyfit(env["t_s"], env["frequency_hz"], 1)[0])
+    env.update(direction="up" if rate > 0 else "down", rate_hz_per_s=rate,
+               amplitude_mm=float(np.median(env["table_mm"])), signals=sig)
+    return env
+
+
+def rec_offset(rows: slice, fs_hz: float) -> float:
+    return rows.start / fs_hz
+
+
+def measured_jump(env: dict) -> dict | None:
+    """The sweep's jump: an up-sweep's steepest drop, a down-sweep's steepest rise of the per-cycle
+    response. {"frequency_hz" (at the steepest cycle), "uncertainty_hz" (half the frequency span of the
+    transition: the sweep moves on while the response changes branch), "t_s", "ratio", "cycles"} or None
+    when nowhere the envelope changes by MIN_JUMP_RATIO. On a sweep a fold's jump and a fast passage of a
+    steep resonance both change at the transient's rate: whether it is a jump is compare_sweep's question
+    (the model's fold and its own run over the same sweep), not this one's."""
+    a, f = env["response_mm"], env["frequency_hz"]
+    sign = -1.0 if env["direction"] == "up" else 1.0
+    step = sign * np.diff(np.log(np.maximum(a, 1e-300)))
+    loud = np.maximum(a[:-1], a[1:]) >= JUMP_LEVEL * a.max()
+    step = np.where(loud, step, -np.inf)
+    i = int(np.argmax(step))
+    if not step[i] > 0:
+        return None
+    s = e = i
+    while s > 0 and step[s - 1] >= TRANSITION_SHARE * step[i]:
+        s -= 1
+    while e < step.size - 1 and step[e + 1] >= TRANSITION_SHARE * step[i]:
+        e += 1
+    ratio = float(np.exp(np.sum(step[s:e + 1])))
+    if ratio < MIN_JUMP_RATIO:
+        return None
+    return {"frequency_hz": float(0.5 * (f[i] + f[i + 1])), "uncertainty_hz": float(0.5 * abs(f[e + 1] - f[s])),
+            "t_s": float(0.5 * (env["t_s"][i] + env["t_s"][i + 1])), "ratio": ratio, "cycles": int(e - s + 1)}
+
+
+def model_sweep_jump(model, env: dict) -> dict | None:
+    """The jump of the model's own free run driven by the recording's band-limited table acceleration,
+    started from the measured state, read by measured_jump: what the model predicts this sweep shows."""
+    sig = env["signals"]
+    rows = sig.valid
+    u = np.asarray(sig.input[rows], float)
+    x0 = [float(sig.q1[rows][0]), float(sig.q2[rows][0])]
+    scale = np.array([np.max(np.abs(sig.q1[rows])), np.max(np.abs(sig.q2[rows]))]) * 2
+    res = simulate(model, 1.0 / sig.fs_hz, x0, u[:, None], state_scale=scale)
+    if res.diverged:
+        return None
+    sim_env = cycle_envelope(res.states[:, 1], u, sig.fs_hz)
+    sim_env["direction"] = env["direction"]
+    jump = measured_jump(sim_env)
+    if jump is not None:
+        jump["t_s"] += rows.start / sig.fs_hz
+    return jump
+
+
+def compare_sweep(model, rec, band_hz=None) -> dict:
+    """Measured against predicted jump of one sweep recording: the measured jump (measured_jump), the
+    model's steady-state fold at the recorded table amplitude, the sweep-rate bias (the model's own sweep
+    jump minus its fold), and whether the measured jump lies between the fold and the fold + bias, give or
+    take its uncertainty ("agrees"); a model that misses it by more is flagged."""
+    env = sweep_envelope(rec)
+    jump = measured_jump(env)
+    f = env["frequency_hz"]
+    band = band_hz or (float(f.min()), float(f.max()))
+    resp = frequency_response(model, env["amplitude_mm"], band)
+    fold = resp.jump_down_hz if env["direction"] == "up" else resp.jump_up_hz
+    model_jump = model_sweep_jump(model, env)
+    out = {"direction": env["direction"], "rate_hz_per_s": env["rate_hz_per_s"], "amplitude_mm": env["amplitude_mm"],
+           "measured": jump, "fold_hz": fold, "model_sweep_jump": model_jump, "bias_hz": None, "agrees": None,
+           "response": resp}
+    if fold is not None and model_jump is not None:
+        out["bias_hz"] = model_jump["frequency_hz"] - fold
+    if fold is None:  # no steady-state fold: the sweep may still show a steep passage; the model's own sweep says
+        if jump is None or model_jump is None:
+            out["agrees"] = jump is None and model_jump is None
+        else:
+            out["miss_hz"] = abs(jump["frequency_hz"] - model_jump["frequency_hz"])
+            out["agrees"] = bool(out["miss_hz"] <= jump["uncertainty_hz"] + model_jump["uncertainty_hz"])
+        return out
+    if jump is None:
+        out["agrees"] = False
+        return out
+    lo, hi = sorted((fold, fold + (out["bias_hz"] or 0.0)))
+    out["miss_hz"] = max(lo - jump["frequency_hz"], jump["frequency_hz"] - hi, 0.0)
+    out["agrees"] = bool(out["miss_hz"] <= jump["uncertainty_hz"])
+    return out
