@@ -23,6 +23,7 @@ import os
 import sys
 from pathlib import Path
 
+from daq.formats import NAMES as FORMAT_NAMES
 from identify.errors import ShakeidError
 
 from .argtypes import int_in, positive
@@ -195,7 +196,7 @@ def add_batch_parser(sub, add_identify_options, make_identifier, read_recording)
     circle); the two functions travel to the workers with the parsed arguments."""
     q = sub.add_parser("batch", help="identify each of many recordings on its own, in a local process pool or "
                                      "on a Dask cluster (--scheduler)")
-    q.add_argument("files", nargs="+", metavar="FILE", help="recordings: CSV, MAT or HDF5")
+    q.add_argument("files", nargs="+", metavar="FILE", help=f"recordings ({FORMAT_NAMES})")
     q.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                    help="an existing Dask scheduler; the files must be at the same paths on its workers "
                         "(default: a local process pool)")

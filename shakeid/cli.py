@@ -10,6 +10,7 @@ import json
 import sys
 from pathlib import Path
 
+from daq.formats import NAMES as FORMAT_NAMES
 from identify.errors import IdentificationError, ShakeidError
 from reports.text import gap_closed_text, model_text, p_value_text, summary
 
@@ -30,11 +31,15 @@ def _add_layout_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--layout", choices=("base", "force"), default="base",
                    help="base: table and mass accelerations in m/s²; force: an input u and a displacement-like "
                         "output y (e.g. Silverbox, volts)")
-    g.add_argument("--input", metavar="NAME", help="input column/variable (default: table_acc, or u with --layout force)")
-    g.add_argument("--output", metavar="NAME", help="output column/variable (default: mass_acc, or y with --layout force)")
+    g.add_argument("--input", metavar="NAME", help="input channel by name, in any format: a column, a variable, a "
+                   "TDMS channel (GROUP/NAME when in two groups), a UFF id1, an MDF channel (default: table_acc, or u "
+                   "with --layout force)")
+    g.add_argument("--output", metavar="NAME", help="output channel by name, as --input (default: mass_acc, or y with "
+                   "--layout force)")
     g.add_argument("--time", metavar="NAME", help="time column, s (default: t)")
     g.add_argument("--fs", type=positive, metavar="HZ",
-                   help="sample rate in Hz when the file has no time column (default: from the time column)")
+                   help="sample rate in Hz for a file without a clock, or the exact rate of a clock the file stores "
+                        "coarsely (UFF's 6-digit increment) (default: from the file)")
     g.add_argument("--samples", type=int_in(0), nargs=2, metavar=("START", "STOP"),
                    help="use samples [START, STOP) only (0-based), e.g. Silverbox's estimation range "
                         "(default: all)")
@@ -351,9 +356,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = Parser(prog="shakeid", description="Sparse nonlinear identification of shaker rigs")
     p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
-    q = sub.add_parser("identify", help="identify a sparse ODE model from a recording (CSV, MAT, HDF5)")
+    q = sub.add_parser("identify", help=f"identify a sparse ODE model from a recording ({FORMAT_NAMES})")
     q.add_argument("files", nargs="+", metavar="FILE",
-                   help="a recording (CSV, MAT or HDF5); several: one model fitted to all of them (joint "
+                   help=f"a recording ({FORMAT_NAMES}: docs/recordings.md); several: one model fitted to all of them (joint "
                         "identification); FILE[START:STOP]: that file's samples [START, STOP) only")
     _add_identify_options(q)
     add_out_of_core_options(q)
@@ -365,7 +370,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.set_defaults(func=cmd_identify)
     add_batch_parser(sub, _add_identify_options, _identifier, _read)
     q = sub.add_parser("explain", help="where a model misses the rig, which effect is missing, and the fix")
-    q.add_argument("file", help="the recording: CSV, MAT or HDF5 (a sweep's .h5); FILE[START:STOP]: its samples "
+    q.add_argument("file", help=f"the recording ({FORMAT_NAMES}); FILE[START:STOP]: its samples "
                                 "[START, STOP) only")
     q.add_argument("--model", metavar="MODEL.json",
                    help="baseline model, e.g. model.json of an identify --report (default: the textbook Duffing, "

@@ -67,6 +67,8 @@ class ReadRequest:
 
 FORMATS: tuple[FileFormat, ...] = tuple(import_module(f"{__name__}.{m}").FORMAT for m in FORMAT_MODULES)
 SUFFIXES: tuple[str, ...] = tuple(s for f in FORMATS for s in f.suffixes)
+#: The formats by name, for help texts: "HDF5, CSV, MAT, TDMS, UFF58, MDF4".
+NAMES = ", ".join(f.name for f in FORMATS)
 #: Bytes read to tell a file's format from its content.
 MAGIC_BYTES = 64
 
