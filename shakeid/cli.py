@@ -194,7 +194,7 @@ def cmd_explain(args) -> int:
         return 0
     f = lambda v: "n/a" if v is None else f"{v:.4f}"  # noqa: E731
     print(f"baseline: {result['baseline']['source']}; {result['metric']}: {f(result['gap_before'])}"
-          f" (sensor-noise floor <= {f(result['noise_floor_upper'])})")
+          f" (sensor-noise floor <= {f(result['noise_floor'])})")
     worst = result["localisation"]["time"]["worst_window"]
     print(f"largest misfit: {_span(worst)} into the recording, excitation {worst['excitation_hz']:.1f} Hz")
     print("candidates (equation-error share: of the held-out equation error it explains; shooting gap closed: "
