@@ -134,7 +134,7 @@ def _index_html(out: Path, analysis, result: dict, u: str) -> str:
               "unexplained": "something is missing, but no effect of the catalog closes enough of the gap"}
     page.paragraph(f"Answer: {answer.get(effect, 'missing effect: ' + effect)} (confidence "
                    f"{result['confidence']:.2f}). Baseline: {result['baseline']['source']}.")
-    floor = result.get("noise_floor_upper")
+    floor = result.get("noise_floor")
     page.table(["quantity", "before (baseline)", "after"], [
         ["gap: " + result["metric"], _f(result["gap_before"]), _f(result["gap_after"])],
         ["free-run fit of the acceleration, held-out" if u else "free-run fit, held-out",
@@ -146,7 +146,8 @@ def _index_html(out: Path, analysis, result: dict, u: str) -> str:
        "noise floor is all the sensors allow; the free-run fit simulates the whole record from its start.")
     if result["effects"]:
         page.heading("Effects added")
-        rows = [[e["name"], e["kind"], ", ".join(f"{t}: {c:.4g}" for t, c in e["coefficients"].items()) or "-",
+        rows = [[e["name"], e["kind"], ", ".join(f"{t}: {c:.4g}" if isinstance(c, (int, float)) else f"{t}: {c}"
+                                                 for t, c in e["coefficients"].items()) or e.get("note", "-"),
                  f"{e['confidence']:.2f}", _f(e["gap_after"]), ", ".join(e["surrogate_for"]) or "-"]
                 for e in result["effects"]]
         page.table(["effect", "kind", "coefficients (q1_dot, SI)", "confidence", "gap after", "stands in for"],
