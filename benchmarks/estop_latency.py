@@ -97,7 +97,7 @@ async def viewer(k):
         sock.setblocking(False)
         try:
             await asyncio.get_running_loop().sock_connect(sock, (host, port))
-            r, w = await asyncio.open_connection(sock=sock)
+            r, w = await asyncio.open_connection(sock=sock, limit=2**24)  # a first batch is ~100 kB a line
             w.write(f"GET /api/recordings/{rec}/live?access_token={token} HTTP/1.1\\r\\nHost: x\\r\\n\\r\\n".encode())
             state["streams"] += 1
             if k < stalled:

@@ -28,12 +28,14 @@ IDENTIFICATION_FIGURES = ("input.png", "output.png", "lambda_path.png", "validat
 IDENTIFICATION_DOCUMENTS = ("model.json", "coefficients.md")
 EXPLAIN_FIGURES = ("residual_time.png", "residual_state.png", "candidates.png", "gap.png")
 EXPLAIN_DOCUMENTS = ("explain.json",)
+FRF_FIGURES, FRF_DOCUMENTS = ("frf.png",), ("frf.json",)  # reports.frf (shakeid frf --report)
 KINDS = {"identification": (*IDENTIFICATION_FIGURES, *IDENTIFICATION_DOCUMENTS),
-         "explain": (*EXPLAIN_FIGURES, *EXPLAIN_DOCUMENTS)}
+         "explain": (*EXPLAIN_FIGURES, *EXPLAIN_DOCUMENTS), "frf": (*FRF_FIGURES, *FRF_DOCUMENTS)}
 #: where a report of each kind goes when the folder holds the other kind (a suggestion in the refusal)
-_SUBFOLDER = {"identification": "identify", "explain": "explain"}
+_SUBFOLDER = {"identification": "identify", "explain": "explain", "frf": "frf"}
 #: the page's titles before it carried the generator tag (reports written by earlier versions)
-_TITLES = {"identification": "<title>Identification report", "explain": "<title>Discrepancy report"}
+_TITLES = {"identification": "<title>Identification report", "explain": "<title>Discrepancy report",
+           "frf": "<title>Frequency response"}
 
 
 def generator(kind: str) -> str:
@@ -85,7 +87,7 @@ def check_report_folder(out_dir, kind: str) -> Path:
     if not out.is_dir():
         return out
     held = report_kind(out)
-    names = [n for n in ("index.html", *KINDS["identification"], *KINDS["explain"]) if (out / n).exists()]
+    names = [n for n in ("index.html", *(f for files in KINDS.values() for f in files)) if (out / n).exists()]
     if held in KINDS and held != kind:
         theirs = [n for n in names if n == "index.html" or n in KINDS[held]]
         raise ShakeidError(f"{out}: holds {_a(held)} report ({', '.join(theirs)}); {_a(kind)} report there would "

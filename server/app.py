@@ -20,13 +20,13 @@ from fastapi.responses import JSONResponse
 
 from daq.recorder import software_version
 
-from . import schemas
+from . import dashboard, schemas
 from .catalog import Catalog
-from .dashboard import dashboard_router
-from .deps import Services, viewer
+from .deps import Services
 from .jobs import JobQueue
 from .rigclient import RigLink
 from .routers import campaigns, export, jobs, live, recordings, results, rig, sweeps
+from .security import SecurityHeaders
 from .settings import Settings
 
 #: the routers, in the order their routes are matched and documented
@@ -62,7 +62,8 @@ def create_app(settings: Settings) -> FastAPI:
     app.add_exception_handler(RequestValidationError, invalid_request)
     for router in ROUTERS:
         app.include_router(router)
-    app.include_router(dashboard_router(lambda: svc.catalog, viewer))  # the page, its script, and the JSON it shows
+    app.include_router(dashboard.router)  # the page, its scripts, the JSON it shows, archiving, reports
+    app.add_middleware(SecurityHeaders)  # Content-Security-Policy, X-Frame-Options on every response
     return app
 
 

@@ -15,6 +15,8 @@ import threading
 import time
 from pathlib import Path
 
+from .text import cleaned
+
 ID_PATTERN = r"^[0-9a-f]{12}$"
 _ID = re.compile(ID_PATTERN)
 
@@ -50,6 +52,17 @@ JSON_FIELDS = {"recordings": {"info"}, "sweeps": {"request"}, "jobs": {"options"
                "campaigns": {"plan", "sweeps", "progress", "recording_ids"}}
 
 
+#: the file a job of each kind delivers, written atomically and last (server/worker.py): when it is there,
+#: whole, the job's result is complete, and a re-run of the job adopts it instead of computing again
+RESULT_FILES = {"identify": "model.json", "explain": "explain.json", "identify_joint": "joint.json"}
+
+
+def delivered(job: dict) -> bool:
+    """Whether the job's result file is there (it is never there half-written)."""
+    name = RESULT_FILES.get(job.get("kind"))
+    return bool(name and job.get("result_dir")) and (Path(job["result_dir"]) / name).is_file()
+
+
 def new_id() -> str:
     return secrets.token_hex(6)
 
@@ -63,6 +76,8 @@ class Catalog:
         self.path = Path(path)
         self.db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None, timeout=10.0)
         self.db.row_factory = sqlite3.Row
+        # text as served: bytes that are not UTF-8 (written by another program) read with U+FFFD, not an error
+        self.db.text_factory = lambda raw: raw.decode("utf-8", "replace")
         self.db.execute("PRAGMA journal_mode=WAL")
         self.db.executescript(SCHEMA)
         for table, column, kind in ADDED_COLUMNS:
@@ -85,7 +100,8 @@ class Catalog:
             return None
         d = dict(row)
         for k in JSON_FIELDS[table] & d.keys():
-            d[k] = json.loads(d[k]) if d[k] else {}
+            # cleaned: a lone surrogate stored as "\ud800" by an older version must not break a listing
+            d[k] = cleaned(json.loads(d[k])) if d[k] else {}
         return d
 
     def insert(self, table: str, **values) -> dict:
@@ -128,11 +144,14 @@ class Catalog:
                 "SELECT * FROM jobs WHERE state = 'queued' ORDER BY created LIMIT 1").fetchone())
 
     def recover_after_restart(self, max_attempts: int = 2) -> list[str]:
-        """Jobs a dead web server left running go back to the queue (or fail after max_attempts).
-        Returns what was done, for the log. (Sweeps are the rig controller's: abort_interrupted_sweeps.)"""
+        """Jobs a dead web server left running go back to the queue (or fail after max_attempts, unless
+        their result was delivered: a job with a result never fails). Returns what was done, for the log. (Sweeps are the rig controller's: abort_interrupted_sweeps.)"""
         notes = []
         for job in self.list("jobs", "state = 'running'", limit=10_000):
-            if job["attempts"] >= max_attempts:
+            if delivered(job):  # its result is there, whole: the re-run adopts it (server/worker.py)
+                self.update("jobs", job["id"], state="queued", error=None)
+                notes.append(f"job {job['id']}: its result was delivered before the restart; re-queued to adopt it")
+            elif job["attempts"] >= max_attempts:
                 self.update("jobs", job["id"], state="failed",
                             error=f"interrupted {job['attempts']} times by service restarts; not retried")
                 notes.append(f"job {job['id']}: failed (interrupted {job['attempts']} times)")
@@ -169,6 +188,12 @@ LEFT JOIN jobs je ON je.id = (SELECT id FROM jobs WHERE recording_id = r.id AND 
 WHERE {where} ORDER BY r.created DESC LIMIT ? OFFSET ?
 """
 RECORDINGS_COUNT = "SELECT COUNT(*) FROM recordings r LEFT JOIN sweeps s ON s.id = r.sweep_id WHERE {where}"
+#: the rig history's points: recordings with their latest identification's result folder (one statement)
+IDENTIFIED = """
+SELECT r.*, j.result_dir AS result_dir FROM recordings r
+JOIN jobs j ON j.id = json_extract(r.info, '$.last_identify_job')
+WHERE r.archived IS NULL AND j.result_dir IS NOT NULL ORDER BY r.created DESC LIMIT ?
+"""
 #: the recordings of a campaign: every sweep it started (aborted ones too), from its `sweeps` JSON
 CAMPAIGN_RECORDINGS = ("r.id IN (SELECT json_extract(c.value, '$.recording_id') FROM campaigns, "
                        "json_each(campaigns.sweeps) AS c WHERE campaigns.id = ?)")
@@ -209,6 +234,19 @@ class NamedQueries:
             rows = cat.db.execute(RECORDINGS_PAGE.format(where=where), (*args, limit, offset)).fetchall()
         return [_page_row(dict(r)) for r in rows], total
 
+    def recording(self, rec_id: str) -> dict | None:
+        """One recording as recordings_page shows it (archived or not)."""
+        with self.catalog.lock:
+            row = self.catalog.db.execute(RECORDINGS_PAGE.format(where="r.id = ?"), (rec_id, 1, 0)).fetchone()
+        return None if row is None else _page_row(dict(row))
+
+    def identified(self, limit: int = 200) -> list[tuple[dict, str]]:
+        """The newest `limit` recordings (not archived) with an identification, and its result folder."""
+        with self.catalog.lock:
+            rows = self.catalog.db.execute(IDENTIFIED, (limit,)).fetchall()
+        recs = [self.catalog._row("recordings", r) for r in rows]
+        return [(rec, rec.pop("result_dir")) for rec in recs]
+
 
 def _page_row(row: dict) -> dict:
     """A RECORDINGS_PAGE row as the dashboard shows a recording: its sweep and its jobs nested."""
@@ -220,4 +258,4 @@ def _page_row(row: dict) -> dict:
     rec["jobs"] = {kind: {"state": "none"} if row[f"{kind}_id"] is None else
                    {"state": row[f"{kind}_state"], "id": row[f"{kind}_id"], "error": row[f"{kind}_error"],
                     "updated": row[f"{kind}_updated"]} for kind in ("identify", "explain")}
-    return rec
+    return cleaned(rec)  # as _row: stored text never breaks the page

@@ -7,14 +7,19 @@ middleware never overrides one.
 """
 from __future__ import annotations
 
-from starlette.datastructures import MutableHeaders
-from starlette.types import ASGIApp, Message, Receive, Scope, Send
+import base64
+import hashlib
 
+from reports.html import STYLE
+
+#: the reports' one inline style, allowed by its hash: a report the dashboard opens from memory (a blob:
+#: page, which keeps the dashboard's policy) keeps its layout, and no other inline style is allowed
+REPORT_STYLE = "'sha256-" + base64.b64encode(hashlib.sha256(STYLE.encode()).digest()).decode() + "'"
 #: the dashboard's policy: its own scripts and styles only, figures as blob: URLs (fetched with the token
 #: in a header), never inside a frame (frame-ancestors; X-Frame-Options for browsers without CSP 2)
-DASHBOARD_CSP = ("default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' blob: data:; "
-                 "connect-src 'self'; object-src 'none'; base-uri 'none'; form-action 'self'; "
-                 "frame-ancestors 'none'")
+DASHBOARD_CSP = ("default-src 'self'; script-src 'self'; style-src 'self' " + REPORT_STYLE + "; "
+                 "img-src 'self' blob: data:; connect-src 'self'; object-src 'none'; base-uri 'none'; "
+                 "form-action 'self'; frame-ancestors 'none'")
 #: FastAPI's /docs and /redoc load their script and style from a CDN and start with an inline script
 DOCS_CSP = ("default-src 'self'; script-src 'self' 'unsafe-inline' https://cdn.jsdelivr.net; "
             "style-src 'self' 'unsafe-inline' https://cdn.jsdelivr.net; img-src 'self' data: https:; "
@@ -27,20 +32,21 @@ HEADERS = {"X-Frame-Options": "DENY", "X-Content-Type-Options": "nosniff", "Refe
 class SecurityHeaders:
     """app = SecurityHeaders(app), or `app.add_middleware(SecurityHeaders)`."""
 
-    def __init__(self, app: ASGIApp):
+    def __init__(self, app):
         self.app = app
 
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+    async def __call__(self, scope: dict, receive, send) -> None:
         if scope["type"] != "http":
             return await self.app(scope, receive, send)
         csp = DOCS_CSP if scope.get("path", "").startswith(DOCS_PATHS) else DASHBOARD_CSP
+        extra = [(name.lower().encode(), value.encode())
+                 for name, value in {"Content-Security-Policy": csp, **HEADERS}.items()]
 
-        async def send_with_headers(message: Message) -> None:
+        async def send_with_headers(message: dict) -> None:
             if message["type"] == "http.response.start":
-                headers = MutableHeaders(scope=message)
-                headers.setdefault("Content-Security-Policy", csp)
-                for name, value in HEADERS.items():
-                    headers.setdefault(name, value)
+                headers = list(message.get("headers", []))
+                present = {name.lower() for name, _ in headers}
+                message["headers"] = headers + [(n, v) for n, v in extra if n not in present]
             await send(message)
 
         await self.app(scope, receive, send_with_headers)

@@ -18,6 +18,7 @@ from .argtypes import file_and_samples, int_in, non_negative, positive
 from .batch_cmd import add_batch_parser
 from .campaign_cmd import add_campaign_parser
 from .export_cmd import add_export_parser
+from .frf_cmd import add_frf_parser
 from .helpformat import Parser
 from .lab_options import add_lab_parsers, add_sweep_shape
 from .ooc_cmd import add_out_of_core_options
@@ -384,6 +385,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_lab_parsers(sub)
     add_campaign_parser(sub)
     add_export_parser(sub)
+    add_frf_parser(sub)
     q = sub.add_parser("simulate", help="write a synthetic recording of the simulated rig (CSV + truth JSON)")
     q.add_argument("--out", required=True, metavar="FILE.csv",
                    help="the recording (t, table_acc, mass_acc); the truth goes to FILE.truth.json")

@@ -122,12 +122,14 @@ function sweepLine(s) {
   return `${base} · ${pct(s.progress)}`;
 }
 
-// -- live plot: server-sent events of the followed sweep's recording (never before it has one)
-let source = null, points = [];
+// -- live plot: server-sent events of the followed sweep's recording (never before it has one). The samples'
+// t is the time into the sweep (s since its recording started), so the axis reads 0 at the start.
+const LIVE_WINDOW_S = 10;
+let source = null, points = [], missed = 0;
 function follow(id) {
   if (sweep && sweep.id === id) return;
   if (source) { source.close(); source = null; }
-  sweep = {id, state: "queued", progress: 0}; points = []; draw();
+  sweep = {id, state: "queued", progress: 0}; points = []; missed = 0; draw();
 }
 function listen(rec_id) {
   if (source || !rec_id) return;
@@ -136,78 +138,55 @@ function listen(rec_id) {
   source.addEventListener("samples", e => {
     const d = JSON.parse(e.data);
     if (!d.t || !d.t.length) return;
-    d.t.forEach((t, i) => points.push([t, d.table_acc[i], d.mass_acc[i]]));
+    const last = points.length ? points[points.length - 1][0] : -Infinity;
+    d.t.forEach((t, i) => { if (t > last) points.push([t, d.table_acc[i], d.mass_acc[i]]); });
     const t_end = points[points.length - 1][0];
-    points = points.filter(p => p[0] > t_end - 10); draw();
+    points = points.filter(p => p[0] > t_end - LIVE_WINDOW_S); draw();
   });
-  source.addEventListener("end", () => { source.close(); });
+  source.addEventListener("missed", e => { missed += JSON.parse(e.data).missed_samples; });  // this browser fell behind
+  source.addEventListener("end", () => { source.close(); draw(); });
+}
+/** Round tick steps (1, 2, 5 x 10^n) for a span. */
+function niceStep(span, n) {
+  const raw = span / n, p = 10 ** Math.floor(Math.log10(raw));
+  return [1, 2, 5, 10].map(k => k * p).find(s => s >= raw);
 }
 function draw() {
   const c = $("live"), g = c.getContext("2d"), W = c.width, H = c.height;
+  const L = 70, R = 12, T = 12, B = 38, w = W - L - R, h = H - T - B;  // the plot area inside the axes
   g.clearRect(0, 0, W, H);
   c.dataset.points = points.length;
-  g.strokeStyle = "#ddd"; g.beginPath(); g.moveTo(0, H / 2); g.lineTo(W, H / 2); g.stroke();
-  if (!points.length) {
-    g.fillStyle = "#999"; g.font = "14px system-ui";
-    g.fillText(sweep ? "waiting for samples…" : "no sweep running", W / 2 - 60, H / 2 - 8); return;
+  const ended = !sweep || ["completed", "aborted", "failed"].includes(sweep.state);
+  const state = ended ? (points.length ? "ended" : "idle") : points.length ? "live" : "waiting";
+  c.dataset.state = state;
+  const t1 = points.length ? Math.max(points[points.length - 1][0], LIVE_WINDOW_S) : LIVE_WINDOW_S, t0 = t1 - LIVE_WINDOW_S;
+  const m = points.length ? Math.max(1e-6, ...points.map(p => Math.max(Math.abs(p[1]), Math.abs(p[2])))) : 1;
+  const ystep = niceStep(2 * m, 4), ymax = Math.ceil(m / ystep) * ystep;
+  const X = t => L + (t - t0) / LIVE_WINDOW_S * w, Y = v => T + h / 2 - v / ymax * h / 2;
+  g.font = "13px system-ui"; g.fillStyle = "#555"; g.strokeStyle = "#e4e4e4"; g.lineWidth = 1;
+  for (let v = -ymax; v <= ymax + 1e-9 * ymax; v += ystep) {  // y grid and labels, m/s²
+    g.beginPath(); g.moveTo(L, Y(v)); g.lineTo(L + w, Y(v)); g.stroke();
+    g.textAlign = "right"; g.fillText(+v.toPrecision(3) + "", L - 6, Y(v) + 4);
   }
-  const m = Math.max(1e-6, ...points.map(p => Math.max(Math.abs(p[1]), Math.abs(p[2]))));
-  const t1 = points[points.length - 1][0], t0 = t1 - 10;
-  g.fillStyle = "#555"; g.font = "12px system-ui";
-  g.fillText(`±${m.toPrecision(3)} m/s²`, 6, 14); g.fillText(`t = ${t1.toFixed(1)} s`, W - 80, H - 6);
+  for (let t = Math.ceil(t0); t <= t1 + 1e-9; t += 1) {  // x grid each second, labels every 2 s
+    g.beginPath(); g.moveTo(X(t), T); g.lineTo(X(t), T + h); g.stroke();
+    if (Math.round(t) % 2 === 0) { g.textAlign = "center"; g.fillText(`${Math.round(t)}`, X(t), T + h + 16); }
+  }
+  g.strokeStyle = "#999"; g.strokeRect(L, T, w, h);
+  g.textAlign = "center"; g.fillText("time into the sweep, s", L + w / 2, H - 4);
+  g.save(); g.translate(14, T + h / 2); g.rotate(-Math.PI / 2); g.fillText("acceleration, m/s²", 0, 0); g.restore();
+  const text = {idle: "no sweep running: the next sweep's table and mass acceleration appear here",
+                waiting: `sweep ${sweep && sweep.id}: waiting for its first samples…`,
+                live: `sweep ${sweep && sweep.id}: ${t1.toFixed(1)} s into the sweep` + (missed ? ` (${missed} samples skipped: this browser fell behind)` : ""),
+                ended: `sweep ${sweep && sweep.id} ${sweep && sweep.state} (its last ${LIVE_WINDOW_S} s shown); no sweep running now`}[state];
+  $("live-state").textContent = text;
+  if (!points.length) { g.fillStyle = "#999"; g.font = "15px system-ui"; g.fillText(text, L + w / 2, T + h / 2 - 8); return; }
+  g.lineWidth = 1.2;
   [[1, "#888"], [2, "#06c"]].forEach(([k, col]) => {
     g.strokeStyle = col; g.beginPath();
-    points.forEach((p, i) => g[i ? "lineTo" : "moveTo"]((p[0] - t0) / 10 * W, H / 2 - p[k] / m * H / 2.2));
+    points.forEach((p, i) => g[i ? "lineTo" : "moveTo"](X(p[0]), Y(p[k])));
     g.stroke();
   });
-}
-
-// -- recordings: date, origin, parameters, status and why, quality flags, where the fit stands
-function params(r) {
-  const s = r.info.sweep;
-  if (s) return `${s.f_start_hz}–${s.f_end_hz} Hz · ${s.duration_s} s · ${s.amplitude_mm} mm`;
-  const o = r.info.read_options || {};
-  return esc(r.filename) + (o.layout && o.layout !== "base" ? ` · ${esc(o.layout)} layout` : "");
-}
-function statusCell(r) {
-  const reason = r.info.reason || (r.sweep && r.sweep.error) || "";
-  const cls = r.status === "complete" ? "" : r.status === "running" ? "" : "bad";
-  const prog = r.sweep && r.status !== "complete" ? ` at ${pct(r.sweep.progress)}` : "";
-  return `<span class="${cls}">${esc(r.status)}${prog}</span>` + (reason ? `<br><span class="muted">${esc(reason)}</span>` : "");
-}
-function qualityCell(q) {
-  if (!q) return `<span class="muted">not assessed</span>`;
-  if (q.usable_for_identification === false) return `<span class="bad">unusable: ${esc((q.reasons || []).join("; "))}</span>`;
-  const flagged = q.flagged || [];
-  return q.flags ? `<span class="warn">${q.flags} flag(s)</span>: ${esc(flagged.join(", "))}` : `<span class="good">clean</span>`;
-}
-/** The fit: "not yet" (no identification), queued, running, failed (with why), or the held-out fit. */
-function fitCell(r) {
-  const j = r.jobs.identify;
-  if (j.state === "none") return `<span class="muted">not yet</span>` +
-    (session.role === "operator" && r.status !== "running" ? ` <button class="identify" data-id="${r.id}">identify</button>` : "");
-  if (j.state === "queued" || j.state === "running") return `<span class="muted">${j.state}…</span>`;
-  if (j.state === "failed") return `<span class="bad" title="${esc(j.error)}">failed</span>: <span class="muted">${esc(shorten(j.error, 60))}</span>`;
-  const f = (r.info.identify || {}).fit_percent;
-  if (f == null) return `<span class="bad">diverged</span>`;
-  const cls = f >= 90 ? "good" : f >= 50 ? "warn" : "bad";
-  return `<span class="${cls}">${f.toFixed(1)} %</span>` + (f < 50 ? ` <span class="bad">(poor)</span>` : "");
-}
-const shorten = (t, n) => (t = String(t ?? "")).length > n ? t.slice(0, n - 1) + "…" : t;
-async function identify(id) {
-  try { await api("POST", `/api/recordings/${id}/identify`, {}); say(`identification of ${id} queued`); refresh(); }
-  catch (e) { fail("identification refused")(e); }
-}
-let recsShown = "";
-function showRecordings(recs) {
-  const key = JSON.stringify([recs, session.role]);
-  if (key === recsShown) return;  // unchanged: leave the rows (and any button under the mouse) alone
-  recsShown = key;
-  $("recs").innerHTML = `<tr><th>date</th><th>id</th><th>origin</th><th>parameters</th><th>status</th><th>data quality</th><th>held-out fit</th></tr>` +
-    (recs.length ? recs.map(r => `<tr data-id="${r.id}"><td class="date">${when(r.created)}</td><td><a href="#/recording/${r.id}">${r.id}</a></td>
-      <td>${esc(r.origin)}</td><td class="date">${params(r)}</td><td>${statusCell(r)}</td><td>${qualityCell(r.info.quality)}</td>
-      <td class="fit">${fitCell(r)}</td></tr>`).join("") : `<tr><td colspan="7" class="muted">no recordings yet</td></tr>`);
-  $("recs").querySelectorAll("button.identify").forEach(b => b.onclick = () => identify(b.dataset.id));
 }
 
 // -- campaigns: a builder (amplitudes, directions, settle) and their state
@@ -231,6 +210,7 @@ function showCampaigns(cs) {
   const key = JSON.stringify(cs);
   if (key === campaignsShown) return;
   campaignsShown = key;
+  campaignChoices(cs);
   const actions = c => session.role !== "operator" ? "" :
     (c.state === "running" ? `<button data-act="pause" data-id="${c.id}">pause</button> ` : "") +
     (c.state === "paused" ? `<button data-act="resume" data-id="${c.id}">resume</button> ` : "") +
@@ -280,16 +260,17 @@ async function refreshHome(rig) {
     $("sweep-status").textContent = sweepLine(sweep);
     $("sweep-status").className = "status " + (["aborted", "failed"].includes(sweep.state) ? "bad" : "");
     if (sweep.state === "running") listen(sweep.recording_id);
+    draw();  // its state line follows the sweep's
   }
-  const [recs, cs] = await Promise.all([api("GET", "/api/dashboard/recordings?limit=50"), api("GET", "/api/campaigns?limit=20")]);
+  const [recs, cs] = await Promise.all([api("GET", listQuery()), api("GET", "/api/campaigns?limit=20")]);
   showRecordings(recs); showCampaigns(cs);
-  await refreshHistory(recs);
+  await refreshHistory(recs.items);
 }
 // start once every script has run: recording.js and history.js load after this file, and an early refresh
 // (a timer or a quick sign-in while they were still loading) read their names before they existed
 // ("openRecording is not defined", seen under load in tests/server/test_dashboard.py)
 window.addEventListener("DOMContentLoaded", () => {
-  planHint();
+  planHint(); draw();
   setInterval(refresh, 1000);
   if (tok()) signIn(); else { $("login").hidden = false; }
 });

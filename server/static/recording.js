@@ -14,6 +14,8 @@ const CAPTIONS = {  // the report's figures; any other figure is shown under its
   "residual_state.png": "Residual over the state (displacement, velocity): where the textbook model misses.",
   "residual_time.png": "Residual over time and excitation frequency.",
 };
+//: figures with several panels or long time axes: shown at the page's width, so their text stays readable
+const WIDE = new Set(["lambda_path.png", "validation.png", "residual_time.png"]);
 //: the model's downloads (GET /api/recordings/{id}/model.<suffix>, server/routers/export.py): suffix, button
 const EXPORTS = [["fmu", "FMU (FMI 2.0)"], ["c", "C"], ["py", "Python"], ["tex", "LaTeX"]];
 const num = (x, digits = 4) => x == null ? "–" : Math.abs(x) >= 1e5 || (Math.abs(x) < 1e-3 && x !== 0) ? x.toExponential(digits - 1) : (+x.toPrecision(digits)).toString();
@@ -43,6 +45,7 @@ async function refreshRecording() {
     api("POST", b.dataset.job === "explain" ? `/api/recordings/${id}/explain` : `/api/recordings/${id}/identify`,
         b.dataset.faulty ? {accept_faulty: true} : {}).then(() => { say(`${b.dataset.job} of ${id} queued`); refreshRecording(); })
       .catch(fail(`${b.dataset.job} refused`)));
+  $("rec-body").querySelectorAll("a.report").forEach(a => a.onclick = ev => { ev.preventDefault(); openReport(id, a.dataset.kind); });
   const dl = $("rec-download");
   if (dl) dl.onclick = async () => {
     try { const a = document.createElement("a"); a.href = await blobUrl(`/api/recordings/${id}/file`); a.download = r.filename; a.click(); }
@@ -78,9 +81,12 @@ function qualitySection(r, result) {
 }
 
 function jobState(r, kind, label) {
-  const j = r.jobs[kind];
-  const run = session.role === "operator" && r.status !== "running" ? ` <button data-job="${kind}">${label}</button>` : "";
-  if (j.state === "none") return `<p class="muted">not yet${run}</p>`;
+  const j = r.jobs[kind], op = session.role === "operator" && !r.archived;
+  // an aborted or faulty recording is refused as it is: the operator may go on anyway, and the result says so
+  const run = !op || r.status === "running" ? "" : r.status === "complete" ? ` <button data-job="${kind}">${label}</button>` :
+    ` <button data-job="${kind}" data-faulty="1">${label} anyway</button>`;
+  if (j.state === "none") return r.status === "complete" || r.status === "running" ? `<p class="muted">not yet${run}</p>` :
+    `<p class="bad">not ${kind === "identify" ? "identified" : "explained"}: the recording is ${esc(r.status)}${run}</p>`;
   if (j.state === "queued" || j.state === "running") return `<p class="muted">${j.state}…</p>`;
   // refused for the data's state or quality: the operator may go on anyway, and the result will say so
   const anyway = session.role === "operator" && /accept_faulty/.test(j.error || "") ? ` <button data-job="${kind}" data-faulty="1">${label} anyway</button>` : run;
@@ -106,11 +112,13 @@ function modelSection(r, m) {
     `<span class="hint">(as <code>shakeid export</code> writes it, docs/export.md)</span></p>`;
   const p = m.physical;
   if (p) {
-    const row = (label, key, unit) => p[key] ? `<tr><td>${label}</td><td class="num">${num(p[key].value)}</td><td class="num">${num(p[key].std_error, 2)}</td><td>${unit}</td></tr>` : "";
+    // scale: from the model's SI value to the unit shown (b in mm, as the CLI and the report print it)
+    const row = (label, key, unit, scale = 1) => p[key] ? `<tr><td>${label}</td><td class="num">${num(p[key].value == null ? null : scale * p[key].value)}</td>` +
+      `<td class="num">${num(p[key].std_error == null ? null : scale * p[key].std_error, 2)}</td><td>${unit}</td></tr>` : "";
     html += `<h4>Physical parameters <span class="hint">(mass ${p.mass_kg} kg)</span></h4><table class="data" id="rec-physical">` +
       `<tr><th>parameter</th><th class="num">value</th><th class="num">standard error</th><th>unit</th></tr>` +
       row("damping c", "damping_ns_per_m", "N s/m") + row("stiffness k", "stiffness_n_per_m", "N/m") +
-      row("cubic stiffness k3", "cubic_stiffness_n_per_m3", "N/m³") + row("pre-stress b", "prestress_b_m", "m") +
+      row("cubic stiffness k3", "cubic_stiffness_n_per_m3", "N/m³") + row("pre-stress b", "prestress_b_m", "mm", 1e3) +
       row("input gain", "input_gain", "") + `</table>` +
       (p.design ? `<p class="hint">For comparison, the design value of k3 from the rig's drawing (4 k_l a²) is ${num(p.design.cubic_stiffness_n_per_m3)} N/m³; ` +
         `it is not measured, and a difference says how far the built rig is from its drawing.</p>` : "");
@@ -118,7 +126,8 @@ function modelSection(r, m) {
   const v = (m.validation || {}).heldout || {};
   if (Object.keys(v).length) html += `<h4>Validation on held-out data</h4><table class="data" id="rec-validation"><tr><th>signal</th><th class="num">fit</th><th class="num">NRMSE</th></tr>` +
     Object.entries(v).map(([k, x]) => `<tr><td>${esc(k)}</td><td class="num">${x.fit_percent == null ? "diverged" : x.fit_percent.toFixed(2) + " %"}</td><td class="num">${num(x.nrmse, 3)}</td></tr>`).join("") + `</table>`;
-  return html + `<div class="figures" id="rec-model-figures"></div>`;
+  return html + `<p><a href="#" class="report" data-kind="identify" id="rec-report">the whole report (index.html)</a> <span class="hint">opens in a new tab</span></p>` +
+    `<div class="figures" id="rec-model-figures"></div>`;
 }
 function explainSection(r, x) {
   const pending = jobState(r, "explain", "explain");
@@ -127,6 +136,7 @@ function explainSection(r, x) {
   const eff = x.effect ? `<b>${esc(String(x.effect).replace(/_/g, " "))}</b> (terms ${esc((x.terms || []).join(", "))}, confidence ${(x.confidence ?? 0).toFixed(3)})` : "<b>no effect found</b>";
   return `<p id="rec-effect">Effect: ${eff}.</p><p>Gap (${esc(x.metric || "")}): ${num(x.gap_before, 3)} before, ${num(x.gap_after, 3)} after` +
     (x.gap_closed != null ? ` (${pct(x.gap_closed)} closed)` : "") + (x.noise_floor != null ? `; noise floor ${num(x.noise_floor, 3)}` : "") + `.</p>` +
+    `<p><a href="#" class="report" data-kind="explain" id="rec-explain-report">the whole report (index.html)</a> <span class="hint">opens in a new tab</span></p>` +
     `<div class="figures" id="rec-explain-figures"></div>`;
 }
 async function figures(id, kind, into) {
@@ -137,7 +147,15 @@ async function figures(id, kind, into) {
   for (const name of names) {
     const fig = document.createElement("figure");
     fig.innerHTML = `<img alt="${esc(name)}"><figcaption>${esc(CAPTIONS[name] || name)}</figcaption>`;
+    if (WIDE.has(name)) fig.className = "wide";
     box.append(fig);
     blobUrl(`/api/recordings/${id}/plots/${name}?kind=${kind}`).then(u => fig.querySelector("img").src = u).catch(() => {});
   }
+}
+/** The report's page (its figures inlined by the server), fetched with the token in a header and opened
+ *  from memory in a new tab: no address carries the token. */
+async function openReport(id, kind) {
+  const tab = window.open("", "_blank");
+  try { const url = await blobUrl(`/api/recordings/${id}/report?kind=${kind}`); if (tab) tab.location = url; else location.assign(url); }
+  catch (e) { if (tab) tab.close(); fail(`the ${kind} report`)(e); }
 }

@@ -242,6 +242,22 @@ def test_recording_page(page, service, sweep_recording):
     page.wait_for_function(f"[...document.querySelectorAll('#rec-model-figures img')].filter(i => i.naturalWidth > 0)"
                            f".length === {len(plots)}")
     assert len(plots) >= 3
+    # b in mm, as the CLI and the report print it
+    b = page.locator("#rec-physical tr:has-text('pre-stress b')").inner_text().split("\t")
+    assert b[3] == "mm" and float(b[1]) == pytest.approx(1e3 * model["physical"]["prestress_b_m"]["value"], rel=1e-3)
+    # the lambda path at the page's width: its text shown at 3/4 of its size or more
+    assert page.evaluate("(i => i.clientWidth / i.naturalWidth)(document.querySelector("
+                         "'#rec-model-figures img[alt=\"lambda_path.png\"]'))") >= 0.75
+    # the whole report from the page: titled with the file's name (no server path), its figures inlined, its
+    # own style applied (the dashboard's policy allows that one inline style by its hash)
+    with page.expect_popup() as popup:
+        page.click("#rec-report")
+    report = popup.value
+    report.wait_for_url("blob:*")
+    report.wait_for_function("document.images.length >= 3 && [...document.images].every(i => i.naturalWidth > 0)")
+    assert report.title() == f"Identification report: {sweep_recording['filename']}"
+    assert report.evaluate("getComputedStyle(document.body).maxWidth") == "1100px"
+    report.close()
     with page.expect_download() as download:
         page.click("#rec-download")
     assert Path(download.value.path()).read_bytes() == stored
@@ -317,9 +333,9 @@ def test_campaign_from_the_builder(page, service):
 
 
 def test_failed_fit_is_not_not_yet_and_can_be_forced(page, service):
-    """An aborted recording: identification refused (failed, with the reason; not the 'not yet' of a
-    recording never tried), then identified anyway from its page, which says so, and kept out of the rig
-    history unless asked for."""
+    """An aborted recording: shown as such (unusable, 'not identified (aborted)', no identify button; never
+    'clean' or 'not yet'), identified anyway from its page, which says so, and kept out of the rig history
+    unless asked for."""
     with service.client() as api:
         wait_idle(api)
         # aborted while recording the settle (30 s of rest after the sweep): the whole sweep is in the file,
@@ -331,13 +347,12 @@ def test_failed_fit_is_not_not_yet_and_can_be_forced(page, service):
         rec_id = wait_for(lambda: (s := api.get(f"/api/sweeps/{sweep_id}").json())["state"] == "aborted"
                           and s["recording_id"], what="the abort")
         row = page.locator(f"#recs tr[data-id='{rec_id}']")
-        row.locator("td.fit:has-text('not yet')").wait_for()
-        row.locator("button.identify").click()
-        row.locator("td.fit:has-text('failed')").wait_for()
-        job = api.get("/api/jobs", params={"limit": 5}).json()
-        error = next(j["error"] for j in job if j["recording_id"] == rec_id)
-        assert "accept_faulty" in error and error[:50] in row.inner_text()
+        row.locator("td.fit:has-text('not identified (aborted)')").wait_for()
+        assert row.locator("button.identify").count() == 0
+        assert "unusable: " in row.locator("td.quality").inner_text() and "clean" not in row.inner_text()
         page.click(f"#recs a[href='#/recording/{rec_id}']")
+        page.wait_for_selector("#rec-model p.bad:has-text('not identified: the recording is aborted')")
+        assert "unusable" in page.inner_text("#rec-quality")
         page.click("#rec-model button[data-faulty]")
         page.wait_for_selector("#rec-model p.muted:has-text('queued'), #rec-model p.muted:has-text('running')")
         page.wait_for_selector("#rec-faulty, #rec-model p.bad")  # identified, or failed again

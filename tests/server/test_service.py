@@ -358,7 +358,7 @@ def test_joint_and_job_requests_are_checked_when_made(service, tmp_path, table1_
     done = wait_for(lambda: (j := op.get(f"/api/jobs/{joint.json()['id']}").json())["state"] in ("completed", "failed")
                     and j, 180, "joint job")
     assert done["state"] == "completed", done  # the MAT file read with its own names, as uploaded
-    listed = op.get("/api/dashboard/recordings").json()
+    listed = op.get("/api/dashboard/recordings").json()["items"]
     assert listed and all("path" not in r for r in listed)
     assert "path" not in op.get(f"/api/dashboard/recordings/{csv_id}").json()
     wait_for(lambda: op.get(f"/api/jobs/{explain.json()['id']}").json()["state"] in ("completed", "failed"), 180,
