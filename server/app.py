@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from contextlib import asynccontextmanager
 
-from fastapi import FastAPI, Request
+from fastapi import Depends, FastAPI, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
@@ -22,12 +22,13 @@ from daq.recorder import software_version
 
 from . import dashboard, schemas
 from .catalog import Catalog
-from .deps import Services
+from .deps import Services, valid_text
 from .jobs import JobQueue
 from .rigclient import RigLink
 from .routers import campaigns, export, jobs, live, recordings, results, rig, sweeps
 from .security import SecurityHeaders
 from .settings import Settings
+from .text import cleaned
 
 #: the routers, in the order their routes are matched and documented
 ROUTERS = (rig.router, sweeps.router, campaigns.router, recordings.router, live.router, jobs.router, results.router,
@@ -55,6 +56,7 @@ def create_app(settings: Settings) -> FastAPI:
         svc.catalog.close()
 
     app = FastAPI(title="shakeid", version=software_version(), lifespan=lifespan,
+                  dependencies=[Depends(valid_text)],  # a body's text checked before any route reads it
                   responses={400: {"model": schemas.Problem}, 422: {"model": schemas.Problem}},
                   description="Sine sweeps on the shaker rig, HDF5 recordings, sparse nonlinear models.")
     app.state.services = svc
@@ -70,13 +72,14 @@ def create_app(settings: Settings) -> FastAPI:
 async def invalid_request(request: Request, exc: RequestValidationError):
     """422 naming each field; inputs echoed only as text, so NaN, Infinity or 1e400 in a body get a
     422 like any other bad value (JSON cannot carry them back, and a 500 would drop the connection)."""
-    detail = [{"loc": list(err.get("loc", ())), "msg": schemas.in_words(err), "type": err.get("type", ""),
-               **({"input": _text(err["input"])} if "input" in err else {})} for err in exc.errors()]
+    detail = [{"loc": cleaned(list(err.get("loc", ()))), "msg": cleaned(schemas.in_words(err)),
+               "type": err.get("type", ""), **({"input": _text(err["input"])} if "input" in err else {})}
+              for err in exc.errors()]
     return JSONResponse({"detail": detail}, status_code=422)
 
 
 def _text(value) -> str | int | bool | None:
     """An input echoed in a 422: text for anything that JSON might not carry (non-finite floats)."""
     if value is None or isinstance(value, (bool, int, str)):
-        return value if not isinstance(value, str) else value[:200]
+        return value if not isinstance(value, str) else cleaned(value[:200])  # a lone surrogate cannot be sent
     return repr(value)[:200]

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 from fastapi import Depends, HTTPException, Path, Request
 from fastapi.concurrency import run_in_threadpool
+from fastapi.exceptions import RequestValidationError
 
 from . import schemas
 from .auth import require_role
@@ -22,6 +23,7 @@ from .jobs import JobQueue
 from .livefeed import LiveFeeds
 from .rigclient import RigLink
 from .settings import Settings
+from .text import first_problem
 
 #: who calls, as a route parameter or in `dependencies=[...]`: a token with this role (or above)
 viewer = Depends(require_role("viewer"))
@@ -67,3 +69,15 @@ class Services:
 async def services(request: Request) -> Services:
     """The app's Services (a dependency: `svc: Services = Depends(services)`)."""
     return request.app.state.services
+
+
+async def valid_text(request: Request) -> None:
+    """Every route's first dependency (create_app): a JSON body with a string that is not text (a lone
+    surrogate, a control character; server/text.py) anywhere, keys included, is refused with 422 naming
+    the field, before anything reads or stores it. The body as FastAPI parsed it for the route (Starlette
+    keeps it on the request); a route without a JSON body (an upload's raw bytes) is not read here."""
+    body = getattr(request, "_json", None)
+    found = first_problem(body, ("body",)) if body is not None else None
+    if found:
+        loc, why = found
+        raise RequestValidationError([{"loc": loc, "msg": why, "type": "invalid_text"}])

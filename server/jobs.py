@@ -12,14 +12,18 @@ import multiprocessing
 import os
 import threading
 import time
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 from identify.errors import ShakeidError
 
 from . import worker
-from .catalog import Catalog, new_id
+from .catalog import Catalog, delivered, new_id
+
+#: how long a stopping service waits for a running job whose result is already delivered, s (what is left
+#: is the report folder's rename: milliseconds; the bound only guards against a stuck worker)
+FINISH_GRACE_S = 5.0
 
 
 def queue_job(catalog: Catalog, results_dir: Path, kind: str, recording_id: str, options: dict | None = None) -> dict:
@@ -37,7 +41,7 @@ class JobQueue:
         self.scheduler, self.connect_timeout_s = scheduler, connect_timeout_s
         self.pool = self._new_pool()
         self._wake = threading.Event()
-        self._stop = False
+        self._stop = self._terminating = False
         self._running: dict[str, Future] = {}
         self._pool_lock = threading.Lock()
         self._thread = threading.Thread(target=self._dispatch, name="job-dispatcher", daemon=True)
@@ -58,13 +62,26 @@ class JobQueue:
         self._thread.start()
 
     def stop(self) -> None:
-        """Stop taking jobs; a running job is stopped with its worker and stays "running" in the catalog,
-        so the next start runs it again."""
+        """Stop taking jobs (a graceful stop: SIGTERM). A running job whose result is delivered is let
+        finish (only the report's rename is left; at most FINISH_GRACE_S); the others are stopped with their
+        worker and parked: queued again, the attempt not counted (a stop is not the job's fault), so the next
+        start runs them. A job left "running" (the service was killed) is recovered on the next start
+        (Catalog.recover_after_restart)."""
         self._stop = True
         self._wake.set()
         self._thread.join(5)
+        for job_id, fut in list(self._running.items()):
+            job = self.catalog.get("jobs", job_id)
+            if job is not None and delivered(job):
+                wait([fut], timeout=FINISH_GRACE_S)
+        self._terminating = True  # from here a job's end is the stop's doing, not the job's
         with self._pool_lock:
             pool = self.pool
+        for job_id in list(self._running):
+            job = self.catalog.get("jobs", job_id)
+            if job is not None and job["state"] == "running":
+                self.catalog.update("jobs", job_id, state="queued", attempts=max(0, job["attempts"] - 1),
+                                    error="parked: the service stopped during this job; it runs again on the next start")
         for proc in list((getattr(pool, "_processes", None) or {}).values()):  # None once shut down
             proc.terminate()
         # not under the lock: shutdown joins the pool's manager thread, which runs _done callbacks
@@ -117,8 +134,8 @@ class JobQueue:
 
     def _done(self, job_id: str, recording_id: str, kind: str, fut: Future, broken_pool=None) -> None:
         self._running.pop(job_id, None)
-        if fut.cancelled() or self._stop:
-            return  # the service is stopping: the job stays "running" and is re-queued on the next start
+        if fut.cancelled() or self._terminating:
+            return  # stopped by the service's stop: parked by stop()
         exc = fut.exception()
         if exc is None:
             summary = fut.result()

@@ -1,6 +1,7 @@
 """Request and response bodies of the HTTP API (pydantic: validated in, documented in the OpenAPI)."""
 from __future__ import annotations
 
+import math
 from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictFloat, field_validator
@@ -224,20 +225,35 @@ class Problem(BaseModel):
     detail: str | list[dict]
 
 
-#: What a pattern asks for, in words, by the parameter's name: pydantic's message quotes the regex.
+#: What a pattern asks for, in words, by where the parameter is and its name: pydantic's message quotes the
+#: regex. ("path", "name") is a plot's name; ("body", "name") a campaign's (one word, two meanings)
 PATTERN_WORDS = {
-    "filename": FILENAME_WORDS,
-    "name": "a plot's file name: lower-case letters, digits and '_', ending in .png",
+    ("query", "filename"): FILENAME_WORDS,
+    ("path", "name"): "a plot's file name: lower-case letters, digits and '_', ending in .png",
+    ("body", "name"): "a campaign name: 1-64 letters, digits, '.', '_' or '-', beginning with a letter or digit "
+                      "(it names the campaign's files)",
 }
+#: bound checks whose message would quote a bound a non-finite number (NaN, inf) cannot be compared with
+_BOUND_TYPES = {"greater_than", "greater_than_equal", "less_than", "less_than_equal", "finite_number"}
+
+
+def _finite(value) -> bool:
+    """False for NaN and infinities, as floats or as the text a query string carries them in."""
+    try:
+        return math.isfinite(float(value))
+    except (TypeError, ValueError, OverflowError):
+        return True  # not a number at all: pydantic's own message says so
 
 
 def in_words(err: dict) -> str:
     """A validation error's message, a pattern mismatch said in words (PATTERN_WORDS; an id: 12 hex digits)."""
     loc = err.get("loc", ())
+    if err.get("type") in _BOUND_TYPES and not _finite(err.get("input")):
+        return "should be a finite number (NaN and infinity are not measurements)"
     if err.get("type") == "string_pattern_mismatch" and loc:
         field = str(loc[-1])
-        if field in PATTERN_WORDS:
-            return f"should be {PATTERN_WORDS[field]}"
+        if (str(loc[0]), field) in PATTERN_WORDS:
+            return f"should be {PATTERN_WORDS[str(loc[0]), field]}"
         if field.endswith("id"):
             return "should be an id: 12 hex digits"
     return err.get("msg", "")

@@ -1,16 +1,21 @@
 """What an identification or explanation job does, in a worker process (no service state here).
 
-The model JSON (the same object `shakeid identify --json` prints) is written first and atomically, so it
-is available as soon as the fit ends; the report's figures follow in the same job.
+A job's result is delivered whole or not at all: the report is written into a staging folder
+(report.partial, wiped first), then the result file (catalog.RESULT_FILES: model.json, the object
+`shakeid identify --json` prints; explain.json; joint.json) atomically, then the staging folder is renamed
+to report. A job run again (re-queued after a restart) whose result file is there adopts it: it finishes
+the rename if it was cut short and returns the same summary, without fitting again.
 """
 from __future__ import annotations
 
 import json
 import os
+import shutil
 from pathlib import Path
 
 from identify.errors import ShakeidError
 
+from .catalog import RESULT_FILES
 from .schemas import IdentifyIn, ReadOptions
 
 
@@ -69,6 +74,9 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
     kind "identify_joint": path is a list of recordings' paths, fitted as one model (identify.joint)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    if (out / RESULT_FILES.get(kind, "-")).is_file():
+        return _adopt(kind, out)
+    shutil.rmtree(out / STAGING, ignore_errors=True)  # an interrupted run's half-written report
     if kind == "identify_joint":
         return _run_joint(list(path), options, out)
     try:
@@ -89,23 +97,44 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
             result = {**ident.fit(rec).result(), **data}
             if result["status"] == "failed":  # no model.json: what was fitted is not a model of the rig
                 raise ShakeidError(f"{_label(path, options)}: identification failed: {result['reason']}")
+            write_report(ident, out / STAGING)
             _write_json(out / "model.json", result)
-            write_report(ident, out / "report")
-            val = (result.get("validation") or {}).get("heldout", {}).get("q1_dot", {})
-            return {"terms": {eq: sorted(terms) for eq, terms in result["model"].items()},
-                    "fit_percent": val.get("fit_percent"), "accepted_faulty": result.get("accepted_faulty", [])}
+            return _adopt(kind, out)
         if kind == "explain":
             from identify.explain import DiscrepancyAnalysis
             from reports.explain import write_explain_report
 
             analysis = DiscrepancyAnalysis(band_hz=tuple(options["band_hz"]) if options.get("band_hz") else None)
             result = {**analysis.fit(rec).result(), **data}
+            write_explain_report(analysis, out / STAGING)
             _write_json(out / "explain.json", result)
-            write_explain_report(analysis, out / "report")
-            return {"effect": result["effect"], "gap_before": result["gap_before"], "gap_after": result["gap_after"]}
+            return _adopt(kind, out)
         raise ShakeidError(f"unknown job kind {kind!r}")
     except (ShakeidError, ValueError) as exc:  # the user's input: a message, not a traceback
         raise ShakeidError(_public(str(exc), [path], options)) from None
+
+
+#: where a job writes its report before the result file is there (then renamed to "report")
+STAGING = "report.partial"
+
+
+def _adopt(kind: str, out: Path) -> dict:
+    """The summary of the result delivered in `out` (its result file is there, whole); a staged report is
+    moved into place first. A joint fit that failed fails its job again, with the same reason."""
+    result = json.loads((out / RESULT_FILES[kind]).read_text())
+    if (out / STAGING).is_dir():
+        shutil.rmtree(out / "report", ignore_errors=True)
+        os.replace(out / STAGING, out / "report")
+    if kind == "explain":
+        return {"effect": result["effect"], "gap_before": result["gap_before"], "gap_after": result["gap_after"]}
+    terms = {eq: sorted(t) for eq, t in result["model"].items()}
+    if kind == "identify_joint":
+        if result["status"] == "failed":
+            raise ShakeidError(f"joint identification of {len(result['recordings'])} recordings failed: "
+                               f"{result['reason']}")
+        return {"terms": terms, "recordings": {r["source"]: r["status"] for r in result["recordings"]}}
+    val = (result.get("validation") or {}).get("heldout", {}).get("q1_dot", {})
+    return {"terms": terms, "fit_percent": val.get("fit_percent"), "accepted_faulty": result.get("accepted_faulty", [])}
 
 
 def _run_joint(paths: list, options: dict, out: Path) -> dict:
@@ -128,12 +157,10 @@ def _run_joint(paths: list, options: dict, out: Path) -> dict:
         if options.get("band_hz"):
             params["band_hz"] = tuple(options["band_hz"])
         result = SparseIdentifier(**params).fit(recs).result()
-        _write_json(out / "joint.json", result)
-        if result["status"] == "failed":
-            raise ShakeidError(f"joint identification of {len(recs)} recordings failed: {result['reason']}")
-        _write_json(out / "model.json", result)
-        return {"terms": {eq: sorted(terms) for eq, terms in result["model"].items()},
-                "recordings": {r["source"]: r["status"] for r in result["recordings"]}}
+        if result["status"] != "failed":
+            _write_json(out / "model.json", result)
+        _write_json(out / "joint.json", result)  # last: the result file (catalog.RESULT_FILES)
+        return _adopt("identify_joint", out)
     except (ShakeidError, ValueError) as exc:
         raise ShakeidError(_public(str(exc), paths, options)) from None
 

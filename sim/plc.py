@@ -57,6 +57,12 @@ class Fault(enum.IntEnum):
     SIMULATION = 9    # the rig response left the simulable range (|q| or |q'| > BOUND, or not finite)
 
 
+#: the shortest sweep, s: a sweep is at least one period at the lowest frequency the rig runs at (Limits.f_min_hz
+#: 0.2 Hz: 5 s would refuse short test sweeps; 1 s is 100 PLC cycles). Shorter durations were accepted and
+#: then read as 0 by the PLC's float32 setpoint (1e-300 s), which faulted the rig and needed a reset.
+MIN_SWEEP_DURATION_S = 1.0
+
+
 @dataclass
 class Limits:
     """Safety limits of the table, checked before a sweep starts (and by the DAQ before it writes)."""
@@ -80,8 +86,9 @@ class Limits:
         if not (self.f_min_hz <= f_low and f_top <= self.f_max_hz):
             return Fault.FREQUENCY, (f"frequency {f_low:g}-{f_top:g} Hz outside the limit "
                                      f"{self.f_min_hz:g}-{self.f_max_hz:g} Hz")
-        if not 0 < sweep.duration_s <= self.max_duration_s:
-            return Fault.DURATION, f"duration {sweep.duration_s:g} s outside (0, {self.max_duration_s:g}] s"
+        if not MIN_SWEEP_DURATION_S <= sweep.duration_s <= self.max_duration_s:
+            return Fault.DURATION, (f"duration {sweep.duration_s:g} s outside the limit {MIN_SWEEP_DURATION_S:g}-"
+                                    f"{self.max_duration_s:g} s")
         if sweep.amplitude_mm > self.max_stroke_mm:
             return Fault.STROKE, f"amplitude {sweep.amplitude_mm:g} mm above the stroke limit {self.max_stroke_mm:g} mm"
         v = a * 2 * np.pi * f_top

@@ -18,8 +18,8 @@ router = APIRouter(tags=["jobs"], dependencies=[viewer], responses={**ERRORS, 40
 def latest_result(svc: Services, rec_id: str, kind: str, name: str) -> FsPath:
     """The file or folder `name` of the recording's newest job of `kind` that has one; 404 saying why not."""
     rec = svc.recording_or_404(rec_id)
-    for job in svc.catalog.list("jobs", "recording_id = ? AND kind = ? AND state IN ('running', 'completed')",
-                                (rec_id, kind)):
+    # a queued job may hold a delivered result too (parked by a stop, or re-queued to adopt it)
+    for job in svc.catalog.list("jobs", "recording_id = ? AND kind = ? AND state != 'failed'", (rec_id, kind)):
         path = FsPath(job["result_dir"]) / name
         if path.exists():
             return path

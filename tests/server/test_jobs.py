@@ -2,6 +2,7 @@
 import os
 import signal
 import time
+from pathlib import Path
 
 import pytest
 
@@ -53,5 +54,51 @@ def test_stopping_with_a_job_running_returns_and_leaves_it_for_the_next_start(qu
     stopper.start()
     stopper.join(30)
     assert not stopper.is_alive(), "JobQueue.stop() hung with a job running"
-    assert cat.get("jobs", job["id"])["state"] == "running"  # re-queued by recover_after_restart next time
-    assert cat.recover_after_restart() == [f"job {job['id']}: re-queued after a restart"]
+    # parked: queued again, the attempt not counted (a stop is not the job's fault); nothing to recover
+    parked = cat.get("jobs", job["id"])
+    assert parked["state"] == "queued" and parked["attempts"] == 0 and "parked" in parked["error"], parked
+    assert cat.recover_after_restart() == []
+
+
+def _completed(cat, job_id):
+    return wait_for(lambda: (j := cat.get("jobs", job_id))["state"] in ("completed", "failed") and j, 90, "job")
+
+
+def test_a_job_whose_result_was_delivered_adopts_it_when_run_again(queue):
+    """The service was killed after model.json was written, before the staged report was renamed (and
+    after two attempts): the job is re-queued, not failed, and its re-run adopts the delivered model (the
+    same bytes, no new fit) and puts the report in place."""
+    cat, jobs = queue
+    job = jobs.submit("identify", "0000000000aa", {})
+    assert _completed(cat, job["id"])["state"] == "completed"
+    out = Path(job["result_dir"])
+    delivered = (out / "model.json").read_bytes()
+    (out / "report").rename(out / "report.partial")  # as if killed between the result file and the rename
+    cat.update("jobs", job["id"], state="running", attempts=2)
+    assert cat.recover_after_restart() == [f"job {job['id']}: its result was delivered before the restart; "
+                                           "re-queued to adopt it"]
+    jobs.wake()
+    done = _completed(cat, job["id"])
+    assert done["state"] == "completed", done
+    assert (out / "model.json").read_bytes() == delivered
+    assert (out / "report" / "index.html").is_file() and not (out / "report.partial").exists()
+
+
+def test_a_half_written_report_of_an_interrupted_run_does_not_fail_the_re_run(queue):
+    """An interrupted run left a staged report without its index.html and no model.json (the fit was not
+    delivered): the re-run starts from a clean staging folder and completes."""
+    cat, jobs = queue
+    jobs.stop()
+    job = jobs.submit("identify", "0000000000aa", {})
+    staging = Path(job["result_dir"]) / "report.partial"
+    staging.mkdir(parents=True)
+    (staging / "input.png").write_bytes(b"half")
+    (staging / "model.json").write_text("{")
+    again = JobQueue(cat, Path(job["result_dir"]).parent, workers=1)
+    again.start()
+    try:
+        done = _completed(cat, job["id"])
+    finally:
+        again.stop()
+    assert done["state"] == "completed", done
+    assert (staging.parent / "report" / "index.html").is_file() and not staging.exists()
