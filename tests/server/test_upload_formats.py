@@ -25,6 +25,7 @@ def lab_files(table1_run, tmp_path_factory):
     return files
 
 
+@pytest.mark.slow
 def test_each_lab_format_is_accepted_and_a_damaged_one_refused(service, lab_files, table1_run):
     # the check reads each file in a process of its own: importing asammdf alone took 12 s at load 15
     op = httpx.Client(base_url=service.url, headers={"Authorization": f"Bearer {OPERATOR}"}, timeout=180)
