@@ -64,7 +64,7 @@ def sweep_envelope(rec) -> dict:
     sig = reconstruct_states(rec, dtype=np.float64)
     rows = sig.valid
     env = cycle_envelope(np.asarray(sig.q2[rows]), np.asarray(sig.input[rows]), rec.fs_hz)
-    env["t_s"] = env["t_s"] + rec_offset(rows, rec.fs_hz)
+    env["t_s"] = env["t_s"] + rows.start / rec.fs_hz
     table = np.median(env["table_mm"])
     keep = (env["frequency_hz"] > 0) & (np.abs(env["table_mm"] - table) < STEADY_TABLE * table)
     env = {k: v[keep] for k, v in env.items()}
@@ -72,10 +72,6 @@ def sweep_envelope(rec) -> dict:
     env.update(direction="up" if rate > 0 else "down", rate_hz_per_s=rate,
                amplitude_mm=float(np.median(env["table_mm"])), signals=sig)
     return env
-
-
-def rec_offset(rows: slice, fs_hz: float) -> float:
-    return rows.start / fs_hz
 
 
 def measured_jump(env: dict) -> dict | None:
