@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench venv clean tools
+.PHONY: demo test check bench venv clean tools
 
 $(STAMP): pyproject.toml setup.py identify/_simkernel.c identify/_polyrows.c
 	$(PYTHON) -m venv $(VENV)
@@ -38,8 +38,13 @@ tools:
 	      || echo "note: could not install chromium; tests/server/test_dashboard.py will say so"; \
 	  else echo "note: chromium is missing; tests/server/test_dashboard.py will say how to install it"; fi; }
 
+# The whole suite: what CI runs (.ci/run).
 test: $(STAMP) tools
 	$(PY) -m pytest -q
+
+# The fast tier for a change in progress: everything not marked slow (pyproject's `markers` says what slow is).
+check: $(STAMP) tools
+	$(PY) -m pytest -q -m "not slow"
 
 bench: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[bench]'
