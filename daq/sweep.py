@@ -71,7 +71,8 @@ def plc_not_ready(status) -> str | None:
         return "the table is moving (a sweep runs); wait for it to end"
     how = ("in emergency stop" if state == State.ESTOP else
            f"in fault ({Fault(status.fault_code).name.lower()})" if state == State.FAULT else state.name.lower())
-    return f"the PLC is {how}; reset it first (`shakeid rig reset --config RIG.toml`, or POST /api/rig/reset)"
+    return (f"the PLC is {how}; reset it first: `shakeid rig reset --server URL` (through the service), "
+            "`shakeid rig reset --config RIG.toml` (the PLC directly), or POST /api/rig/reset")
 
 
 class SweepRunner:

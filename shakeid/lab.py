@@ -195,10 +195,42 @@ def cmd_sim(args) -> int:
     return 0
 
 
+def _recordings_of_service(args) -> int:
+    """`shakeid recordings --server URL`: the service's recordings, newest first (GET /api/recordings)."""
+    import os
+    import time
+
+    from .remote import ServiceClient
+
+    if args.files or args.recover or args.process:
+        raise ShakeidError("--server lists the service's recordings; FILE.h5, --recover and --process are for local files")
+    token = args.token or os.environ.get("SHAKEID_TOKEN", "")
+    if not token:
+        raise ShakeidError("--server needs a token: --token or SHAKEID_TOKEN (a viewer's is enough)")
+    recs = ServiceClient(args.server, token).request("GET", f"/api/recordings?limit={args.limit}")
+    for rec in recs:
+        if args.json:
+            print(json.dumps({k: v for k, v in rec.items() if k != "path"}))
+            continue
+        info = rec.get("info") or {}
+        created = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(rec["created"]))
+        print(f"{rec['id']}  {created}  {rec['origin']:6s}  {rec['status']:8s}  {rec['filename']}"
+              + (f"  ({info['samples']} samples at {info['fs_hz']:g} Hz)" if info.get("samples") and info.get("fs_hz")
+                 else ""))
+    if not args.json:
+        print(f"{len(recs)} recording(s) on {args.server}" + (f" (the newest {args.limit}: --limit for more)"
+                                                                if len(recs) == args.limit else ""))
+    return 0
+
+
 def cmd_recordings(args) -> int:
     """Metadata, status, gaps and quality flags of HDF5 recordings; --recover marks crashed ones as aborted."""
     from daq.recorder import describe, recover
 
+    if args.server:
+        return _recordings_of_service(args)
+    if not args.files:
+        raise ShakeidError("give recordings (FILE.h5 ...) or --server URL to list a service's")
     said = sys.stderr if args.json else sys.stdout  # with --json, stdout is one JSON object per file, nothing else
     for path in args.files:
         if args.recover:

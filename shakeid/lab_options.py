@@ -7,7 +7,7 @@ import argparse
 
 from .argtypes import int_in, non_negative, positive
 from .lab import cmd_controller, cmd_demo, cmd_recordings, cmd_serve, cmd_sim, cmd_sweep
-from .rigcmd import cmd_rig
+from .rigcmd import RIG_ACTIONS, cmd_rig
 
 SERVER_HELP = "through the HTTP service at this URL, e.g. http://127.0.0.1:8000"
 TOKEN_HELP = "with --server: an operator token (default: $SHAKEID_TOKEN)"
@@ -41,20 +41,31 @@ def add_lab_parsers(sub) -> None:
     q.add_argument("--out", metavar="FILE.h5", help="the recording (needed with --config; with --server: a copy, "
                                                     "downloaded; default: none)")
     q.set_defaults(func=cmd_sweep)
-    q = sub.add_parser("recordings", help="inspect HDF5 recordings (metadata, status, gaps, quality flags)")
-    q.add_argument("files", nargs="+", metavar="FILE.h5", help="recordings written by a sweep or the service")
+    q = sub.add_parser("recordings", help="inspect HDF5 recordings (metadata, status, gaps, quality flags), or list "
+                                          "a service's recordings (--server)")
+    q.add_argument("files", nargs="*", metavar="FILE.h5", help="recordings written by a sweep or the service")
+    q.add_argument("--server", metavar="URL", help="list the recordings of a running `shakeid serve` instead "
+                                                   "(newest first; a viewer's token: --token or SHAKEID_TOKEN)")
+    q.add_argument("--token", help="with --server: a bearer token (default: $SHAKEID_TOKEN)")
+    q.add_argument("--limit", type=int_in(1, 500), default=50, metavar="N", help="with --server: how many (default 50)")
     q.add_argument("--recover", action="store_true", help="mark recordings left running by a crash as aborted")
     q.add_argument("--process", action="store_true",
                    help="add processed signals: relative acceleration, velocity, displacement (/entry/processed)")
     q.add_argument("--json", action="store_true", help="one JSON object per file instead of text")
     q.set_defaults(func=cmd_recordings)
-    q = sub.add_parser("rig", help="the PLC of --config directly (works while the service is wedged): status, "
-                                   "reset, estop")
-    q.add_argument("action", choices=("status", "reset", "estop"),
-                   help="status: read the PLC; reset: clear a fault or estop; estop: emergency stop")
-    q.add_argument("--config", metavar="RIG.toml", required=True, help="rig configuration: its [plc] section")
-    q.add_argument("--json", action="store_true", help="one JSON object instead of text")
-    q.set_defaults(func=cmd_rig)
+    q = sub.add_parser("rig", help="the rig's PLC: status, reset, estop; through a running service (--server) or "
+                                   "directly (--config: works while the service is wedged)")
+    actions = q.add_subparsers(dest="action", required=True, metavar="ACTION")
+    for action, about in RIG_ACTIONS.items():
+        a = actions.add_parser(action, help=about, description=about)
+        where = a.add_mutually_exclusive_group(required=True)
+        where.add_argument("--server", metavar="URL", help="a running `shakeid serve` (its embedded rig too); "
+                                                           + ("a viewer's token" if action == "status" else
+                                                              "an operator's token") + ": --token or SHAKEID_TOKEN")
+        where.add_argument("--config", metavar="RIG.toml", help="the PLC of this rig configuration ([plc]), directly")
+        a.add_argument("--token", help="with --server: a bearer token (default: $SHAKEID_TOKEN)")
+        a.add_argument("--json", action="store_true", help="one JSON object instead of text")
+        a.set_defaults(func=cmd_rig)
     q = sub.add_parser("sim", help="run the simulated rig: PLC over Modbus TCP, accelerometer stream over TCP")
     q.add_argument("--config", metavar="RIG.toml", help="rig configuration, e.g. examples/sim-rig.toml "
                                                         "(default: the built-in simulated rig)")

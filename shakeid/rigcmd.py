@@ -1,6 +1,7 @@
-"""`shakeid rig status|reset|estop --config RIG.toml`: the PLC of a rig configuration, directly.
+"""`shakeid rig status|reset|estop --server URL | --config RIG.toml`: the rig's PLC through a running
+service (its embedded simulated rig included: the only way to it), or the PLC of a rig configuration directly.
 
-No HTTP service and no rig controller in between (daq.devices.open_plc: Modbus TCP or ADS), so an
+With --config: no HTTP service and no rig controller in between (daq.devices.open_plc: Modbus TCP or ADS), so an
 operator can read and stop the rig while the service is wedged. Exit 0 when the command took effect,
 2 (one line `shakeid: error: ...`) when the PLC does not answer or did not do what it was told.
 """
@@ -15,6 +16,12 @@ from identify.errors import ShakeidError
 #: and a table stopping from full speed ramps down in 0.2 s of rig time
 SETTLE_S = 5.0
 POLL_S = 0.05
+#: the actions, each with its own help (`shakeid rig ACTION --help`)
+RIG_ACTIONS = {
+    "status": "read the PLC: state, fault, table position, frequency",
+    "reset": "clear a fault or an emergency stop once the table is at rest (refused while a sweep runs)",
+    "estop": "emergency stop: the table ramps to rest at once; a running sweep ends aborted",
+}
 
 
 def _describe(st) -> dict:
@@ -61,6 +68,42 @@ def _at_rest(plc, timeout_s: float = SETTLE_S):
 
 
 def cmd_rig(args) -> int:
+    if args.server:
+        return _through_service(args)
+    return _direct(args)
+
+
+def _through_service(args) -> int:
+    """The action through `shakeid serve` (GET /api/rig, POST /api/rig/reset, POST /api/rig/estop)."""
+    import os
+
+    from .remote import ServiceClient
+
+    token = args.token or os.environ.get("SHAKEID_TOKEN", "")
+    if not token:
+        raise ShakeidError("--server needs a token: --token or SHAKEID_TOKEN")
+    client = ServiceClient(args.server, token)
+    message = ""
+    if args.action == "estop":
+        out = client.request("POST", "/api/rig/estop")
+        message = "emergency stop: the PLC is in estop" + (f"; sweep {out['aborted_sweep']} aborted"
+                                                           if out.get("aborted_sweep") else "")
+    elif args.action == "reset":
+        message = f"reset: the PLC is {client.request('POST', '/api/rig/reset')['state']}"
+    plc = client.request("GET", "/api/rig").get("plc", {})
+    where = f"PLC of the service at {args.server}"
+    if args.json:
+        print(json.dumps({"plc": where, **plc, "action": args.action, "message": message}))
+        return 0
+    print(f"{where}: state {plc.get('state')}" + (f", fault {plc['fault']}" if plc.get("fault") else "")
+          + (f", position {plc['position_mm']:+.3f} mm" if isinstance(plc.get("position_mm"), (int, float)) else "")
+          + (f", frequency {plc['frequency_hz']:.2f} Hz" if isinstance(plc.get("frequency_hz"), (int, float)) else ""))
+    if message:
+        print(message)
+    return 0
+
+
+def _direct(args) -> int:
     from daq.devices import DeviceError, open_plc
     from sim.config import load_config
     from sim.plc import Command, State
