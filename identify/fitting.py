@@ -171,6 +171,8 @@ def fit_sources(ident, sources: list, timings: dict) -> list:
         docs_runs = [s.validate(validated, e, h) for s, (e, h) in zip(sources, blocks)]
         runs = [r for _, r in docs_runs]
         ident.validation_ = docs_runs[0][0] if len(sources) == 1 else pooled_validation(validated, runs)
+        if len(sources) == 1 and runs[0] is not None:  # one record in core: the free run itself (reports draw it)
+            ident.simulated_states_, ident.simulated_q1_dot_ = runs[0][2], runs[0][3]
         timings["validation"] = time.perf_counter() - t0
         if ident.budget_ is not None and ident.budget_refit == "all":
             ident.validation_["heldout_fitted"] = True  # the winner's coefficients saw these rows
