@@ -114,7 +114,10 @@ def _end_stop(fitter: Fitter, cur: Structure, effect: Effect, sig):
             if d not in memo:
                 st = cur.adding("end_stop", effect.terms, travel=float(d), side=side)
                 fit = fitter.equation_fit(st)
-                sane = not admissibility.check("end_stop", fit.coef, {}, {}, fit.se)
+                # signs at face value here: between the variants, a two-sided fit that pushes outwards
+                # by a hair on one side is the one-sided stop (case 72); the chosen one is then judged
+                # statistically (admissibility.SIGN_Z_WRONG)
+                sane = not admissibility.check("end_stop", fit.coef, {}, {})
                 memo[d] = (st, fit, sane, fit.mse_heldout * (1.0 if sane else 10.0))
             return memo[d]
 

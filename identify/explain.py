@@ -9,10 +9,11 @@ and how much adding them closes the gap.
    error and refit on the multiple-shooting error (identify.shooting), which keeps it on the measured
    branch of the resonance's jump.
 2. Gap: the held-out multiple-shooting NRMSE of the measured signal (q'' for the accelerometer rig, y for
-   force inputs), against the sensor-noise floor (identify.noise). Every total that decides (the gap,
-   the share a candidate closes, the bootstrap) leaves out the largest TRIM_SHARE of the held-out
+   force inputs), against the sensor-noise floor (identify.noise). The first round's totals (the gap,
+   the share a candidate closes, the bootstrap) leave out the largest TRIM_SHARE of the held-out
    segments' errors (identify.shooting.trimmed_total): no segment that holds the resonance's jump, a
-   bifurcation a model's last digits move, can decide what is missing. The jump itself is reported
+   bifurcation a model's last digits move, can decide whether anything is missing or what (later
+   rounds decide on plain sums, _total). The jump itself is reported
    apart: its time and frequency, measured and as the models' free runs predict it (identify.jumps).
 3. Explain until explained (identify.candidates, identify.admissibility): while the gap is above
    `none_factor` x the noise floor, every catalog effect (physics and measurement faults) is fitted on
@@ -153,11 +154,13 @@ class DiscrepancyAnalysis:
         base_err = err
         cur_se = base_fit.se
         effects, rounds = [], []
-        while len(effects) < self.max_effects and self._gap(err) > (
+        self._plain = False
+        while len(effects) < self.max_effects and self._decision_gap(err) > (
                 LOOK_FACTOR if not effects else CONTINUE_FACTOR) * self.noise_floor_:
             # within none_factor x the floor the answer is `none` unless a candidate clearly closes the gap
             near = not effects and self._gap(err) <= self.none_factor * self.noise_floor_
             step = self._round(fitter, cur, err, cur_se, base_fit.mse_heldout, catalog, near)
+            self._plain = True  # rounds after the first decide on plain sums (see _total)
             rounds.append(step["table"])
             if step["best"] is None:
                 break
@@ -286,6 +289,17 @@ class DiscrepancyAnalysis:
         e = fitter.errors(out)
         return (out, e) if np.sum(e[train]) < np.sum(err[train]) else (st, err)
 
+    def _total(self, err: np.ndarray):
+        """The total that decides: trimmed (shooting.trimmed_total) in the first round, whether anything
+        is missing and what; plain sums once an effect is named, as a second effect shows in the
+        resonance's few segments, which trimming would drop (Coulomb + quadratic damping named Coulomb
+        alone with every round trimmed)."""
+        return np.sum(err, axis=-1) if self._plain else trimmed_total(err)
+
+    def _decision_gap(self, err: np.ndarray) -> float:
+        h = self.fitter_.seg_held
+        return float(np.sqrt(self._total(err[h]) / self._norm)) if self._norm > 0 else 0.0
+
     def _gap(self, err: np.ndarray) -> float:
         h = self.fitter_.seg_held
         return float(np.sqrt(trimmed_total(err[h]) / self._norm)) if self._norm > 0 else 0.0
@@ -319,8 +333,8 @@ class DiscrepancyAnalysis:
             return {"best": None, "table": table}
         best = ok[0]
         others = ok[1:]
-        runner = min(others, key=lambda c: trimmed_total(c["err"][held])) if others else None
-        p_runner = bootstrap_prob(runner["err"][held], best["err"][held]) if runner else 1.0
+        runner = min(others, key=lambda c: self._total(c["err"][held])) if others else None
+        p_runner = bootstrap_prob(runner["err"][held], best["err"][held], trim=not self._plain) if runner else 1.0
         conf = (1 - best["p_value"]) * min(p_runner, best["p_beats_current"])
         closed = best["gap_share_closed"]
         sur = best.get("same_as", []) + [c["name"] for c in others if c["gap_share_closed"] >= SURROGATE_SHARE * closed]
@@ -343,9 +357,9 @@ class DiscrepancyAnalysis:
             reason = f"not significant (Wald p = {c['p_value']:.2g} >= {self.alpha:g})"
         c["rejected"] = reason
         c["admissible"] = not reason
-        e0, e1 = trimmed_total(err[held]), trimmed_total(c["err"][held])
+        e0, e1 = self._total(err[held]), self._total(c["err"][held])
         c["gap_share_closed"] = float(1 - e1 / e0) if e0 > 0 else 0.0
-        c["p_beats_current"] = bootstrap_prob(err[held], c["err"][held])
+        c["p_beats_current"] = bootstrap_prob(err[held], c["err"][held], trim=not self._plain)
         c["score"] = float((mse_cur - c["fit"].mse_heldout) / mse_cur) if mse_cur > 0 else 0.0
 
     def _public(self, c) -> dict:

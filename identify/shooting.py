@@ -174,7 +174,7 @@ def trimmed_total(err: np.ndarray) -> np.ndarray:
     return np.sort(err, axis=-1)[..., :n - k].sum(-1) * n / (n - k)
 
 
-def bootstrap_prob(ref: np.ndarray, new: np.ndarray, n_boot: int = 4000) -> float:
+def bootstrap_prob(ref: np.ndarray, new: np.ndarray, n_boot: int = 4000, trim: bool = True) -> float:
     """Probability that `new` has the smaller trimmed total error than `ref` over segments resampled with
     replacement (ties count half). A paired t-test is the wrong tool: a missing effect shows in the
     segments that hold the resonance, not evenly."""
@@ -183,5 +183,6 @@ def bootstrap_prob(ref: np.ndarray, new: np.ndarray, n_boot: int = 4000) -> floa
         return 0.5
     rng = np.random.default_rng(0)  # reproducible
     idx = rng.integers(0, ref.size, (n_boot, ref.size))
-    d = trimmed_total(ref[idx]) - trimmed_total(new[idx])
+    total = trimmed_total if trim else (lambda e: e.sum(-1))  # noqa: E731
+    d = total(ref[idx]) - total(new[idx])
     return float(np.mean(d > 0) + 0.5 * np.mean(d == 0))
