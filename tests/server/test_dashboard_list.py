@@ -49,8 +49,12 @@ def months(service) -> list[dict]:
                                       "note": "resonance check"}} if i == 12 else {})}}
         cat.insert("recordings", **rec)
         rows.append(rec)
-    cat.insert("campaigns", id="c0ffee000001", created=now, updated=now, name="drift-series", state="complete",
-               reason="", operator="", plan={}, sweeps=[{"recording_id": rows[k]["id"]} for k in (3, 4, 7)],
+    # a campaign row as the controller writes it (GET /api/campaigns validates every field)
+    sweeps = [{"index": n + 1, "amplitude_mm": 1.0, "direction": "up", "repeat": 1, "f_start_hz": 1.0, "f_end_hz": 20.0,
+               "duration_s": 60.0, "settle_s": 2.0, "status": "complete", "sweep_id": None,
+               "recording_id": rows[k]["id"]} for n, k in enumerate((3, 4, 7))]
+    cat.insert("campaigns", id="c0ffee000001", created=now, updated=now, name="drift-series", state="completed",
+               reason=None, operator="", plan={"name": "drift-series"}, sweeps=sweeps,
                progress={"done": 3, "total": 3}, recording_ids=[rows[k]["id"] for k in (3, 4, 7)])
     cat.close()
     return rows
