@@ -24,6 +24,7 @@ import shlex
 import signal
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import h5py
@@ -165,6 +166,10 @@ def test_every_readme_command_runs_verbatim(tmp_path):
     for page in ("demo-output/report/index.html", "report/index.html", "explain/index.html"):
         assert "<table>" in (clone / page).read_text(), page
     assert json.loads((clone / "models" / "batch.json").read_text())
+    # `shakeid frf ... --report frf/` and `shakeid export ... --format fmu`
+    assert (clone / "frf" / "frf.png").stat().st_size > 0 and "jump" in (clone / "frf" / "index.html").read_text()
+    with zipfile.ZipFile(clone / "sweep.fmu") as fmu:
+        assert "modelDescription.xml" in fmu.namelist()
     # `shakeid batch sweep.csv sweep.h5`: two recordings, two models (not one file written twice)
     assert sorted(p.name for p in (clone / "models").iterdir()) == ["batch.json", "sweep.csv.model.json",
                                                                     "sweep.h5.model.json"]
