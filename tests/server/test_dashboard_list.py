@@ -119,6 +119,7 @@ def test_pages_filters_and_search(page, service, months):
     range_is(page, "1–1 of 1")
     assert shown(page) == [months[7]["id"]]
     page.fill("#f-q", "resonance")
+    page.wait_for_selector(f"#recs tr[data-id='{months[12]['id']}']")  # the same "1–1 of 1" as before
     range_is(page, "1–1 of 1")
     assert shown(page) == [months[12]["id"]]
     page.fill("#f-q", "no such recording")
@@ -147,7 +148,7 @@ def test_archive_asks_first_and_moves_the_file(page, service, months, make_run, 
     assert archived.read_bytes() == path.read_bytes() and not stored.exists()
     row.wait_for(state="detached")
     with service.client() as api:
-        assert api.get(f"/api/recordings/{rec['id']}").json()["archived"] is not None
+        assert api.get(f"/api/dashboard/recordings/{rec['id']}").json()["archived"] is not None
     page.check("#f-archived")
     row.locator("button.restore").click()
     page.wait_for_selector(f".msg:has-text('recording {rec['id']} restored')")
