@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from . import joint
+from . import joint, params
 from . import uncertainty as unc
 from .errors import IdentificationError
 from .fitting import (effective_samples, fit_sources, holdout_blocks, make_optimizer, per_record,  # noqa: F401
@@ -34,9 +34,6 @@ from .recording import Recording
 from .selection import DEFAULT_TOLERANCE
 from .sources import RecordingEquations, state_gram
 
-BUDGETS = ("equation-error", "free-run")
-BUDGET_REFITS = ("fit", "all")
-BIAS_METHODS = ("auto", "simex")
 N_REPORTED = 10  # budget candidates listed in the result
 
 
@@ -73,6 +70,9 @@ class SparseIdentifier:
         samples down to 16 from 1e6, uncertainty.replicates_for); 0: no chain-bias correction at all,
         coefficients then ignore it; placements : random held-out placements for the inclusion
         probabilities (0: none). identify.uncertainty.
+    mass_kg : moving mass for the physical parameters (rig= overrides it; None: the recording's, else
+        the paper's rig, said to be assumed).
+    Ranges and choices of the user-settable ones: identify.params.PARAMS (checked at fit).
     """
 
     def __init__(self, degree: int = 4, extra_terms=(), method: str = "admm", n_lambdas: int = 100,
@@ -82,7 +82,7 @@ class SparseIdentifier:
                  holdout_fraction: float = 0.2, holdout_samples: int | None = None, band_hz=None,
                  harmonics: float = 5.0, taper_s: float | None = None, rig: RigConstants | None = None,
                  validate: bool = True, bias_replicates: int | None = unc.N_REPLICATES,
-                 placements: int = unc.N_PLACEMENTS, bias_method: str = "auto"):
+                 placements: int = unc.N_PLACEMENTS, bias_method: str = "auto", mass_kg: float | None = None):
         self.degree = degree
         self.extra_terms = tuple(extra_terms)
         self.method = method
@@ -106,6 +106,7 @@ class SparseIdentifier:
         self.bias_replicates = bias_replicates
         self.placements = placements
         self.bias_method = bias_method
+        self.mass_kg = mass_kg
 
     # ------------------------------------------------------------------------------------------------
     def _optimizer(self):
@@ -116,6 +117,8 @@ class SparseIdentifier:
         recording's (a sweep records its rig configuration's moving mass), or the default, assumed."""
         if self.rig is not None:
             return self.rig, "given"
+        if self.mass_kg is not None:
+            return RigConstants(mass_kg=float(self.mass_kg)), "given"
         mass = (getattr(getattr(self, "recording_", None), "metadata", None) or {}).get("moving_mass_kg")
         if mass:
             return RigConstants(mass_kg=float(mass)), "recording"
@@ -147,15 +150,9 @@ class SparseIdentifier:
         return self
 
     def _check_options(self) -> None:
-        """Options refused before any work (an unknown method, refine, budget)."""
-        if self.refine not in (None, "free-run"):  # refused before any work, like an unknown method
-            raise IdentificationError(f"unknown refine {self.refine!r} (free-run)")
-        if self.budget not in BUDGETS:
-            raise IdentificationError(f"unknown budget {self.budget!r} ({', '.join(BUDGETS)})")
-        if self.bias_method not in BIAS_METHODS:
-            raise IdentificationError(f"unknown bias_method {self.bias_method!r} ({', '.join(BIAS_METHODS)})")
-        if self.budget_refit not in BUDGET_REFITS:
-            raise IdentificationError(f"unknown budget_refit {self.budget_refit!r} ({', '.join(BUDGET_REFITS)})")
+        """Every user-settable parameter refused out of its range or choices before any work, as the CLI
+        and the HTTP schema refuse it (all three from identify.params.PARAMS)."""
+        params.check({p.name: getattr(self, p.name) for p in params.PARAMS})
         self._optimizer()
 
     # the fit sequence's steps as the tests and benchmarks call them on a fitted identifier

@@ -4,9 +4,10 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StrictFloat, field_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt, create_model, field_validator
 
 from daq.campaign import MAX_SWEEPS, NAME_PATTERN
+from identify import params
 
 from .uploads import FILENAME_WORDS
 
@@ -98,24 +99,28 @@ class ReadOptions(Strict):
         return pair
 
 
-class IdentifyIn(ReadOptions):
-    """The options of `shakeid identify`; all optional."""
-    degree: int | None = Field(None, ge=1, le=8)  # the library's range, as the CLI's
-    method: Literal["admm", "stlsq"] | None = None
-    selection: Literal["heldout", "paper", "bic"] | None = None
-    tolerance: float | None = Field(None, gt=0, le=10)
-    max_terms: int | None = Field(None, ge=1, le=100)
-    budget: Literal["equation-error", "free-run"] | None = Field(
-        None, description="how max_terms chooses q1_dot's terms (free-run: by the free-run error, slower)")
-    budget_refit: Literal["fit", "all"] | None = Field(
-        None, description="budget free-run: refit the chosen terms on the fit rows (fit) or on all rows (all; "
-                          "validation then not out-of-sample)")
-    refine: Literal["free-run"] | None = None
-    holdout_fraction: float | None = Field(None, gt=0, lt=0.9)
-    n_lambdas: int | None = Field(None, ge=2, le=1000)
-    extra_terms: list[str] | None = Field(None, max_length=20)
-    bias_replicates: int | None = Field(None, ge=0, le=200, description="SIMEX replicates where SIMEX runs (0: no chain-bias correction)")
-    placements: int | None = Field(None, ge=0, le=500, description="held-out placements for inclusion probabilities")
+def _estimator_field(p: params.Param):
+    """A request field for one identify.params.PARAMS entry: its type, default, range or choices, help."""
+    if p.kind == "terms":
+        kind = list[Annotated[str, Field(max_length=64)]]
+    elif p.choices:
+        kind = Literal[p.choices]
+    else:
+        kind = StrictBool if p.kind is bool else (StrictInt if p.kind is int else float)
+    bounds = {} if p.low is None else {"gt" if p.low_open else "ge": p.low}
+    if p.high is not None:
+        bounds["lt" if p.high_open else "le"] = p.high
+    if p.max_items is not None:
+        bounds["max_length"] = p.max_items
+    default = list(p.default) if isinstance(p.default, tuple) else p.default
+    unit = f" ({p.unit})" if p.unit else ""
+    return (kind | None if p.nullable else kind), Field(default, description=p.help + unit, **bounds)
+
+
+#: The options of `shakeid identify`, every one with its default: the read options and the estimator's
+#: parameters, derived from identify.params.PARAMS (as the CLI's options and the estimator's checks are).
+IdentifyIn = create_model("IdentifyIn", __base__=ReadOptions, __doc__="The options of `shakeid identify`; "
+                          "all optional.", **{p.name: _estimator_field(p) for p in params.PARAMS})
 
 
 class JointIdentifyIn(IdentifyIn):

@@ -22,6 +22,7 @@ from .frf_cmd import add_frf_parser
 from .helpformat import Parser
 from .lab_options import add_lab_parsers, add_sweep_shape
 from .ooc_cmd import add_out_of_core_options
+from .param_options import add_estimator_options, estimator_kwargs
 
 EXIT_USAGE = 2
 
@@ -51,69 +52,15 @@ def _add_layout_options(p: argparse.ArgumentParser) -> None:
 def _add_identify_options(p: argparse.ArgumentParser) -> None:
     _add_layout_options(p)
     g = p.add_argument_group("identification")
-    g.add_argument("--degree", type=int_in(1, 8), default=4, metavar="N", help="highest monomial degree of the library")
-    g.add_argument("--extra-terms", default="", metavar="TERMS",
-                   help="comma-separated extra terms, e.g. 'sign(q1),q1*|q1|'")
-    g.add_argument("--method", choices=("admm", "stlsq"), default="admm",
-                   help="admm: LASSO solved by ADMM along a lambda path (the paper); stlsq: sequentially "
-                        "thresholded least squares")
-    g.add_argument("--lambdas", type=int_in(2), default=100, metavar="N", help="number of points on the lambda path")
-    g.add_argument("--threshold", type=non_negative,
-                   help="STLSQ: a single threshold on the coefficients, dimensionless (normalised unless "
-                        "--raw-threshold), instead of a path (default: none, a path)")
-    g.add_argument("--raw-threshold", action="store_true",
-                   help="STLSQ: threshold raw coefficients, as the paper's Table 2 (lambda = 0.95)")
-    g.add_argument("--selection", choices=("heldout", "paper", "bic"), default="heldout",
-                   help="how a model is chosen on the path: held-out error of the refit (heldout), the paper's "
-                        "relative-MSE tolerance (paper), or the Bayesian information criterion (bic)")
-    g.add_argument("--tolerance", type=positive,
-                   help="selection tolerance, relative MSE (default: 0.25 for paper, 0.003 for heldout)")
-    g.add_argument("--max-terms", type=int_in(1), metavar="K", help="at most K terms per equation (default: no limit)")
-    g.add_argument("--budget", choices=("equation-error", "free-run"), default="equation-error",
-                   help="how --max-terms chooses q1_dot's terms: by one-step acceleration error or by the "
-                        "free-run error of refit candidates on the data (slower; implies the refit)")
-    g.add_argument("--budget-refit", choices=("fit", "all"), default="fit",
-                   help="--budget free-run: refit the chosen terms on the fit rows or on all rows, held-out ones "
-                        "included (validation figures are then not out-of-sample)")
-    g.add_argument("--refine", choices=("free-run",),
-                   help="refit the kept coefficients on the free-run simulation error (default: no refinement)")
-    g.add_argument("--holdout-samples", type=int_in(1), metavar="N",
-                   help="hold out the first N samples, as the paper (30000) (default: --holdout-fraction)")
-    g.add_argument("--holdout-fraction", type=float, default=0.2, metavar="F",
-                   help="share of samples held out in interleaved blocks when --holdout-samples is not given, 0-0.9")
-    g.add_argument("--bias-replicates", type=int_in(0), default=None, metavar="N",
-                   help="0: no correction of the measurement chain's bias; else SIMEX replicates where SIMEX "
-                        "estimates it (the bias is in closed form when every kept term is a monomial; default: "
-                        "by the record's length, 64 up to 250 000 samples, 16 from 1 000 000)")
-    g.add_argument("--placements", type=int_in(0), default=24, metavar="N",
-                   help="random held-out placements for the inclusion probabilities (0: none, faster)")
-    g.add_argument("--mass-kg", type=positive, metavar="KG",
-                   help="moving mass for the physical parameters, kg (default: the recording's, which a sweep "
-                        "takes from its rig configuration, else 0.49, the paper's rig, said to be assumed)")
+    add_estimator_options(g)  # identify.params.PARAMS: one declaration for CLI, API, estimator, docs
 
 
 def _identifier(args):
     from identify.identifier import SparseIdentifier
-    from identify.physical import RigConstants
-
-    if args.lambdas < 2:
-        raise ShakeidError("--lambdas must be at least 2")
-    if not 0 <= args.holdout_fraction < 0.9:
-        raise ShakeidError("--holdout-fraction must be in [0, 0.9)")
-    if (args.bias_replicates is not None and args.bias_replicates < 0) or args.placements < 0:
-        raise ShakeidError("--bias-replicates and --placements must be >= 0")
-    extra = tuple(t.strip() for t in args.extra_terms.split(",") if t.strip())
     from identify.library import Library
 
-    Library(degree=args.degree, extra_terms=extra)  # unknown terms are refused here, by name
-    return SparseIdentifier(degree=args.degree, extra_terms=extra, method=args.method, n_lambdas=args.lambdas,
-                            threshold=args.threshold, normalize_threshold=not args.raw_threshold,
-                            selection=args.selection, tolerance=args.tolerance, max_terms=args.max_terms,
-                            budget=args.budget, budget_refit=args.budget_refit, refine=args.refine,
-                            holdout_fraction=args.holdout_fraction, holdout_samples=args.holdout_samples,
-                            band_hz=tuple(args.band) if args.band else None,
-                            rig=RigConstants(mass_kg=args.mass_kg) if args.mass_kg else None, bias_replicates=args.bias_replicates,
-                            placements=args.placements)
+    Library(degree=args.degree, extra_terms=args.extra_terms)  # unknown terms are refused here, by name
+    return SparseIdentifier(**estimator_kwargs(args), band_hz=tuple(args.band) if args.band else None)
 
 
 def _read(args):

@@ -96,7 +96,7 @@ def test_errors_are_one_clear_line(tmp_path, content, args, message):
     (["identify", "{csv}", "--mass-kg", "0"], "argument --mass-kg: must be > 0, got 0"),
     (["identify", "{csv}", "--mass-kg", "nan"], "argument --mass-kg: must be a finite number"),
     (["identify", "{csv}", "--degree", "0"], "argument --degree: must be 1..8, got 0"),
-    (["identify", "{csv}", "--max-terms", "0"], "argument --max-terms: must be >= 1, got 0"),
+    (["identify", "{csv}", "--max-terms", "0"], "argument --max-terms: must be 1..100, got 0"),
     (["identify", "{csv}", "--samples", "-5", "100"], "argument --samples: must be >= 0, got -5"),
     (["identify", "{csv}", "--samples", "100", "50"], "samples [100, 50) requested: need 0 <= start < stop <= "),
     (["identify", "{csv}", "--budget", "aic"], "argument --budget: invalid choice: 'aic'"),
