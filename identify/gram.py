@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .threads import one_blas_thread
+
 #: Rows per chunk when streaming the library: 8192 x 18 doubles = 1.2 MB, resident in L2/L3 cache.
 CHUNK_ROWS = 8192
 
@@ -91,6 +93,7 @@ class BlockGram:
         return out
 
     @classmethod
+    @one_blas_thread  # ~120 small GEMMs per 1e6 samples: slower with 2 threads, oversubscribed under load
     def from_library(cls, library, states, inputs, targets, edges, chunk: int | None = None) -> "BlockGram":
         """Per-block Grams of [library(states, inputs) | targets] without building the whole matrix.
 

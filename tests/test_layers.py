@@ -12,7 +12,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 ALLOWED = {
-    "identify": {"numpy", "scipy", "identify"},
+    "identify": {"numpy", "scipy", "identify", "threadpoolctl"},  # threadpoolctl: identify.threads, BLAS limit
     "sim": {"numpy", "scipy", "identify", "sim", "pymodbus", "pyads", "can", "serial"},
     # daq is the acquisition and file layer: the readers of the lab's file formats (daq/formats/) use npTDMS
     # (TDMS), pyuff (UFF 58) and asammdf (MDF4)
