@@ -44,7 +44,7 @@ ARCHIVE_DIR = "archive"
 STATUSES = Literal["running", "complete", "aborted", "failed", "fault"]
 #: a report page's own policy: its inline style, its figures inlined as data: URLs, nothing else; sandboxed
 REPORT_CSP = "default-src 'none'; style-src 'unsafe-inline'; img-src data:; frame-ancestors 'none'; sandbox"
-_IMG_SRC = re.compile(r'src="([a-z0-9_]{1,40}\.png)"')
+_IMG_SRC = re.compile(r"""src=(["'])([a-z0-9_]{1,40}\.png)\1""")  # reports/html.py writes src='name.png'
 
 router = APIRouter()
 ANSWERS = {**ERRORS, 422: {"model": Problem}}
@@ -165,7 +165,7 @@ def report(rec_id: str = Id(), kind: Literal["identify", "explain"] = "identify"
         raise HTTPException(404, f"the {kind} report of recording {rec_id} has no page (yet)") from None
 
     def inline(m: re.Match) -> str:
-        png = folder / m.group(1)
+        png = folder / m.group(2)
         return f'src="data:image/png;base64,{base64.b64encode(png.read_bytes()).decode()}"' if png.is_file() else m.group(0)
 
     return HTMLResponse(_IMG_SRC.sub(inline, html), headers={"Content-Security-Policy": REPORT_CSP})

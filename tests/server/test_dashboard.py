@@ -253,8 +253,10 @@ def test_recording_page(page, service, sweep_recording):
     with page.expect_popup() as popup:
         page.click("#rec-report")
     report = popup.value
-    report.wait_for_url("blob:*")
-    report.wait_for_function("document.images.length >= 3 && [...document.images].every(i => i.naturalWidth > 0)")
+    report.wait_for_url("blob:**")
+    # polled from here: the page's policy (no eval) refuses wait_for_function's predicate
+    wait_for(lambda: report.evaluate("document.images.length >= 3 && [...document.images].every(i => i.naturalWidth > 0)"),
+             30, "the report's figures")
     assert report.title() == f"Identification report: {sweep_recording['filename']}"
     assert report.evaluate("getComputedStyle(document.body).maxWidth") == "1100px"
     report.close()
