@@ -64,7 +64,7 @@ async def consume(stream, into: list) -> None:
 def test_viewers_share_one_reader_and_a_stalled_viewer_stays_bounded():
     async def scenario():
         n_viewers, reads = 25, VIEWER_QUEUE_FRAMES + 30
-        source = Source(end=reads, notify_at=reads)
+        source = Source(end=reads, notify_at=reads, hold=True)  # the end read waits: the feed is still there
         feeds = LiveFeeds(source.read_live, source.read_status, poll_s=0.0)
         stalled = feeds.stream("rec", 0)
         got_before_stall = [await stalled.__anext__()]  # connected, read one batch, then never again
@@ -76,6 +76,7 @@ def test_viewers_share_one_reader_and_a_stalled_viewer_stays_bounded():
         # the stalled viewer holds at most VIEWER_QUEUE_FRAMES batches; the rest were dropped and counted
         assert stats["longest_queue_frames"] == VIEWER_QUEUE_FRAMES
         assert stats["dropped_frames"] >= reads - 1 - VIEWER_QUEUE_FRAMES - 1
+        source.release.set()
         await asyncio.gather(*tasks)  # the source ends: every fast viewer gets its `end`
         # one reader for all 26 viewers: the controller was asked once per batch (+1 for the end), not per viewer
         assert source.reads == reads + 1
