@@ -83,7 +83,7 @@ def test_the_limit_check_names_the_first_unsafe_sweep_and_its_limit():
                                               "limit 40 m/s^2")
     assert plan_violation(Limits(max_acceleration_ms2=100.0, max_velocity_ms=1.0), plan) is None
     long = parse_plan({**PLAN, "sweep": {**PLAN["sweep"], "duration_s": 900.0}})
-    assert plan_violation(Limits(), long) == "sweep 1 of 4 (0.5 mm, up): duration 900 s outside (0, 600] s"
+    assert plan_violation(Limits(), long) == "sweep 1 of 4 (0.5 mm, up): duration 900 s outside the limit 1-600 s"
 
 
 def test_a_downward_sweep_is_exact_and_decreasing():
