@@ -160,6 +160,10 @@ def _physics_names(res, at_least=0.5):
     return [e["name"] for e in res["effects"] if e["kind"] == "physics" and e["confidence"] >= at_least]
 
 
+@pytest.mark.xfail(strict=True, reason="regression of the first-round trimming (8922e5b, issue 32): the drift's "
+                   "gap, 1.21x the noise floor once the largest 10 % of segments are left out, is now under "
+                   "none_factor, so the rig answers 'none' although the drift would close 36 % of the squared gap "
+                   "at p 1.0; open on issue 32")
 def test_a_soft_contact_after_the_named_effect_is_not_called_an_end_stop():
     """Case 22: a 5.5 % stiffness drift, named; then a one-sided `end_stop` of 6.4 N/m per kg on a rig of
     1894 took 38 % of a gap at 1.2x the noise floor at confidence 0.95. A contact softer than the rig's own
