@@ -154,8 +154,13 @@ def _move(src: FsPath, folder: FsPath) -> FsPath:
     return dest
 
 
+#: the page route answers HTML, its errors JSON: FastAPI would document a `model` under the route's text/html
+HTML_ROUTE_ERRORS = {code: {"description": "a Problem", "content": {"application/json": {
+    "schema": {"$ref": "#/components/schemas/Problem"}}}} for code in (401, 403, 404, 422)}
+
+
 @router.get("/api/recordings/{rec_id}/report", tags=["jobs"], dependencies=[viewer], response_class=HTMLResponse,
-            responses={**ANSWERS, 404: {"model": Problem}})
+            responses=HTML_ROUTE_ERRORS)
 def report(rec_id: str = Id(), kind: Literal["identify", "explain"] = "identify", svc: Services = Depends(services)):
     """The latest report's index.html as one self-contained page (its figures inlined), to open as is."""
     folder = latest_result(svc, rec_id, kind, "report")
