@@ -124,7 +124,7 @@ def test_option_errors_refuse_before_any_work(recordings, tmp_path, capsys):
     twin = tmp_path / good[0].name
     twin.write_bytes(good[0].read_bytes())
     cases = [(["--workers", "0"], "argument --workers: must be >= 1, got 0"),
-             (["--lambdas", "1"], "argument --lambdas: must be >= 2, got 1"),
+             (["--lambdas", "1"], "argument --lambdas: must be 2..1000, got 1"),
              ([str(twin)], f"two files named {good[0].name!r}"),
              (["--scheduler", f"tcp://127.0.0.1:{free_port()}", "--connect-timeout", "1"],
               "cannot reach the Dask scheduler tcp://127.0.0.1:")]
