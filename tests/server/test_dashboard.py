@@ -239,7 +239,7 @@ def test_recording_page(page, service, sweep_recording):
     k = page.locator("#rec-physical tr:has-text('stiffness k')").first.inner_text().split("\t")
     assert float(k[1]) == pytest.approx(model["physical"]["stiffness_n_per_m"]["value"], rel=1e-3)
     # the report's figures, each loaded as an image
-    page.wait_for_function(f"[...document.querySelectorAll('#rec-model-figures img')].filter(i => i.naturalWidth > 0)"
+    page.wait_for_function(f"() => [...document.querySelectorAll('#rec-model-figures img')].filter(i => i.naturalWidth > 0)"
                            f".length === {len(plots)}")
     assert len(plots) >= 3
     # b in mm, as the CLI and the report print it
@@ -270,7 +270,7 @@ def test_recording_page(page, service, sweep_recording):
         explanation = api.get(f"/api/recordings/{rec_id}/explanation").json()
     effect = (explanation["effect"] or "no effect found").replace("_", " ")
     assert effect in page.inner_text("#rec-effect")
-    page.wait_for_function("[...document.querySelectorAll('#rec-explain-figures img')].some(i => i.naturalWidth > 0)")
+    page.wait_for_function("() => [...document.querySelectorAll('#rec-explain-figures img')].some(i => i.naturalWidth > 0)")
     page.click("text=← all recordings")
     page.wait_for_selector("#home:not([hidden])")
 
