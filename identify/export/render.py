@@ -38,7 +38,7 @@ class Syntax:
         raise NotImplementedError
 
     def product(self, parts: list[str]) -> str:
-        raise NotImplementedError
+        return " * ".join(parts)
 
     def term(self, space: FeatureSpace, term: Term) -> str:
         """The term as an expression of this syntax."""
@@ -68,9 +68,6 @@ class CSyntax(Syntax):
     def power(self, base, p):
         return "(" + " * ".join([base] * p) + ")"
 
-    def product(self, parts):
-        return " * ".join(parts)
-
 
 class NumpySyntax(Syntax):
     """numpy on arrays of any shape: signals are arrays named as the model's signals."""
@@ -85,9 +82,6 @@ class NumpySyntax(Syntax):
 
     def power(self, base, p):
         return f"{base}**{p}"
-
-    def product(self, parts):
-        return " * ".join(parts)
 
 
 class LatexSyntax(Syntax):
