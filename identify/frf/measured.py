@@ -126,10 +126,16 @@ def compare_sweep(model, rec, band_hz=None) -> dict:
     jump minus its fold), and whether the measured jump lies between the fold and the fold + bias, give or
     take its uncertainty ("agrees"); a model that misses it by more is flagged."""
     env = sweep_envelope(rec)
-    jump = measured_jump(env)
     f = env["frequency_hz"]
     band = band_hz or (float(f.min()), float(f.max()))
-    resp = frequency_response(model, env["amplitude_mm"], band)
+    return compare_jump(model, env, frequency_response(model, env["amplitude_mm"], band))
+
+
+def compare_jump(model, env: dict, resp) -> dict:
+    """compare_sweep's judgement for an envelope already read (sweep_envelope) and the model's response
+    already predicted (frequency_response at about its table amplitude): the side-by-side of
+    identify.frf.side_by_side reuses both across models and directions."""
+    jump = measured_jump(env)
     fold = resp.jump_down_hz if env["direction"] == "up" else resp.jump_up_hz
     model_jump = model_sweep_jump(model, env)
     out = {"direction": env["direction"], "rate_hz_per_s": env["rate_hz_per_s"], "amplitude_mm": env["amplitude_mm"],
