@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .frf_overlay import OVERLAY_FIGURE, add_side_by_side, overlay_figure
 from .html import EXPLAIN_DOCUMENTS, EXPLAIN_FIGURES, Page, report_folder
 from .identification import RESIDUAL, _save, plt
 from .text import gap_closed_text, p_value_text
@@ -25,12 +26,17 @@ FIGURES, DOCUMENTS = EXPLAIN_FIGURES, EXPLAIN_DOCUMENTS
 CLIP = -0.5  # candidates.png: shooting-gap bars below this are drawn cut here, their value written on them
 
 
-def write_explain_report(analysis, out_dir) -> Path:
+def write_explain_report(analysis, out_dir, frf: dict | None = None) -> Path:
     """Write the report of a fitted DiscrepancyAnalysis into `out_dir` (created; an earlier explain
     report there is replaced, none of its files left behind; a folder holding anything else is refused:
-    html.check_report_folder). Returns the folder."""
+    html.check_report_folder). Returns the folder. `frf`: the frequency response before/after beside the
+    measured sweep (identify.frf.side_by_side.for_explanation), carried into explain.json and drawn."""
     out = report_folder(out_dir, "explain")
     result = analysis.result()
+    if frf is not None:
+        result["frf"] = frf
+        if frf.get("status") == "ok":
+            overlay_figure(frf, out / OVERLAY_FIGURE)
     (out / "explain.json").write_text(json.dumps(result, indent=2))
     base = analysis.layout_ == "base"
     u = "m/s²" if base else ""
@@ -194,8 +200,11 @@ def _index_html(out: Path, analysis, result: dict, u: str) -> str:
                    "simulated) on its own scale.",
     }
     for f in FIGURES:
-        if (out / f).exists():
+        if f in captions and (out / f).exists():
             page.figure(f, captions[f])
+    if "frf" in result:  # after the figures the text numbers
+        add_side_by_side(page, result["frf"], OVERLAY_FIGURE if (out / OVERLAY_FIGURE).exists() else None,
+                         "Frequency response before and after, beside the measured sweep")
     page.links([("explain.json", "explain.json (the whole result)")])
     return page.render()
 

@@ -24,9 +24,10 @@ STYLE = ("body{font-family:sans-serif;max-width:1100px;margin:1em auto;padding:0
 #: What each kind of report writes beside its index.html (reports.identification, reports.explain take
 #: theirs from here). A folder holds one report: a new report replaces an earlier one of its own kind and
 #: refuses a folder that holds the other kind or files shakeid did not write (check_report_folder).
-IDENTIFICATION_FIGURES = ("input.png", "output.png", "lambda_path.png", "validation.png")
+#: frf_overlay.png: reports.frf_overlay (the predicted frequency response beside the measured sweeps)
+IDENTIFICATION_FIGURES = ("input.png", "output.png", "lambda_path.png", "validation.png", "frf_overlay.png")
 IDENTIFICATION_DOCUMENTS = ("model.json", "coefficients.md")
-EXPLAIN_FIGURES = ("residual_time.png", "residual_state.png", "candidates.png", "gap.png")
+EXPLAIN_FIGURES = ("residual_time.png", "residual_state.png", "candidates.png", "gap.png", "frf_overlay.png")
 EXPLAIN_DOCUMENTS = ("explain.json",)
 FRF_FIGURES, FRF_DOCUMENTS = ("frf.png",), ("frf.json",)  # reports.frf (shakeid frf --report)
 KINDS = {"identification": (*IDENTIFICATION_FIGURES, *IDENTIFICATION_DOCUMENTS),

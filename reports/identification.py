@@ -24,6 +24,7 @@ from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from identify.export.latex import latex_equations  # noqa: E402
 
+from .frf_overlay import OVERLAY_FIGURE, add_side_by_side, overlay_figure  # noqa: E402
 from .html import IDENTIFICATION_DOCUMENTS, IDENTIFICATION_FIGURES, Page, report_folder  # noqa: E402
 from .text import (DESIGN_K3_NOTE, coefficient_rows, coefficient_table, fit_text, mass_text,  # noqa: E402
                    physical_rows, plural, unit)
@@ -57,6 +58,8 @@ def write_report(ident, out_dir, result: dict | None = None) -> Path:
     _save(fig, out / "output.png")
 
     _path_figure(ident, out / "lambda_path.png")
+    if (result.get("frf") or {}).get("status") == "ok":
+        overlay_figure(result["frf"], out / OVERLAY_FIGURE)
     if ident.validation_ is not None:
         _validation_figure(ident, out / "validation.png", labels)
     (out / "index.html").write_text(_index_html(out, ident, result))
@@ -275,7 +278,9 @@ def _index_html(out: Path, ident, result: dict) -> str:
                           "left. Shaded: held-out samples.",
     }
     for f in FIGURES:
-        if (out / f).exists():
+        if f in captions and (out / f).exists():
             page.figure(f, captions[f])
+    if "frf" in result:  # after the figures the text numbers (Figure 3, ...)
+        add_side_by_side(page, result["frf"], OVERLAY_FIGURE if (out / OVERLAY_FIGURE).exists() else None)
     page.links([("model.json", "model.json (the whole result)"), ("coefficients.md", "coefficients.md")])
     return page.render()
