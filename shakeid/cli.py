@@ -104,11 +104,16 @@ def cmd_identify(args) -> int:
     except IdentificationError as exc:  # what the data cannot give (no excited band, too short): name the file
         raise _naming(args.file, exc) from None
     result = {**ident.result(), **data}
+    from identify.frf.side_by_side import for_identification  # predicted jumps vs the sweep's (docs/frf.md)
+
+    result["frf"] = for_identification(result, ident.model_, [rec])
     replaced = _write_report("identification", ident, args.report, result)
     if args.json:
         print(json.dumps(result))
     else:
         print(summary(result, rec.source))
+        for line in result["frf"]["flags"]:
+            print(f"flagged: {line}")
         if args.report:
             print(f"report: {Path(args.report) / 'index.html'}{replaced}")
     if result["status"] == "failed":
@@ -136,7 +141,10 @@ def cmd_explain(args) -> int:
     except IdentificationError as exc:
         raise _naming(args.file, exc) from None
     result = {**analysis.result(), **data}
-    replaced = _write_report("explain", analysis, args.report)
+    from identify.frf.side_by_side import for_explanation  # the jumps before/after beside the sweep's
+
+    result["frf"] = for_explanation(result, analysis.baseline_model_, analysis.model_, [rec])
+    replaced = _write_report("explain", analysis, args.report, result)
     if args.json:
         print(json.dumps(result))
         return 0
@@ -220,7 +228,7 @@ def _write_report(kind: str, fitted, out_dir, result: dict | None = None) -> str
     else:
         from reports.explain import write_explain_report
 
-        write_explain_report(fitted, out_dir)
+        write_explain_report(fitted, out_dir, (result or {}).get("frf"))
     return f" (replaces {earlier})" if earlier else ""
 
 
