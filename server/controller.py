@@ -19,6 +19,8 @@ Lifecycle:
 Every request is served on its own connection thread; the emergency stop has a PLC connection of its own.
 """
 from __future__ import annotations
+The stop listener (server/stoplistener.py) serves `POST /api/rig/estop` over HTTP on settings.stop_port
+from this process, where no viewer traffic is queued.
 
 import hmac
 import os
@@ -43,6 +45,7 @@ from .jobs import queue_job
 from .rig import RigBusy, RigService
 from .settings import Settings
 
+from .stoplistener import StopListener
 #: why a sweep ended when its web server died (session ended or its process gone, whichever is seen first)
 WEB_SERVER_GONE = "the web server went away during the sweep; the rig controller stopped the table"
 #: decimated points one live request returns at the most (~10 s at the live view's 200 per second)
@@ -83,6 +86,8 @@ class RigController:
         self._closed = False  # set once stopping: no sweep starts after the rig was stopped
         self.campaigns = CampaignService(self)
 
+        settings.resolve_stop()  # a web server that started this controller has filled it in already
+        self.stop_listener: StopListener | None = None
     # -- lifecycle ------------------------------------------------------------------------------------
     def start(self) -> "RigController":
         self._recover()
@@ -105,10 +110,24 @@ class RigController:
         os.replace(tmp, path)  # written last: a client that reads the key finds the socket listening
         threading.Thread(target=self._accept, name="controller-accept", daemon=True).start()
         if self.parent_pid:
+        self._start_stop_listener()
             threading.Thread(target=self._watch_parent, name="controller-parent", daemon=True).start()
         return self
 
     def stop(self, reason: str) -> None:
+    def _start_stop_listener(self) -> None:
+        """The HTTP stop on its own port; a port that cannot be had is said, not fatal (the web server's
+        route stays, and /api/health then names no stop_url)."""
+        host, port = self.settings.stop_host, self.settings.stop_port
+        if not port:
+            return
+        try:
+            self.stop_listener = StopListener(host, port, self.settings.tokens,
+                                              lambda: self.handle({"op": "estop"})).start()
+        except OSError as exc:
+            print(f"shakeid controller: no stop listener on {host}:{port} ({exc}); the emergency stop is served "
+                  "by the web server's port only", flush=True)
+
         self.stop_reason = reason
         self.stopping.set()
 
@@ -121,6 +140,8 @@ class RigController:
         self.rig.stop(self.stop_reason)  # aborts a running sweep (the table is commanded to stop) and waits
         self.campaigns.join()
         if self._listener is not None:
+        if self.stop_listener is not None:
+            self.stop_listener.stop()
             self._listener.close()
         family, addr = parse_address(self.address)
         if family == socket.AF_UNIX:
@@ -163,7 +184,9 @@ class RigController:
                 line.send({"ok": False, "status": 401, "detail": "wrong or missing controller key"})
                 return
             sock.settimeout(None)
-            line.send({"ok": True, "result": {"pid": os.getpid(), "simulated": self.rig.sim is not None}})
+            stop_port = self.stop_listener.port if self.stop_listener is not None else None
+            line.send({"ok": True, "result": {"pid": os.getpid(), "simulated": self.rig.sim is not None,
+                                              "stop_port": stop_port}})
             if hello.get("role") == "session":
                 return self._session(line)
             if hello.get("role") == "estop":  # this connection only ever carries the stop: it runs first
@@ -390,7 +413,8 @@ def main(settings: Settings, address: str | None = None, parent_pid: int | None 
     ctl.start()
     print(f"shakeid controller: pid {os.getpid()}, {'real-time (SCHED_RR)' if realtime else 'normal'} scheduling, "
           f"listening on {ctl.address}"
-          f" ({'embedded simulated rig' if ctl.rig.sim is not None else 'rig of ' + str(settings.rig.source)})",
+          f" ({'embedded simulated rig' if ctl.rig.sim is not None else 'rig of ' + str(settings.rig.source)})"
+          + (f"; stop listener on {settings.stop_host}:{ctl.stop_listener.port}" if ctl.stop_listener else ""),
           flush=True)
     ctl.run()
     print(f"shakeid controller: stopped ({ctl.stop_reason})", flush=True)

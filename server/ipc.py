@@ -72,6 +72,7 @@ class Line:
         self.sock = sock
         self.reader = sock.makefile("rb")
         self.write_lock = threading.Lock()
+        self.hello: dict = {}
 
     def send(self, obj) -> None:
         data = json.dumps(_finite(obj), separators=(",", ":"), allow_nan=False).encode() + b"\n"
@@ -113,6 +114,7 @@ def connect(address: str, key: str, role: str = "client", timeout_s: float = 5.0
         sock.close()
         raise ControllerUnavailable(f"rig controller at {address} refused the connection: "
                                     f"{(answer or {}).get('detail', 'no answer')}")
+    line.hello = answer.get("result") or {}  # the controller's pid, its rig, its stop listener's port
     return line
 
 

@@ -32,6 +32,7 @@ class RigLink:
         self.client = ControllerClient(self.address, self.key_file)
         self.proc: subprocess.Popen | None = None
         self.attached = threading.Event()
+        self.stop_port: int | None = None  # the controller's stop listener (server/stoplistener.py), if any
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._keep_session, name="controller-session", daemon=True)
         self._log = None
@@ -64,8 +65,13 @@ class RigLink:
             cmd += ["--sim-speed", repr(self.settings.sim_speed)]
         if self._log is None:
             self._log = open(self.settings.data_dir / "controller.log", "a")
+        # its stop listener where this web server's settings put it (`shakeid serve` resolved them from
+        # --host/--port); none when they were not resolved (an app made in a test, say)
+        env = {**os.environ, "SHAKEID_STOP_PORT": str(self.settings.stop_port or 0)}
+        if self.settings.stop_host:
+            env["SHAKEID_STOP_HOST"] = self.settings.stop_host
         self.proc = subprocess.Popen(cmd, stdout=self._log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                     start_new_session=True)
+                                     start_new_session=True, env=env)
 
     def _log_tail(self) -> str:
         try:
@@ -86,6 +92,7 @@ class RigLink:
                 self._stop.wait(0.2)
                 continue
             line.sock.settimeout(None)  # a session is quiet for hours; only its end means something
+            self.stop_port = line.hello.get("stop_port")
             self.attached.set()
             self._session = line
             try:

@@ -63,6 +63,8 @@ class Health(BaseModel):
     rig_simulated: bool
     controller: Literal["attached", "unreachable"] = Field(description="the rig controller process")
     jobs_queued: int
+    stop_url: str | None = Field(None, description="POST the emergency stop here first: the rig controller's "
+                                                   "stop listener, where no viewer traffic waits (None: none)")
 
 
 class RecordingOut(BaseModel):

@@ -9,6 +9,9 @@
     max_upload_mb = 512                      # larger uploads are refused (413) before they are read
     controller = "unix:/run/shakeid/controller.sock"   # attach to a rig controller that runs on its own
                                              # (`shakeid controller`); unset: `shakeid serve` starts one
+    stop_port = 8001                         # the rig controller's stop listener (POST /api/rig/estop
+                                             # where no viewer waits); unset: the web port + 1; 0: none
+    stop_host = "0.0.0.0"                    # where it listens; unset: the web server's --host
 
     [compute]
     scheduler = "tcp://dask-scheduler:8786"  # run identification jobs on this Dask cluster (its workers
@@ -18,13 +21,15 @@
                                              # reached in this time
 
 Environment (wins over the file): SHAKEID_DATA_DIR, SHAKEID_TOKENS ("token:role,token:role"),
-SHAKEID_SIM_SPEED, SHAKEID_CONTROLLER, SHAKEID_MAX_UPLOAD_MB, SHAKEID_SCHEDULER ([compute] scheduler).
+SHAKEID_SIM_SPEED, SHAKEID_CONTROLLER, SHAKEID_MAX_UPLOAD_MB, SHAKEID_SCHEDULER ([compute] scheduler),
+SHAKEID_STOP_PORT, SHAKEID_STOP_HOST.
 With no configuration file the service starts an embedded simulated rig; with no
 token configured it makes one operator token, prints it and keeps it in <data_dir>/operator-token so a
 new user can log in without reading anything first.
 """
 from __future__ import annotations
 
+import hmac
 import os
 import secrets
 from dataclasses import dataclass, field
@@ -34,8 +39,21 @@ from identify.errors import ShakeidError
 from sim.config import RigConfig, load_config
 
 ROLES = ("viewer", "operator")
-KEYS = {"data_dir", "tokens", "sim_speed", "identify_workers", "auto_identify", "max_upload_mb", "controller"}
+KEYS = {"data_dir", "tokens", "sim_speed", "identify_workers", "auto_identify", "max_upload_mb", "controller",
+        "stop_port", "stop_host"}
+#: `shakeid serve`'s port when none is given (`--port`)
+DEFAULT_WEB_PORT = 8000
+#: the stop listener's port is the web server's plus this, unless stop_port is set (server/stoplistener.py)
+STOP_PORT_OFFSET = 1
+#: where the stop listener listens when neither stop_host nor a web server's --host says (`shakeid controller`)
+DEFAULT_STOP_HOST = "127.0.0.1"
 COMPUTE_KEYS = {"scheduler", "connect_timeout_s"}
+
+
+def token_role(tokens: dict[str, str], token: str) -> str | None:
+    """The role of a bearer token, or None for an unknown one (compared in constant time): the web
+    server's check (server/auth.py) and the stop listener's (server/stoplistener.py)."""
+    return next((r for t, r in tokens.items() if hmac.compare_digest(t.encode(), token.encode())), None)
 
 
 class SettingsError(ShakeidError):
@@ -56,6 +74,8 @@ class Settings:
     controller: str | None = None                        # an existing rig controller; None: start one
     scheduler: str | None = None                         # a Dask scheduler for jobs; None: process pool
     connect_timeout_s: float = 10.0                      # reaching the Dask scheduler, seconds
+    stop_port: int | None = None                         # the stop listener; None: web port + STOP_PORT_OFFSET; 0: none
+    stop_host: str | None = None                         # its address; None: the web server's --host
 
     @classmethod
     def load(cls, config_path=None, env=None, data_dir=None) -> "Settings":
@@ -76,6 +96,8 @@ class Settings:
             s.auto_identify = bool(section.get("auto_identify", s.auto_identify))
             s.max_upload_mb = float(section.get("max_upload_mb", s.max_upload_mb))
             s.controller = section.get("controller", s.controller)
+            s.stop_port = section.get("stop_port", s.stop_port)
+            s.stop_host = section.get("stop_host", s.stop_host)
             compute = s.rig.compute
             unknown = set(compute) - COMPUTE_KEYS
             if unknown:
@@ -96,6 +118,17 @@ class Settings:
             s.max_upload_mb = float(env["SHAKEID_MAX_UPLOAD_MB"])
         if env.get("SHAKEID_CONTROLLER"):
             s.controller = env["SHAKEID_CONTROLLER"]
+        if env.get("SHAKEID_STOP_PORT"):
+            s.stop_port = env["SHAKEID_STOP_PORT"]
+        if env.get("SHAKEID_STOP_HOST"):
+            s.stop_host = env["SHAKEID_STOP_HOST"]
+        if s.stop_port is not None:
+            try:
+                s.stop_port = int(s.stop_port)
+            except (TypeError, ValueError):
+                s.stop_port = -1
+            if not 0 <= s.stop_port <= 65535:
+                raise SettingsError("stop_port must be a TCP port (1-65535), or 0 for no stop listener")
         if env.get("SHAKEID_SCHEDULER"):
             s.scheduler = env["SHAKEID_SCHEDULER"]
         if s.scheduler is not None and not (isinstance(s.scheduler, str) and "://" in s.scheduler):
@@ -113,6 +146,14 @@ class Settings:
         if not 0 < s.sim_speed < float("inf") or s.identify_workers < 1:
             raise SettingsError("sim_speed must be positive and identify_workers at least 1")
         return s
+
+    def resolve_stop(self, web_host: str | None = None, web_port: int = DEFAULT_WEB_PORT) -> None:
+        """Fill in the stop listener's address from the web server's (`shakeid serve --host --port`): the
+        port STOP_PORT_OFFSET above the web port, the same host, unless stop_port/stop_host say."""
+        if self.stop_port is None:
+            self.stop_port = web_port + STOP_PORT_OFFSET if web_port + STOP_PORT_OFFSET <= 65535 else 0
+        if self.stop_host is None:
+            self.stop_host = web_host or DEFAULT_STOP_HOST
 
     def prepare(self) -> None:
         """Create the data directory; make and keep an operator token when none is configured."""

@@ -352,6 +352,7 @@ def cmd_serve(args) -> int:
     rig += f", rig controller at {settings.controller}" if settings.controller else ", rig controller as a child process"
     print(f"shakeid serve: http://{args.host}:{args.port}/ ({rig}); data in {settings.data_dir.resolve()}", flush=True)
     if settings.generated_token:
+    settings.resolve_stop(args.host, args.port)  # the child controller's stop listener: --port + 1 by default
         print(f"shakeid serve: no tokens configured; operator token: {settings.generated_token} "
               f"(kept in {settings.data_dir / 'operator-token'}); dashboard: "
               f"http://{args.host}:{args.port}/#token={settings.generated_token}", flush=True)

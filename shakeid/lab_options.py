@@ -64,6 +64,10 @@ def add_lab_parsers(sub) -> None:
                                                               "an operator's token") + ": --token or SHAKEID_TOKEN")
         where.add_argument("--config", metavar="RIG.toml", help="the PLC of this rig configuration ([plc]), directly")
         a.add_argument("--token", help="with --server: a bearer token (default: $SHAKEID_TOKEN)")
+        if action == "estop":
+            a.add_argument("--stop-url", metavar="URL", help="with --server: the rig controller's stop listener "
+                           "(/api/health's stop_url; default: the --server URL's port + 1); the --server URL's own "
+                           "route is used when nothing answers there")
         a.add_argument("--json", action="store_true", help="one JSON object instead of text")
         a.set_defaults(func=cmd_rig)
     q = sub.add_parser("sim", help="run the simulated rig: PLC over Modbus TCP, accelerometer stream over TCP")

@@ -1,6 +1,9 @@
 """`shakeid rig status|reset|estop --server URL | --config RIG.toml`: the rig's PLC through a running
 service (its embedded simulated rig included: the only way to it), or the PLC of a rig configuration directly.
 
+With --server, `estop` goes first to the rig controller's stop listener (server/stoplistener.py: the
+--server URL's host on its port + STOP_PORT_OFFSET, or --stop-url), where no viewer traffic is queued, and
+to the web server's own route only when nothing answers there.
 With --config: no HTTP service and no rig controller in between (daq.devices.open_plc: Modbus TCP or ADS), so an
 operator can read and stop the rig while the service is wedged. Exit 0 when the command took effect,
 2 (one line `shakeid: error: ...`) when the PLC does not answer or did not do what it was told.
@@ -85,7 +88,7 @@ def _through_service(args) -> int:
     client = ServiceClient(args.server, token)
     message = ""
     if args.action == "estop":
-        out = client.request("POST", "/api/rig/estop")
+        out, via = _estop(client, args.stop_url)
         message = "emergency stop: the PLC is in estop" + (f"; sweep {out['aborted_sweep']} aborted"
                                                            if out.get("aborted_sweep") else "")
     elif args.action == "reset":
@@ -101,6 +104,40 @@ def _through_service(args) -> int:
     if message:
         print(message)
     return 0
+
+
+def stop_url(server: str, given: str | None = None) -> str:
+    """Where the stop listener is: --stop-url (its path added if it has none), else the --server URL's host
+    on the port STOP_PORT_OFFSET above the server's."""
+    from urllib.parse import urlsplit
+
+    from server.settings import STOP_PORT_OFFSET
+    from server.stoplistener import ESTOP_PATH
+
+    if given:
+        return given if urlsplit(given).path not in ("", "/") else given.rstrip("/") + ESTOP_PATH
+    url = urlsplit(server)
+    port = url.port or (443 if url.scheme == "https" else 80)
+    host = f"[{url.hostname}]" if ":" in (url.hostname or "") else url.hostname
+    return f"http://{host}:{port + STOP_PORT_OFFSET}{ESTOP_PATH}"
+
+
+def _estop(client, given: str | None) -> tuple[dict, str]:
+    """POST the stop to the stop listener; to the web server's route only if nothing answers there (or
+    not a stop listener: 404/405). (answer, where it was sent)."""
+    from server.stoplistener import CLIENT_TIMEOUT_S, ESTOP_PATH
+
+    from .remote import ServiceClient, ServiceError
+
+    url = stop_url(client.url, given)
+    origin, _, path = url.partition("://")[2].partition("/")
+    listener = ServiceClient(url.split("://")[0] + "://" + origin, client.token, timeout_s=CLIENT_TIMEOUT_S)
+    try:
+        return listener.request("POST", "/" + path), url
+    except ServiceError as exc:
+        if exc.status not in (0, 404, 405):  # it answered: 401/403 (the token), 503 (not delivered)
+            raise
+    return client.request("POST", ESTOP_PATH), client.url + ESTOP_PATH
 
 
 def _direct(args) -> int:

@@ -56,7 +56,27 @@ def test_compose_file_is_valid_and_runs_what_exists():
 
     settings = Settings.load(REPO / "deploy" / "compose-rig.toml", env={})
     assert settings.rig.plc["host"] == "rig-sim" and str(settings.data_dir) == "/data"
+    _check_stop_listener(server, ctl)
     _check_dask_services(services)
+
+
+def _published(svc: dict) -> set[int]:
+    """The host ports a service publishes (long syntax, as `docker-compose config` writes it; or short)."""
+    return {int(p["published"]) if isinstance(p, dict) else int(str(p).split(":")[-2]) for p in svc.get("ports", [])}
+
+
+def _check_stop_listener(server: dict, ctl: dict) -> None:
+    """The controller's stop listener is published where the dashboard and the CLI look for it (the
+    server's port + STOP_PORT_OFFSET), listens beyond the container's loopback, and takes the server's tokens."""
+    from server.settings import STOP_PORT_OFFSET, Settings
+
+    web_port = int(server["command"][server["command"].index("--port") + 1])
+    assert web_port in _published(server)
+    settings = Settings.load(REPO / "deploy" / "compose-rig.toml", env=ctl["environment"])
+    settings.resolve_stop()
+    assert settings.stop_port == web_port + STOP_PORT_OFFSET and settings.stop_port in _published(ctl)
+    assert settings.stop_host == "0.0.0.0"
+    assert ctl["environment"]["SHAKEID_TOKENS"] == server["environment"]["SHAKEID_TOKENS"]
 
 
 def _check_dask_services(services: dict) -> None:

@@ -3,13 +3,14 @@ from __future__ import annotations
 
 import time
 
-from fastapi import APIRouter, Depends, HTTPException
+from fastapi import APIRouter, Depends, HTTPException, Request
 
 from daq.recorder import software_version
 
 from .. import schemas
 from ..deps import ERRORS, Services, operator, services, viewer
 from ..ipc import ControllerRefused, ControllerUnavailable
+from ..stoplistener import ESTOP_PATH, not_delivered
 
 #: GET /api/rig answers from a copy at most this old, s: pollers never become load on the rig controller
 RIG_STATUS_MAX_AGE_S = 0.1
@@ -17,12 +18,27 @@ RIG_STATUS_MAX_AGE_S = 0.1
 router = APIRouter()
 
 
+def stop_origin(svc: Services, host_header: str | None) -> str | None:
+    """http://HOST:PORT of the rig controller's stop listener as the caller reaches it (the host it asked
+    this server by, the port the controller reported), or None when there is none (or no usable Host)."""
+    port = svc.link.stop_port if svc.link.attached.is_set() else None
+    if not port or not host_header:
+        return None
+    host = host_header.rsplit(":", 1)[0] if not host_header.endswith("]") else host_header
+    if not host or not all(c.isalnum() or c in ".-[]:" for c in host):
+        return None
+    return f"http://{host}:{port}"
+
+
 @router.get("/api/health", response_model=schemas.Health, tags=["service"])
-def health(svc: Services = Depends(services)):
-    """Liveness, without a token (for supervisors and compose health checks)."""
+def health(request: Request, svc: Services = Depends(services)):
+    """Liveness, without a token (for supervisors and compose health checks); stop_url: where the
+    emergency stop is served apart from the viewers (the rig controller's stop listener), if anywhere."""
+    origin = stop_origin(svc, request.headers.get("host"))
     return {"status": "ok", "version": software_version(), "rig_simulated": svc.settings.rig is None,
             "controller": "attached" if svc.link.attached.is_set() else "unreachable",
-            "jobs_queued": svc.catalog.count("jobs", "state = 'queued'")}
+            "jobs_queued": svc.catalog.count("jobs", "state = 'queued'"),
+            "stop_url": origin + ESTOP_PATH if origin else None}
 
 
 @router.get("/api/rig", tags=["rig"], responses={**ERRORS, 503: {"model": schemas.Problem}}, dependencies=[viewer])
@@ -37,10 +53,11 @@ async def rig_status(svc: Services = Depends(services)) -> dict:
         return cache["value"]
 
 
-@router.post("/api/rig/estop", response_model=schemas.EstopOut, tags=["rig"], dependencies=[operator],
+@router.post(ESTOP_PATH, response_model=schemas.EstopOut, tags=["rig"], dependencies=[operator],
              responses={**ERRORS, 503: {"model": schemas.Problem}})
 async def estop(svc: Services = Depends(services)):
-    """Emergency stop: the table ramps to rest at once; an active sweep ends aborted."""
+    """Emergency stop: the table ramps to rest at once; an active sweep ends aborted. The same stop is
+    served where no viewer traffic waits: /api/health's stop_url (the rig controller's stop listener)."""
     # sent from the event loop itself, not via a thread: under load every hop through the loop's queue
     # waits behind the other requests (~15 ms each with 50 pollers). The call is one message on the
     # connection kept for stops to a real-time thread of the controller (a few ms; at most
@@ -48,7 +65,7 @@ async def estop(svc: Services = Depends(services)):
     try:
         return svc.link.client.emergency_stop()
     except (ControllerRefused, ControllerUnavailable) as exc:
-        raise HTTPException(503, f"emergency stop not delivered: {exc}; use the hardware stop") from None
+        raise HTTPException(503, not_delivered(exc)) from None
     finally:
         svc.rig_cache["t"] = -1e9  # the next GET /api/rig shows the stop
 

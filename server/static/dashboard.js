@@ -91,7 +91,23 @@ function route() {
 window.addEventListener("hashchange", () => tokenFromLink() ? signIn() : route());
 
 // -- the rig: its state line is rewritten by every refresh, so it never shows a stale state
-$("estop").onclick = () => api("POST", "/api/rig/estop")
+// The stop goes first to the rig controller's stop listener (GET /api/health's stop_url: a port of its own,
+// where no viewer traffic waits), and to this server's own route when that does not answer in time or refuses.
+let stopUrl = null;
+const STOP_LISTENER_TIMEOUT_MS = 2000;
+const learnStopUrl = () => fetch("/api/health").then(r => r.json()).then(h => { stopUrl = h.stop_url || null; }).catch(() => {});
+learnStopUrl();
+async function emergencyStop() {
+  if (stopUrl) {
+    try {
+      const r = await fetch(stopUrl, {method: "POST", headers: {"Authorization": "Bearer " + tok()},
+                                      signal: AbortSignal.timeout(STOP_LISTENER_TIMEOUT_MS)});
+      if (r.ok) return await r.json();
+    } catch (e) { /* not reached: the web server's route below */ }
+  } else learnStopUrl();  // a rig controller attached after the page loaded: its listener for the next press
+  return api("POST", "/api/rig/estop");
+}
+$("estop").onclick = () => emergencyStop()
   .then(r => say("EMERGENCY STOP sent" + (r.aborted_sweep ? `: sweep ${r.aborted_sweep} aborted` : ""), "error"))
   .catch(fail("emergency stop NOT confirmed (use the hardware stop)")).finally(refresh);
 $("reset").onclick = () => api("POST", "/api/rig/reset").then(r => say(`rig reset: ${r.state}`))
