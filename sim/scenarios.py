@@ -35,6 +35,11 @@ A drawn scenario is checked by running its physics once (no noise): it must not 
 MAX_RESPONSE_MM, reach at least MIN_RESPONSE of the plain rig's peak, and touch the end stops only if end
 stops are its effect (then in >= 10 samples); otherwise it is redrawn (make_scenario never raises for an
 unlucky draw).
+
+Wide draws (`wide=True`, sim/wide.py; issue 32 item 7): a rig within +-30 % of the design rig, a table
+amplitude of 0.8-4 mm as drawn (no pilot rescaling: the jump falls anywhere), sweeps up or down within
+1-25 Hz over 15-120 s, noise 0.2-5 %, and quantisation and mains hum as measurement nuisances
+(`Scenario.nuisances`); the effects are sized and checked as above.
 """
 from __future__ import annotations
 
@@ -44,9 +49,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from protocol.sweep import SineSweep
+
+from . import wide as wide_draws
 from .rig import RigParameters
 from .sensors import Accelerometer
-from .sweep import SineSweep
 from .synth import SyntheticRun, run_sweep
 
 CATEGORIES = ("none", "single", "two_effects", "sensor_fault", "out_of_catalog")
@@ -111,13 +118,14 @@ class Scenario:
     settle_s: float = 2.0
     magnitudes: dict = field(default_factory=dict)  # per effect: its parameters and relative force
     pilot: dict = field(default_factory=dict)       # Q (m), V (m/s), Fs (N) of the plain rig
+    nuisances: dict = field(default_factory=dict)   # sim.wide.nuisances: quantisation, hum (wide draws)
 
     def run(self, seed: int | None = 0) -> SyntheticRun:
         """Simulate and measure the scenario (the physics is the same for every seed; `seed` draws the
         sensor noise). The recording's truth holds category, truth_effects and magnitudes."""
         run = run_sweep(self.rig, self.sweep, self.fs_hz, self.settle_s, self.table_sensor, self.mass_sensor, seed)
         run.truth.update(category=self.category, truth_effects=list(self.truth_effects),
-                         magnitudes=self.magnitudes, pilot=self.pilot)
+                         magnitudes=self.magnitudes, pilot=self.pilot, nuisances=self.nuisances)
         run.recording.metadata["truth"] = run.truth
         return run
 
@@ -127,22 +135,33 @@ class Scenario:
                        for n in self.truth_effects) or "-"
         fn = math.sqrt(self.rig.stiffness_n_per_m / self.rig.mass_kg) / (2 * math.pi)
         noise = max(self.table_sensor.noise_fraction, self.mass_sensor.noise_fraction)
-        return (f"{self.category:14s} {eff:44s} fn={fn:4.1f}Hz Q={self.pilot.get('Q_m', 0) * 1e3:4.1f}mm "
-                f"{self.sweep.f_start_hz:.1f}-{self.sweep.f_end_hz:.0f}Hz/{self.sweep.duration_s:.0f}s "
-                f"fs={self.fs_hz:.0f} noise<={noise * 100:.1f}%")
+        extra = "".join(f" {k}" for k in self.nuisances)
+        return (f"{self.category:14s} {eff:44s} fn={fn:4.1f}Hz Z={self.sweep.amplitude_mm:.2f}mm "
+                f"Q={self.pilot.get('Q_m', 0) * 1e3:4.1f}mm "
+                f"{self.sweep.f_start_hz:.1f}-{self.sweep.f_end_hz:.1f}Hz/{self.sweep.duration_s:.0f}s "
+                f"fs={self.fs_hz:.0f} noise<={noise * 100:.1f}%{extra}")
+
+    def drawn(self) -> dict:
+        """Everything drawn, JSON-ready: rig, sweep, sample rate, sensors, effect sizes, pilot, nuisances."""
+        return {"category": self.category, "truth_effects": list(self.truth_effects),
+                "rig": dataclasses.asdict(self.rig), "sweep": dataclasses.asdict(self.sweep), "fs_hz": self.fs_hz,
+                "table_sensor": dataclasses.asdict(self.table_sensor),
+                "mass_sensor": dataclasses.asdict(self.mass_sensor), "settle_s": self.settle_s,
+                "magnitudes": self.magnitudes, "pilot": self.pilot, "nuisances": self.nuisances}
 
 
 def make_scenario(rng: np.random.Generator, category: str, effects: list[str] | None = None, *,
-                  duration_s: float | None = None, fs_hz: float | None = None) -> Scenario:
+                  duration_s: float | None = None, fs_hz: float | None = None, wide: bool = False) -> Scenario:
     """A random scenario of `category` (CATEGORIES); `effects` fixes the truth names instead of drawing
     them (e.g. ["end_stop"] for "single"); `duration_s` and `fs_hz` fix the sweep's length and the sample
-    rate (tests use short records). Redraws until the physics checks (module docstring)."""
+    rate (tests use short records); `wide` draws rig, sweep and recording from sim/wide.py's distributions.
+    Redraws until the physics checks (module docstring)."""
     if category not in CATEGORIES:
         raise ValueError(f"unknown category {category!r}; known: {CATEGORIES}")
     for _ in range(MAX_TRIES):
         names = list(effects) if effects is not None else _draw_names(rng, category)
         try:
-            sc = _draw(rng, category, names, duration_s, fs_hz)
+            sc = _draw(rng, category, names, duration_s, fs_hz, wide)
         except ValueError:  # the pilot or the physics diverged: an unlucky draw
             continue
         if sc is not None:
@@ -186,21 +205,23 @@ def _base(rng, duration_s=None, fs_hz=None):
 
 
 def _pilot(rig, sweep, fs, q_target):
-    """Scale the table amplitude so the plain rig peaks near q_target; (sweep, Q, V, Fs)."""
+    """Scale the table amplitude so the plain rig peaks near q_target (None: as drawn); (sweep, Q, V, Fs)."""
     quiet = Accelerometer(noise_fraction=0.0)
     for attempt in range(4):
         run = run_sweep(rig, sweep, fs, 2.0, quiet, quiet, None)
         q = run.truth["max_abs_q_m"]
-        if abs(q / q_target - 1) < 0.15 or attempt == 3:
+        if q_target is None or abs(q / q_target - 1) < 0.15 or attempt == 3:
             break
         sweep = dataclasses.replace(sweep, amplitude_mm=sweep.amplitude_mm * q_target / q)
     q, v = run.truth["max_abs_q_m"], float(np.max(np.abs(run.states[:, 0])))
     return sweep, q, v, rig.stiffness_n_per_m * q + rig.cubic_stiffness_n_per_m3 * q**3
 
 
-def _draw(rng, category, names, duration_s=None, fs_hz=None) -> Scenario | None:
-    rig, sweep, fs, (table, mass), q_target = _base(rng, duration_s, fs_hz)
+def _draw(rng, category, names, duration_s=None, fs_hz=None, wide=False) -> Scenario | None:
+    rig, sweep, fs, (table, mass), q_target = (wide_draws.draw_base if wide else _base)(rng, duration_s, fs_hz)
     sweep, Q, V, Fs = _pilot(rig, sweep, fs, q_target)
+    if wide and Q >= MAX_RESPONSE_MM * 1e-3:
+        return None  # the plain rig alone runs too far (wide draws: the amplitude is not rescaled)
     k, m = rig.stiffness_n_per_m, rig.mass_kg
     fields_, effects, mags = {}, {}, {}
 
@@ -272,7 +293,8 @@ def _draw(rng, category, names, duration_s=None, fs_hz=None) -> Scenario | None:
             mags[name] = {"value": effects[name], "relative_force": r}
     rig = dataclasses.replace(rig, effects=effects, **fields_)
     sc = Scenario(category, list(names), rig, sweep, fs, table, mass, magnitudes=mags,
-                  pilot={"Q_m": Q, "V_ms": V, "Fs_n": Fs, "fn_hz": _fn(rig)})
+                  pilot={"Q_m": Q, "V_ms": V, "Fs_n": Fs, "fn_hz": _fn(rig)},
+                  nuisances=wide_draws.nuisances(table, mass))
     quiet = Accelerometer(noise_fraction=0.0)
     check = run_sweep(rig, sweep, fs, sc.settle_s, quiet, quiet, None)  # the physics sc.run() will run
     contact = check.truth["contact_samples"]
@@ -339,9 +361,34 @@ def wrong_physical_names(truth_effects: list[str], effects: list[dict], min_conf
     return wrong
 
 
-def score(category: str, truth_effects: list[str], result: dict) -> dict:
-    """Whether a result is right for the scenario (contract rules), and its wrong physical names."""
-    effects = result_effects(result)
+def is_nuisance(entry: dict, nuisances) -> bool:
+    """Whether a measurement entry names one of the recording's nuisances (sim.wide.NUISANCE_NAMES kinds:
+    "hum" as any name with hum or mains in it, "quantisation" as any with quanti in it)."""
+    if entry.get("kind") != "measurement":
+        return False
+    name = entry["name"].lower()
+    return (("hum" in nuisances and ("hum" in name or "mains" in name))
+            or ("quantisation" in nuisances and "quanti" in name))
+
+
+def spurious_measurement_names(truth_effects: list[str], effects: list[dict], nuisances=(),
+                               min_confidence: float = 0.5) -> list[str]:
+    """Measurement entries named with confidence >= min_confidence where no such fault exists: neither a
+    truth fault (nor its MEASUREMENT_EQUIVALENT) nor one of the recording's nuisances."""
+    allowed = set(truth_effects) | {q for t in truth_effects for q in MEASUREMENT_EQUIVALENT.get(t, ())}
+    return [e["name"] for e in effects if e.get("kind") == "measurement"
+            and (e.get("confidence") or 0.0) >= min_confidence and e["name"] not in allowed
+            and not is_nuisance(e, nuisances)]
+
+
+def score(category: str, truth_effects: list[str], result: dict, nuisances=()) -> dict:
+    """Whether a result is right for the scenario (contract rules), its wrong physical names and its
+    measurement names where no fault exists. `nuisances` (sim.wide: "hum", "quantisation") are measurement
+    effects the recording has besides the truth: entries naming them are passed over, not judged."""
+    all_effects = result_effects(result)
+    effects = [e for e in all_effects if not is_nuisance(e, nuisances)]
+    if result.get("effect") not in ("none", "unexplained") and all_effects and not effects:
+        result = {**result, "effect": "none"}  # only nuisances named: nothing else is missing
     names = [e["name"] for e in effects]
     closed = result.get("gap_closed")
     closed_half = closed is not None and closed >= 0.5
@@ -361,4 +408,5 @@ def score(category: str, truth_effects: list[str], result: dict) -> dict:
                                                           and closed_half)
     else:
         raise ValueError(f"unknown category {category!r}")
-    return {"right": bool(right), "wrong_names": wrong, "names": names}
+    return {"right": bool(right), "wrong_names": wrong, "names": names,
+            "spurious_measurement": spurious_measurement_names(truth_effects, all_effects, nuisances)}

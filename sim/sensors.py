@@ -1,5 +1,6 @@
-"""Accelerometer model: scale, bias, white noise, ADC quantisation and clipping, and the sensor faults of
-the discrepancy suite (sim/scenarios.py): a gain error, a delay, a drifting bias."""
+"""Accelerometer model: scale, bias, white noise, ADC quantisation and clipping, the sensor faults of
+the discrepancy suite (sim/scenarios.py): a gain error, a delay, a drifting bias, and its measurement
+nuisances: mains hum and an N-bit converter ranged to the record."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -18,7 +19,13 @@ class Accelerometer:
     delay_s : the reading at t is the acceleration at t - delay_s (s, >= 0; fractional samples, exact: see
         `measure`); a delay on one of two channels is the inter-channel delay;
     bias_drift_ms2 : the bias changes linearly by this much (m/s^2) from the first to the last sample.
-    The noise std stays a fraction of the true signal's std (the fault does not change the noise)."""
+    The noise std stays a fraction of the true signal's std (the fault does not change the noise).
+
+    Nuisances (defaults: none):
+    hum_fraction : mains hum, a sine of RMS hum_fraction x the true signal's std at hum_hz (50 or 60 Hz)
+        and phase hum_phase_rad at the first sample, picked up before the converter;
+    adc_bits : the readings quantised by an adc_bits converter whose full scale is the record's largest
+        |reading| (the best a range setting can do): step 2 max|y| / 2^adc_bits (0 = ideal)."""
 
     noise_fraction: float = 0.005
     noise_ms2: float = 0.0
@@ -28,16 +35,29 @@ class Accelerometer:
     gain: float = 1.0
     delay_s: float = 0.0
     bias_drift_ms2: float = 0.0
+    hum_fraction: float = 0.0
+    hum_hz: float = 50.0
+    hum_phase_rad: float = 0.0
+    adc_bits: int = 0
 
     def __post_init__(self):
         if not (0 <= self.delay_s < np.inf and np.isfinite(self.gain) and np.isfinite(self.bias_drift_ms2)):
             raise ValueError(f"sensor delay_s must be >= 0 and finite, gain and bias_drift_ms2 finite "
                              f"(got {self.delay_s}, {self.gain}, {self.bias_drift_ms2})")
+        if not (0 <= self.hum_fraction < np.inf and self.hum_hz > 0 and np.isfinite(self.hum_phase_rad)):
+            raise ValueError(f"sensor hum_fraction must be >= 0 and finite, hum_hz positive (got "
+                             f"{self.hum_fraction}, {self.hum_hz})")
+        if not (self.adc_bits == 0 or 2 <= self.adc_bits <= 32):
+            raise ValueError(f"sensor adc_bits must be 0 (ideal) or 2-32, got {self.adc_bits}")
 
     def faults(self) -> dict:
-        """The fault fields that differ from a healthy sensor (for a recording's truth)."""
-        return {k: v for k, v in (("gain", self.gain), ("delay_s", self.delay_s),
-                                  ("bias_drift_ms2", self.bias_drift_ms2)) if v != (1.0 if k == "gain" else 0.0)}
+        """The fault and nuisance fields that differ from a healthy, ideal sensor (for a recording's truth);
+        the hum's frequency and phase are listed with its fraction."""
+        healthy = {"gain": 1.0, "delay_s": 0.0, "bias_drift_ms2": 0.0, "hum_fraction": 0.0, "adc_bits": 0}
+        out = {k: getattr(self, k) for k, v in healthy.items() if getattr(self, k) != v}
+        if self.hum_fraction:
+            out.update(hum_hz=self.hum_hz, hum_phase_rad=self.hum_phase_rad)
+        return out
 
     def measure(self, true_ms2: np.ndarray, rng: np.random.Generator, fs_hz: float | None = None,
                 delayed_ms2: np.ndarray | None = None) -> np.ndarray:
@@ -65,6 +85,14 @@ class Accelerometer:
         y = seen + self.bias_ms2 + std * rng.standard_normal(x.shape)
         if self.bias_drift_ms2:
             y = y + self.bias_drift_ms2 * np.linspace(0.0, 1.0, x.size)
+        if self.hum_fraction:
+            if not fs_hz:
+                raise ValueError("mains hum needs the sample rate fs_hz")
+            t = np.arange(x.size) / fs_hz
+            y = y + self.hum_fraction * np.std(x) * np.sqrt(2) * np.sin(2 * np.pi * self.hum_hz * t + self.hum_phase_rad)
+        if self.adc_bits:
+            step = 2 * np.max(np.abs(y)) / 2**self.adc_bits
+            y = step * np.round(y / step) if step > 0 else y
         if self.lsb_ms2 > 0:
             y = self.lsb_ms2 * np.round(y / self.lsb_ms2)
         return np.clip(y, -self.range_ms2, self.range_ms2)
