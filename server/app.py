@@ -25,14 +25,14 @@ from .catalog import Catalog
 from .deps import Services, valid_text
 from .jobs import JobQueue
 from .rigclient import RigLink
-from .routers import campaigns, export, jobs, live, recordings, results, rig, sweeps
+from .routers import campaigns, export, frf, jobs, live, recordings, results, rig, sweeps
 from .security import SecurityHeaders
 from .settings import Settings
 from .text import cleaned
 
 #: the routers, in the order their routes are matched and documented
 ROUTERS = (rig.router, sweeps.router, campaigns.router, recordings.router, live.router, jobs.router, results.router,
-           export.router)
+           export.router, frf.router)
 
 
 def create_app(settings: Settings) -> FastAPI:

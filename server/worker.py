@@ -97,7 +97,8 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
             result = {**ident.fit(rec).result(), **data}
             if result["status"] == "failed":  # no model.json: what was fitted is not a model of the rig
                 raise ShakeidError(f"{_label(path, options)}: identification failed: {result['reason']}")
-            write_report(ident, out / STAGING)
+            result["frf"] = frf_beside(out, result, ident.model_, [rec], [_label(path, options)])
+            write_report(ident, out / STAGING, result)
             _write_json(out / "model.json", result)
             return _adopt(kind, out)
         if kind == "explain":
@@ -116,6 +117,20 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
 
 #: where a job writes its report before the result file is there (then renamed to "report")
 STAGING = "report.partial"
+#: the predicted frequency response beside the measured sweeps, written beside model.json
+FRF_FILE = "frf.json"
+
+
+def frf_beside(out: Path, result: dict, model, recs: list, names: list[str]) -> dict:
+    """The side-by-side frequency response of an identification (identify.frf.side_by_side, the one
+    `shakeid identify --json` carries), also written to FRF_FILE before the result file. It never fails
+    the job: whatever goes wrong is its status and reason. Its cost is one frequency response per table
+    amplitude over the band the sweeps cover and one free run of the model per sweep."""
+    from identify.frf.side_by_side import for_identification
+
+    doc = for_identification(result, model, recs, names)
+    _write_json(out / FRF_FILE, doc)
+    return doc
 
 
 def _adopt(kind: str, out: Path) -> dict:
@@ -156,13 +171,30 @@ def _run_joint(paths: list, options: dict, out: Path) -> dict:
         params = {k: options[k] for k in IDENTIFY_KEYS if options.get(k) is not None}
         if options.get("band_hz"):
             params["band_hz"] = tuple(options["band_hz"])
-        result = SparseIdentifier(**params).fit(recs).result()
+        ident = SparseIdentifier(**params)
+        result = ident.fit(recs).result()
         if result["status"] != "failed":
+            result["frf"] = frf_beside(out, result, ident.model_, recs, [r.source for r in recs])
+            if result["frf"]["status"] == "ok":  # the campaign's overlay, moved into report/ by _adopt
+                _campaign_overlay(out, result["frf"])
             _write_json(out / "model.json", result)
         _write_json(out / "joint.json", result)  # last: the result file (catalog.RESULT_FILES)
         return _adopt("identify_joint", out)
     except (ShakeidError, ValueError) as exc:
         raise ShakeidError(_public(str(exc), paths, options)) from None
+
+
+def _campaign_overlay(out: Path, frf: dict) -> None:
+    """The campaign's overlay figure (reports.frf_overlay) in the staging folder; a figure that cannot be
+    drawn is said in frf.json, never a failed job."""
+    from reports.frf_overlay import OVERLAY_FIGURE, overlay_figure
+
+    try:
+        (out / STAGING).mkdir(exist_ok=True)
+        overlay_figure(frf, out / STAGING / OVERLAY_FIGURE)
+    except Exception as exc:  # noqa: BLE001 -- the joint model stands without its figure
+        frf["figure_error"] = f"{type(exc).__name__}: {exc}"
+        _write_json(out / FRF_FILE, frf)
 
 
 def _label(path, options: dict) -> str:

@@ -32,11 +32,13 @@ SWEEP_CORRELATION = 0.95
 ENVELOPE_DIGITS = 6
 
 
-def side_by_side(models: dict, recordings: list, fit_percent: float | None = None, judged: str | None = None) -> dict:
+def side_by_side(models: dict, recordings: list, fit_percent: float | None = None, judged: str | None = None,
+                 names: list[str] | None = None) -> dict:
     """`models`: {label: SparseModel} (the identified model; the explain report's baseline and fixed
     model); `recordings`: base-layout sweep recordings; `fit_percent`: the judged model's held-out
     time-domain fit (None: it failed its validation, so there is nothing to flag); `judged`: the label
-    whose misses are flagged (default: the first)."""
+    whose misses are flagged (default: the first); `names`: what to call each recording (default: its
+    source)."""
     judged = judged or next(iter(models))
     doc = {"status": "ok", "reason": None, "models": list(models), "judged": judged, "amplitudes": [],
            "jumps": [], "flagged": False, "flags": [], "skipped": []}
@@ -46,10 +48,10 @@ def side_by_side(models: dict, recordings: list, fit_percent: float | None = Non
     except ShakeidError as exc:
         return {**doc, "status": "not_applicable", "reason": str(exc)}
     envs = []
-    for rec in recordings:
-        env, why = _sweep(rec)
+    for rec, name in zip(recordings, names or [str(r.source) for r in recordings]):
+        env, why = _sweep(rec, name)
         if env is None:
-            doc["skipped"].append({"source": str(rec.source), "reason": why})
+            doc["skipped"].append({"source": name, "reason": why})
         else:
             envs.append(env)
     if not envs:
@@ -64,18 +66,18 @@ def side_by_side(models: dict, recordings: list, fit_percent: float | None = Non
     return _finite(doc)
 
 
-def _sweep(rec):
+def _sweep(rec, name: str):
     """(the recording's envelope, None) or (None, why it is not a sweep to compare with)."""
     try:
         env = sweep_envelope(rec)
     except ShakeidError as exc:
-        return None, str(exc)
+        return None, str(exc).replace(str(rec.source), name)
     f, t = env["frequency_hz"], env["t_s"]
     r = float(np.corrcoef(t, f)[0, 1]) if f.size > 3 and np.ptp(f) > 0 else 0.0
     if not abs(r) >= SWEEP_CORRELATION:
-        return None, (f"{rec.source}: not a sine sweep (its cycles' frequency follows time with r = {r:.2f} < "
+        return None, (f"{name}: not a sine sweep (its cycles' frequency follows time with r = {r:.2f} < "
                       f"{SWEEP_CORRELATION}): no frequency response to read from it")
-    env["source"] = str(rec.source)
+    env["source"] = name
     return env, None
 
 
@@ -161,3 +163,31 @@ def _finite(obj):
     if isinstance(obj, np.bool_):
         return bool(obj)
     return obj
+
+
+def for_identification(result: dict, model, recordings: list, names: list[str] | None = None) -> dict:
+    """The side-by-side an identification's document carries (its "frf"): the model is judged (flagged)
+    only when it passed its time-domain validation. Whatever goes wrong is recorded, never raised: the
+    identification it rides on stands without it."""
+    heldout = ((result.get("validation") or {}).get("heldout") or {}).get("q1_dot") or {}
+    fit = heldout.get("fit_percent") if result.get("status") != "failed" else None
+    return _guarded(lambda: side_by_side({"model": model}, recordings, fit, names=names))
+
+
+def for_explanation(result: dict, baseline, fixed, recordings: list) -> dict:
+    """The explain report's side-by-side: the baseline and, when an effect was added, the baseline with
+    it (judged, by its held-out free-run fit)."""
+    models = {"baseline": baseline}
+    if result.get("effects"):
+        models["+ " + ", ".join(e["name"] for e in result["effects"])] = fixed
+    which = "after" if len(models) > 1 else "before"
+    heldout = (((result.get("validation") or {}).get(which) or {}).get("heldout") or {}).get("q1_dot") or {}
+    return _guarded(lambda: side_by_side(models, recordings, heldout.get("fit_percent"), judged=list(models)[-1]))
+
+
+def _guarded(make) -> dict:
+    try:
+        return make()
+    except Exception as exc:  # noqa: BLE001 -- the identification must not fail for its frequency response
+        return {"status": "failed", "reason": f"the frequency response failed: {type(exc).__name__}: {exc}",
+                "amplitudes": [], "jumps": [], "flagged": False, "flags": []}

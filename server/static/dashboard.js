@@ -74,19 +74,20 @@ async function signIn() {
 }
 function signOut(why) {
   localStorage.removeItem(TOKEN_KEY); session = null;
-  $("session").textContent = ""; $("rig").textContent = "not signed in"; $("rig").className = "rig"; $("login").hidden = false; $("home").hidden = $("recording").hidden = true;
+  $("session").textContent = ""; $("rig").textContent = "not signed in"; $("rig").className = "rig"; $("login").hidden = false; $("home").hidden = $("recording").hidden = $("campaign").hidden = true;
   if (why) say(why, "error");
 }
 $("login-form").onsubmit = ev => {
   ev.preventDefault(); localStorage.setItem(TOKEN_KEY, $("token").value.trim()); $("token").value = ""; signIn();
 };
 
-// -- pages: # is the main view, #/recording/<id> one recording's page
+// -- pages: # is the main view, #/recording/<id> one recording's page, #/campaign/<id> a campaign's (frf.js)
 function route() {
   if (!session) return;
-  const m = location.hash.match(/^#\/recording\/([0-9a-f]{12})$/);
-  $("home").hidden = !!m; $("recording").hidden = !m;
-  if (m) showRecording(m[1]); else { openRecording = null; refresh(); }
+  const m = location.hash.match(/^#\/recording\/([0-9a-f]{12})$/), c = location.hash.match(/^#\/campaign\/([0-9a-f]{12})$/);
+  $("home").hidden = !!(m || c); $("recording").hidden = !m; $("campaign").hidden = !c;
+  if (!c) openCampaign = null;
+  if (m) showRecording(m[1]); else if (c) { openRecording = null; showCampaign(c[1]); } else { openRecording = null; refresh(); }
 }
 window.addEventListener("hashchange", () => tokenFromLink() ? signIn() : route());
 
@@ -232,7 +233,7 @@ function showCampaigns(cs) {
     (c.state === "paused" ? `<button data-act="resume" data-id="${c.id}">resume</button> ` : "") +
     (["running", "pausing", "paused"].includes(c.state) ? `<button data-act="abort" data-id="${c.id}">abort</button>` : "");
   $("campaigns").innerHTML = `<tr><th>date</th><th>name</th><th>state</th><th>progress</th><th>sweeps (amplitude, direction)</th><th></th></tr>` +
-    (cs.length ? cs.map(c => `<tr data-id="${c.id}"><td>${when(c.created)}</td><td>${esc(c.name)}</td>
+    (cs.length ? cs.map(c => `<tr data-id="${c.id}"><td>${when(c.created)}</td><td><a href="#/campaign/${c.id}">${esc(c.name)}</a></td>
       <td class="state">${esc(c.state)}${c.reason ? `<br><span class="muted">${esc(c.reason)}</span>` : ""}</td>
       <td class="progress">${c.progress.done}/${c.progress.total}${c.joint_identification ?
         `<br><span class="muted joint" title="${esc(c.joint_identification.error || "")}">joint model: ${esc(c.joint_identification.state)}` +

@@ -39,6 +39,7 @@ async function refreshRecording() {
   if (id !== openRecording) return;
   $("rec-body").innerHTML = details(r) + qualitySection(r, model || explanation) +
     `<h3>Model</h3><div id="rec-model">${modelSection(r, model)}</div>` +
+    (model ? `<h3>Frequency response <span class="hint">(the model's predicted response beside this sweep's)</span></h3><div id="rec-frf"></div>` : "") +
     `<h3>Explanation <span class="hint">(what the textbook Duffing model misses, and which effect closes the gap)</span></h3>` +
     `<div id="rec-explain">${explainSection(r, explanation)}</div>`;
   $("rec-body").querySelectorAll("button[data-job]").forEach(b => b.onclick = () =>
@@ -56,7 +57,7 @@ async function refreshRecording() {
     try { const a = document.createElement("a"); a.href = await blobUrl(`/api/recordings/${id}/model.${suffix}`); a.download = `model_${id}.${suffix}`; a.click(); }
     catch (e) { fail(`${b.textContent} export`)(e); }
   });
-  if (model) await figures(id, "identify", "rec-model-figures");
+  if (model) await Promise.all([figures(id, "identify", "rec-model-figures"), recordingFrf(id)]);
   if (explanation) await figures(id, "explain", "rec-explain-figures");
 }
 
@@ -144,7 +145,7 @@ async function figures(id, kind, into) {
   try { names = await api("GET", `/api/recordings/${id}/plots?kind=${kind}`); } catch (e) { return; }
   const box = $(into);
   if (!box) return;
-  for (const name of names) {
+  for (const name of names.filter(n => n !== FRF_FIGURE)) {  // the overlay: in its own section (frf.js)
     const fig = document.createElement("figure");
     fig.innerHTML = `<img alt="${esc(name)}"><figcaption>${esc(CAPTIONS[name] || name)}</figcaption>`;
     if (WIDE.has(name)) fig.className = "wide";

@@ -1,0 +1,63 @@
+"""The predicted frequency response beside the measured sweeps (identify.frf.side_by_side), as each
+identification stored it: a recording's (its latest identify job) and a campaign's (its joint job, every
+table amplitude of the campaign). docs/frf.md, docs/service.md."""
+from __future__ import annotations
+
+import json
+from pathlib import Path as FsPath
+
+from fastapi import APIRouter, Depends, HTTPException
+from fastapi.responses import FileResponse
+
+from .. import schemas
+from ..deps import ERRORS, Id, Services, services, viewer
+from ..worker import FRF_FILE
+from .campaigns import latest_joint_jobs
+from .results import latest_result
+
+OVERLAY = "frf_overlay.png"  # reports.frf_overlay.OVERLAY_FIGURE (the server does not draw: a worker did)
+router = APIRouter(tags=["frequency response"], dependencies=[viewer],
+                   responses={**ERRORS, 404: {"model": schemas.Problem}})
+
+
+@router.get("/api/recordings/{rec_id}/frf")
+def recording_frf(rec_id: str = Id(), svc: Services = Depends(services)) -> dict:
+    """The latest identification's frequency response beside the recording's sweep: per table amplitude
+    the predicted branches and folds, the measured per-cycle envelope and jump, `jumps` (measured vs
+    predicted, `agrees`), `flagged` with `flags`; `status` not "ok" with the `reason` when there is none
+    (not a sweep, not a base-excited model, or the computation failed: the model stands without it)."""
+    return json.loads(latest_result(svc, rec_id, "identify", FRF_FILE).read_text())
+
+
+@router.get("/api/campaigns/{campaign_id}/frf")
+def campaign_frf(campaign_id: str = Id(), svc: Services = Depends(services)) -> dict:
+    """The campaign's joint model's frequency response beside every sweep of the campaign, one entry per
+    table amplitude (the same document as a recording's)."""
+    return json.loads(_campaign_file(svc, campaign_id, FRF_FILE).read_text())
+
+
+@router.get("/api/campaigns/{campaign_id}/frf.png", response_class=FileResponse)
+def campaign_frf_figure(campaign_id: str = Id(), svc: Services = Depends(services)):
+    """The campaign's overlay figure (a panel per table amplitude); a recording's is its report's
+    frf_overlay.png (GET /api/recordings/{id}/plots/frf_overlay.png)."""
+    return FileResponse(_campaign_file(svc, campaign_id, f"report/{OVERLAY}"), media_type="image/png")
+
+
+def _campaign_file(svc: Services, campaign_id: str, name: str) -> FsPath:
+    """`name` in the result folder of the campaign's newest joint identification; 404 saying why not."""
+    if svc.catalog.get("campaigns", campaign_id) is None:
+        raise HTTPException(404, f"no campaign {campaign_id}")
+    job = latest_joint_jobs(svc.catalog, [campaign_id]).get(campaign_id)
+    if job is None:
+        raise HTTPException(404, f"no frequency response for campaign {campaign_id} yet: its joint identification "
+                                 "is queued when the campaign completes")
+    path = FsPath(job["result_dir"]) / name
+    if not path.is_file():
+        why = f"failed: {job['error']}" if job["state"] == "failed" else f"is {job['state']}"
+        if job["state"] == "completed":
+            frf = FsPath(job["result_dir"]) / FRF_FILE
+            why = ("has no overlay: " + json.loads(frf.read_text()).get("reason", "")) if frf.is_file() else \
+                "has no frequency response (identified before the service computed one)"
+        raise HTTPException(404, f"no frequency response for campaign {campaign_id}: its joint identification "
+                                 f"{job['id']} {why}")
+    return path
