@@ -90,7 +90,7 @@ def _through_service(args) -> int:
     if args.action == "estop":
         out, via = _estop(client, args.stop_url)
         message = "emergency stop: the PLC is in estop" + (f"; sweep {out['aborted_sweep']} aborted"
-                                                           if out.get("aborted_sweep") else "")
+                                                           if out.get("aborted_sweep") else "") + f" (sent to {via})"
     elif args.action == "reset":
         message = f"reset: the PLC is {client.request('POST', '/api/rig/reset')['state']}"
     plc = client.request("GET", "/api/rig").get("plc", {})
