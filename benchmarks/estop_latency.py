@@ -43,7 +43,7 @@ from sim.server import free_port  # noqa: E402
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 TOKEN = "benchmark-operator-token"
 VIEWER_TOKEN = "benchmark-viewer-token"
-SWEEP = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 300.0, "amplitude_mm": 1.3, "settle_s": 1.0}
+SWEEP = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 300.0, "amplitude_mm": 1.0, "settle_s": 1.0}  # 1.3 mm: refused (end stops)
 PROBE = """
 import signal, sys, time
 worst, n = 0.0, 0

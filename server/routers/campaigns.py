@@ -4,23 +4,50 @@ from __future__ import annotations
 from typing import Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Query
+from fastapi.concurrency import run_in_threadpool
+from pydantic import Field
+
+from daq.campaign import PlanError, parse_plan
 
 from .. import schemas
 from ..catalog import Catalog
 from ..deps import ERRORS, Id, Services, operator, services, viewer
+from ..preflight import check_plan, rig_response
 
 router = APIRouter(tags=["campaigns"])
 CAMPAIGN_ERRORS = {**ERRORS, 404: {"model": schemas.Problem}, 409: {"model": schemas.Problem},
                    503: {"model": schemas.Problem}}
 
 
-@router.post("/api/campaigns", status_code=202, response_model=schemas.Accepted,
+class CampaignAccepted(schemas.Accepted):
+    preflight: dict | None = Field(None, description="warnings of the predicted peaks above "
+                                                     "daq.preflight.WARN_SHARE of a limit, by sweep")
+
+
+def preflight(svc: Services, plan: dict):
+    """Every sweep of the plan predicted with this rig's latest model (daq/preflight.py); (None, {}) for a
+    plan the controller refuses anyway (it names the key or the limit)."""
+    try:
+        parsed = parse_plan(plan)
+    except PlanError:
+        return None, {}
+    return check_plan(rig_response(svc.catalog, svc.settings.rig), svc.settings.rig, parsed)
+
+
+@router.post("/api/campaigns", status_code=202, response_model=CampaignAccepted,
              responses={**CAMPAIGN_ERRORS, 422: {"model": schemas.Problem}})
 async def start_campaign(body: schemas.CampaignIn, who: str = operator, svc: Services = Depends(services)):
     """Start a campaign: its sweeps one after another in the rig controller. Every sweep is checked
-    against the limits first (422 naming the sweep and the limit, nothing moves); 409 while a sweep or a
-    campaign runs or the PLC is in emergency stop or fault."""
-    return await svc.controller("start_campaign", plan=body.model_dump(), operator=who)
+    against the limits and predicted from the rig's model first (422 naming the sweep and the limit, or the
+    predicted peak, where and what would pass; nothing moves); 409 while a sweep or a campaign runs or the
+    PLC is in emergency stop or fault. Each sweep is predicted again right before it starts (a newer model
+    may be known by then): a refusal there pauses the campaign."""
+    plan = body.model_dump()
+    refusal, warnings = await run_in_threadpool(preflight, svc, plan)
+    if refusal:
+        raise HTTPException(422, f"campaign refused: {refusal}")
+    started = await svc.controller("start_campaign", plan=plan, operator=who)
+    return {**started, "preflight": {"warnings": warnings}}
 
 
 @router.get("/api/campaigns", response_model=list[schemas.CampaignOut], dependencies=[viewer], responses=ERRORS)

@@ -157,7 +157,7 @@ def test_sweep_live_plot_moves_then_fit_shown(page, service):
 def test_refusal_stays_until_dismissed(page, service):
     with service.client() as api:
         wait_idle(api)
-        running = api.post("/api/sweeps", json=sweep_body(300.0)).json()["id"]
+        running = api.post("/api/sweeps", json=sweep_body(300.0, 1.0)).json()["id"]  # 1.3 mm would hit the stops
         page.wait_for_selector(f"#sweep-status:has-text('{running}')")  # the page follows a sweep started elsewhere
         fill_sweep(page, 30.0)
         page.click("#start")

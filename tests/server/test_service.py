@@ -15,6 +15,8 @@ from sim.rig import RigParameters
 from .conftest import VIEWER, Service, wait_for
 
 SWEEP = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 40.0, "amplitude_mm": 1.3, "settle_s": 2.0}
+#: a long sweep to stop or abort: 1 mm (at 1.3 mm a 120-300 s sweep hits the end stops: the preflight refuses it)
+LONG = {**SWEEP, "amplitude_mm": 1.0}
 
 
 def _read_live(url: str, rec_id: str, out: list, stop: threading.Event):
@@ -93,7 +95,7 @@ def test_sweep_live_model_and_the_rules_around_it(service):
 
 def test_abort_mid_sweep_leaves_an_aborted_recording(service):
     op = service.client()
-    sweep_id = op.post("/api/sweeps", json={**SWEEP, "duration_s": 120.0}).json()["id"]
+    sweep_id = op.post("/api/sweeps", json={**LONG, "duration_s": 120.0}).json()["id"]
     wait_for(lambda: op.get(f"/api/sweeps/{sweep_id}").json()["progress"] > 0.1, 60, "progress")
     assert op.post(f"/api/sweeps/{sweep_id}/abort").status_code == 202
     sweep = wait_for(lambda: (s := op.get(f"/api/sweeps/{sweep_id}").json())["state"] != "running" and s, 30, "end")
@@ -116,7 +118,7 @@ def test_abort_mid_sweep_leaves_an_aborted_recording(service):
 
 def test_emergency_stop_stops_the_simulated_table(service):
     op, viewer = service.client(), service.client(VIEWER)
-    sweep_id = op.post("/api/sweeps", json={**SWEEP, "duration_s": 120.0}).json()["id"]
+    sweep_id = op.post("/api/sweeps", json={**LONG, "duration_s": 120.0}).json()["id"]
     wait_for(lambda: op.get("/api/rig").json()["plc"]["state"] == "running", 30, "running")
     assert viewer.post("/api/rig/estop").status_code == 403
     # emergency stop while other requests keep the service busy
@@ -191,7 +193,7 @@ def test_service_killed_mid_sweep_loses_nothing_and_recovers(tmp_path):
     closes the file 'aborted' with the reason and exits; a restart finds everything in order."""
     svc = Service(tmp_path / "data").start()
     op = svc.client()
-    sweep_id = op.post("/api/sweeps", json={**SWEEP, "duration_s": 120.0}).json()["id"]
+    sweep_id = op.post("/api/sweeps", json={**LONG, "duration_s": 120.0}).json()["id"]
     wait_for(lambda: op.get(f"/api/sweeps/{sweep_id}").json()["progress"] > 0.2, 60, "progress")
     rec_id = op.get(f"/api/sweeps/{sweep_id}").json()["recording_id"]
     svc.stop(signal.SIGKILL)
@@ -250,7 +252,7 @@ def test_sigterm_mid_sweep_ends_the_recording_aborted_with_the_reason(tmp_path):
     table is stopped, the file closed 'aborted' with the reason, and the process exits promptly."""
     svc = Service(tmp_path / "data").start()
     op = svc.client()
-    sweep_id = op.post("/api/sweeps", json={**SWEEP, "duration_s": 300.0}).json()["id"]
+    sweep_id = op.post("/api/sweeps", json={**LONG, "duration_s": 300.0}).json()["id"]
     rec_id = op.get(f"/api/sweeps/{sweep_id}").json()["recording_id"]
     events, stop = [], threading.Event()
     reader = threading.Thread(target=_read_live, args=(svc.url, rec_id, events, stop), daemon=True)
