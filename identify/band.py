@@ -4,10 +4,9 @@ identify.chunked accumulates the same segments chunk by chunk; one rule, band_fr
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import chi2
 
 from .errors import IdentificationError
-from .spectral import welch_dof, welch_psd, welch_segments
+from .spectral import noise_level, welch_psd, welch_segments
 
 #: Excited = Welch PSD at least this many dB above the noise floor (excited_band: the noise level itself).
 EXCITATION_MARGIN_DB = 8.0  # over the noise level: the old rule's 10 dB over a low decile (0.55-0.67 of it)
@@ -42,7 +41,9 @@ def band_from_psd(f: np.ndarray, p: np.ndarray, n: int, nper: int,
     """excited_band's rule on a Welch PSD of a record of n samples in segments of nper (identify.chunked
     accumulates that PSD chunk by chunk, without holding the record)."""
     skip = 3  # the lowest bins hold the window's leakage of offsets and drifts, not excitation
-    floor = np.percentile(p[skip:], 10) / _low_decile_of_noise(n, nper)
+    # the noise level: the spectrum's low decile (robust to how many bins the excitation fills) over
+    # the low decile of a noise bin's own distribution (spectral.noise_level, the one estimator)
+    floor = noise_level(p[skip:], welch_segments(n, nper), 0.1)
     above = np.flatnonzero(p[skip:] > floor * 10 ** (margin_db / 10)) + skip
     if above.size == 0:
         raise IdentificationError("the input shows no excited frequency band above its noise floor")
@@ -56,18 +57,3 @@ def band_from_psd(f: np.ndarray, p: np.ndarray, n: int, nper: int,
     lo_bin, hi_bin = above[starts[best]], above[stops[best]]
     df = f[1] - f[0]
     return float(max(f[lo_bin] - df, df)), float(min(f[hi_bin] + df, df * nper / 2))  # df nper / 2: Nyquist
-
-
-def _low_decile_of_noise(n: int, nper: int) -> float:
-    """The 10th percentile of a Welch estimate of white noise, as a fraction of its mean.
-
-    The floor is the spectrum's 10th percentile (robust to how many bins the excitation fills) divided
-    by this, i.e. the noise level itself. A noise bin of a Welch estimate over K segments (Hann, 50 %
-    overlap) is chi-square with ~2K / (1 + 2 c^2 (K - 1) / K) degrees of freedom, c = 0.167: with
-    K = 14 (60 s at 2048 Hz) its low decile is 0.67 of the mean, with K = 3 (a 13-15 s record) 0.37,
-    so the undivided percentile put the threshold at 3.7x instead of 10x the noise on short records:
-    noise bins crossed it and, merged across MAX_GAP_BINS, pulled f_lo to the spectrum's bottom
-    (0.31 Hz for a response that cannot clear its noise below ~1.5 Hz), leaving the record too short for
-    its own band."""
-    dof = welch_dof(welch_segments(n, nper))
-    return float(chi2.ppf(0.1, dof) / dof)

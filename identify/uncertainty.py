@@ -38,15 +38,15 @@ import dataclasses
 import itertools
 
 import numpy as np
-from scipy.stats import chi2
 
 from .chain import STATE_REQUESTS, BandSpectra, spectral_ops
 from .chain_noise import BandLimitedNoise
 from .corrected import CorrectedSums, analytic_bias, gram_moments, term_exponents
 from .gram import BlockGram, scaled_pinv
+from .noise import noise_std
 from .noise_spread import noise_variance
 from .optimizers.base import least_squares
-from .spectral import welch_dof, welch_psd, welch_segments
+from .spectral import welch_psd, welch_segments
 
 #: Random held-out placements for the inclusion probabilities (a probability to +-0.1 at worst).
 N_PLACEMENTS = 24
@@ -61,10 +61,6 @@ N_REPLICATES = None
 #: 250 000 samples in all, 16 from 1 000 000 (the 1e6-sample record's cost, benchmarks/identify_speed.py).
 REPLICATE_SAMPLES = 16_000_000
 MIN_REPLICATES, MAX_REPLICATES = 16, 64
-#: The noise floor is read above this multiple of the band top (past the band edge's roll-off, 1.25 f_hi).
-NOISE_FLOOR_ABOVE = 1.3
-#: ... up to this fraction of Nyquist (anti-alias filters roll off beyond).
-NOISE_FLOOR_BELOW = 0.95
 
 
 def refit_all_rows(gram: BlockGram, support: np.ndarray, eq: int, covariance: bool = True):
@@ -93,26 +89,6 @@ def refit_all_rows(gram: BlockGram, support: np.ndarray, eq: int, covariance: bo
     meat = (scores.T @ scores + 0.5 * (lag1 + lag1.T)) * k / max(k - 1, 1)
     bread = scaled_pinv(ne.G[np.ix_(S, S)])
     return coef, bread @ meat @ bread
-
-
-def floor_std(f: np.ndarray, p: np.ndarray, segments: int, fs_hz: float, band_hz) -> float | None:
-    """Std of white noise from a Welch spectrum p on the bins f (Hz), the mean over `segments` segments:
-    the median over NOISE_FLOOR_ABOVE f_hi .. NOISE_FLOOR_BELOW Nyquist, robust to a stray harmonic.
-    None when the band leaves less than a tenth of the spectrum above it to read the floor from.
-
-    A noise bin of a Welch estimate is chi-square distributed, whose median lies below its mean (the
-    level): by 0.3 % of the variance over the ~120 segments of a million-sample record in the band
-    search's 16384-sample segments, by 11 % over the 3 of a 15 s record. The median is divided by
-    that ratio (spectral.welch_dof)."""
-    nyq = fs_hz / 2
-    lo, hi = NOISE_FLOOR_ABOVE * band_hz[1], NOISE_FLOOR_BELOW * nyq
-    if hi - lo < 0.1 * nyq:
-        return None
-    sel = (f >= lo) & (f <= hi)
-    if np.count_nonzero(sel) < 8:
-        return None
-    dof = welch_dof(segments)
-    return float(np.sqrt(np.median(p[sel]) / (chi2.ppf(0.5, dof) / dof) * nyq))
 
 
 class NoiseChain:
@@ -304,7 +280,7 @@ FLOOR_STRETCHES, FLOOR_STRETCH = 64, 4
 
 
 def noise_floors(recording, band_hz, spectra: BandSpectra | None = None) -> tuple[float | None, float | None]:
-    """White-noise std of the input and output channels (floor_std).
+    """White-noise std of the input and output channels (identify.noise.noise_std, the one floor estimator).
 
     From the spectra the chain's band search read (StateSignals.spectra: base layout, the input's and
     the response's, output - input) when given: the sensors' noises are independent, so the output's
@@ -314,8 +290,8 @@ def noise_floors(recording, band_hz, spectra: BandSpectra | None = None) -> tupl
     noise is stationary)."""
     fs = recording.fs_hz
     if spectra is not None:
-        s_in = floor_std(spectra.f_hz, spectra.input, spectra.segments, fs, band_hz)
-        s_resp = floor_std(spectra.f_hz, spectra.response, spectra.segments, fs, band_hz)
+        s_in = noise_std(spectra.f_hz, spectra.input, spectra.segments, fs, band_hz)
+        s_resp = noise_std(spectra.f_hz, spectra.response, spectra.segments, fs, band_hz)
         if s_in is None or s_resp is None:
             return s_in, s_resp
         return s_in, float(np.sqrt(max(s_resp**2 - s_in**2, 0.0)))
@@ -335,7 +311,7 @@ def floors_read(read, n: int, fs: float, band_hz) -> tuple[float | None, float |
     else:
         f, p = welch_psd(np.vstack(read(0, n)), fs, nper)
         segments = welch_segments(n, nper)
-    return floor_std(f, p[0], segments, fs, band_hz), floor_std(f, p[1], segments, fs, band_hz)
+    return noise_std(f, p[0], segments, fs, band_hz), noise_std(f, p[1], segments, fs, band_hz)
 
 
 def placements(held: np.ndarray, n: int, seed: int = 0) -> list[np.ndarray]:

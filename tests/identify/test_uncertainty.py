@@ -10,8 +10,6 @@ from identify.errors import IdentificationError
 from identify.gram import BlockGram
 from identify.identifier import SparseIdentifier, holdout_blocks
 from identify.optimizers.base import least_squares
-from identify.spectral import welch_psd, welch_segments
-from identify.uncertainty import floor_std
 from identify.validation import validate
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
@@ -187,15 +185,6 @@ def test_simex_where_the_closed_form_does_not_apply():
         assert abs(c - simex["model"]["q1_dot"][term]) < closed["standard_errors"]["q1_dot"][term], term
     with pytest.raises(IdentificationError):
         SparseIdentifier(bias_method="exact").fit(run.recording)
-
-
-def test_white_noise_floor_needs_room_above_the_band():
-    rng = np.random.default_rng(0)
-    x = 0.1 * rng.standard_normal(20000)
-    f, p = welch_psd(x, 1000.0, 1024)
-    segments = welch_segments(x.size, 1024)
-    assert floor_std(f, p, segments, 1000.0, (1.0, 100.0)) == pytest.approx(0.1, rel=0.05)
-    assert floor_std(f, p, segments, 1000.0, (1.0, 400.0)) is None  # band top 400 Hz x 1.3 is past 0.9 Nyquist
 
 
 @pytest.mark.parametrize("duration_s, noise_fraction", [(15, 0.005), (60, 0.05)])
