@@ -44,7 +44,8 @@ from pathlib import Path
 from identify.errors import ShakeidError
 from sim.plc import Limits
 
-from .sweep import SweepRequest, limit_violation
+from .preflight import RigResponse, Verdict
+from .sweep import SweepRequest, limit_violation, predicted_verdict
 
 #: more sweeps than this in one plan is refused (a step of 0.001 mm over 1 mm is a typo, not a plan)
 MAX_SWEEPS = 500
@@ -219,6 +220,27 @@ def plan_violation(limits: Limits, plan: CampaignPlan) -> str | None:
         if problem:
             return f"{s.label(len(sweeps))}: {problem}"
     return None
+
+
+def plan_prediction(response: RigResponse, limits: Limits, plan: CampaignPlan) -> tuple[str | None, dict]:
+    """Every sweep of the plan through the preflight's prediction (daq/preflight.py): the first refused one
+    named with its prediction and what would pass ('sweep 3 of 6 (1.3 mm, up): ...') or None, and the
+    warnings {sweep label: [...]}. Sweeps that break a limit are left to plan_violation; repeats are
+    predicted once."""
+    sweeps = plan.sweeps()
+    seen: dict[tuple, Verdict] = {}
+    warnings: dict[str, list[str]] = {}
+    for s in sweeps:
+        if limit_violation(limits, s.request()):
+            continue
+        key = (s.f_start_hz, s.f_end_hz, s.duration_s, s.amplitude_mm)
+        if key not in seen:
+            seen[key] = predicted_verdict(response, s.request(), suggest=False)
+        if seen[key].refusal:
+            return f"{s.label(len(sweeps))}: {predicted_verdict(response, s.request()).refusal}", warnings
+        if seen[key].warnings:
+            warnings[s.label(len(sweeps))] = seen[key].warnings
+    return None, warnings
 
 
 def sweep_problem(outcome: dict) -> str | None:

@@ -20,6 +20,7 @@ from sim.plc import Command, Fault, Limits, State
 from sim.sweep import SineSweep
 
 from .devices import PLC, DeviceError
+from .preflight import RigResponse, Verdict, assess
 from .realtime import HEARTBEAT_PRIORITY, make_realtime
 from .sources import AccelerometerSource
 from .recorder import DEFAULT_CHANNELS, DiskFull, Recorder, quality_summary
@@ -48,6 +49,13 @@ def limit_violation(limits: Limits, req: SweepRequest) -> str | None:
         return str(exc)
     fault, message = limits.check(sweep)
     return message if fault != Fault.NONE else None
+
+
+def predicted_verdict(response: RigResponse, req: SweepRequest, suggest: bool = True) -> Verdict:
+    """The preflight's prediction of the sweep from the rig's model (daq/preflight.py): refused when the
+    mass accelerometer would clip or the mass hit the end stops, warned near either. One path for the
+    service's door, campaigns and `shakeid sweep/campaign --config`."""
+    return assess(response, SineSweep(req.f_start_hz, req.f_end_hz, req.duration_s, req.amplitude_mm), suggest)
 
 
 def _ended_by(exc: BaseException) -> tuple[str, str]:
@@ -79,13 +87,17 @@ class SweepRunner:
     """plc, source: device backends; limits: the configured safety limits; sensitivity: counts per
     m/s^2; on_progress(fraction, status) is called about ten times a second; on_samples(first index,
     block (n, channels) in m/s^2) with every block recorded (live views); disk_reserve_mb: free space
-    the recording must leave (a sweep that would not fit is refused, one that reaches it is stopped)."""
+    the recording must leave (a sweep that would not fit is refused, one that reaches it is stopped);
+    response: the rig's model and limits for the preflight's prediction (predicted_verdict; None: the
+    caller predicted already, as the service does at its door)."""
 
     def __init__(self, plc: PLC, source: AccelerometerSource, limits: Limits, sensitivity: float,
                  channels=DEFAULT_CHANNELS, heartbeat_s: float = 0.05, on_progress=None,
                  rig_config: dict | None = None, on_samples=None, disk_reserve_mb: float = 100.0,
-                 heartbeat_plc: PLC | None = None):
+                 heartbeat_plc: PLC | None = None, response: RigResponse | None = None):
         self.plc, self.source, self.limits = plc, source, limits
+        self.response = response
+        self.prediction: dict | None = None  # the preflight's prediction of the last sweep (with its warnings)
         self.sensitivity, self.channels = sensitivity, tuple(channels)
         self.heartbeat_s, self.on_progress, self.rig_config = heartbeat_s, on_progress, rig_config or {}
         self.on_samples = on_samples
@@ -110,6 +122,11 @@ class SweepRunner:
         problem = limit_violation(self.limits, req)
         if problem:
             raise SweepRefused(f"sweep refused: {problem}")
+        if self.response is not None:
+            verdict = predicted_verdict(self.response, req)
+            if verdict.refusal:
+                raise SweepRefused(f"sweep refused: {verdict.refusal}")
+            self.prediction = verdict.record
         try:
             st = self.plc.status()
         except DeviceError as exc:
@@ -208,7 +225,7 @@ class SweepRunner:
                     "its last flush and the next start (or `shakeid recordings --recover`) marks it aborted")
             quality = rec.quality or quality_summary(rec.quality_report())  # the flags, even if close failed
         return {"status": status, "reason": reason, "samples": rec.n, "gaps": n_gaps, "path": str(out_path),
-                "quality": quality,
+                "quality": quality, **({"preflight": self.prediction} if self.prediction else {}),
                 **self.heartbeat_stats(),
                 **{f"link_{k}": v for k, v in self.source.stats.items()}}
 

@@ -24,6 +24,7 @@ from daq.campaign import Campaign, CampaignControl, PlanError, parse_plan, plan_
 from daq.devices import DeviceError
 
 from .catalog import new_id
+from .preflight import check_sweep, rig_response
 
 #: why a campaign a dead or stopped controller was running is paused after the restart
 RESTARTED = ("the rig controller stopped during the campaign (restart or crash); the table was stopped; "
@@ -178,9 +179,15 @@ class CampaignService:
                 + (f"; {campaign.plan.note}" if campaign.plan.note else ""))
         from .controller import Refused  # here: the controller module imports this one
 
+        body = {**planned.body(note), "campaign": info}
+        # predicted again right before it starts: a sweep of this campaign may have given a newer model
+        verdict = check_sweep(rig_response(self.catalog, self.ctl.settings.rig), self.ctl.settings.rig, body)
+        if verdict is not None and verdict.refusal:
+            return {"status": "refused", "reason": f"sweep refused: {verdict.refusal}"}
+        if verdict is not None:
+            body["preflight"] = verdict.record  # kept in the sweep's request, as a single sweep's
         try:
-            started = self.ctl.launch_sweep({**planned.body(note), "campaign": info}, act["operator"], after_end,
-                                            held=control.held)
+            started = self.ctl.launch_sweep(body, act["operator"], after_end, held=control.held)
         except Refused as exc:
             return {"status": "refused", "reason": exc.detail}
         except DeviceError as exc:

@@ -13,8 +13,8 @@ import datetime
 import json
 from pathlib import Path
 
-from daq.preflight import RigResponse, Verdict, assess, nominal_response
-from daq.sweep import SineSweep, SweepRequest, limit_violation
+from daq.preflight import RigResponse, Verdict, nominal_response
+from daq.sweep import SweepRequest, limit_violation, predicted_verdict
 from identify.errors import ModelError
 from identify.model import SparseModel
 from sim.config import RigConfig
@@ -55,25 +55,5 @@ def check_sweep(response: RigResponse, rig: RigConfig | None, body: dict, sugges
     req = request_of(body)
     if limit_violation((rig or RigConfig()).limits, req):
         return None
-    return assess(response, SineSweep(req.f_start_hz, req.f_end_hz, req.duration_s, req.amplitude_mm), suggest)
+    return predicted_verdict(response, req, suggest)
 
-
-def check_plan(response: RigResponse, rig: RigConfig | None, plan) -> tuple[str | None, dict[str, list[str]]]:
-    """Every sweep of a campaign plan (daq.campaign.CampaignPlan) predicted: the first refused one named
-    with its prediction and what would pass ('sweep 3 of 6 (1.3 mm, up): ...'), or None; and the warnings
-    by sweep label. Sweeps of the same parameters (repeats) are predicted once."""
-    sweeps = plan.sweeps()
-    seen: dict[tuple, Verdict | None] = {}
-    warnings: dict[str, list[str]] = {}
-    for s in sweeps:
-        body = s.body()
-        key = (s.f_start_hz, s.f_end_hz, s.duration_s, s.amplitude_mm)
-        if key not in seen:
-            seen[key] = check_sweep(response, rig, body, suggest=False)
-        verdict = seen[key]
-        if verdict is not None and verdict.refusal:
-            verdict = check_sweep(response, rig, body)  # again, with what would pass
-            return f"{s.label(len(sweeps))}: {verdict.refusal}", warnings
-        if verdict is not None and verdict.warnings:
-            warnings[s.label(len(sweeps))] = verdict.warnings
-    return None, warnings

@@ -95,6 +95,15 @@ def _local(args, plan) -> int:
     problem = plan_violation(cfg.limits, plan)
     if problem:
         raise ShakeidError(f"{args.plan}: campaign refused: {problem} (nothing was sent to the PLC)")
+    from daq.campaign import plan_prediction
+    from daq.preflight import nominal_response
+
+    response = nominal_response(cfg)  # every sweep predicted now, and again by its runner before it starts
+    problem, warnings = plan_prediction(response, cfg.limits, plan)
+    if problem:
+        raise ShakeidError(f"{args.plan}: campaign refused: {problem} (nothing was sent to the PLC)")
+    for label, said in warnings.items():
+        print("\n".join(f"preflight warning: {label}: {w}" for w in said), flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     for path in recover_directory(out):  # crashed recordings, found on start
@@ -139,7 +148,7 @@ def _local(args, plan) -> int:
             progress = Progress(f"sweep {planned.index} of {campaign.total}:", planned.duration_s)
             runner = SweepRunner(plc, source, cfg.limits, float(cfg.stream["sensitivity_counts_per_ms2"]),
                                  cfg.channels, on_progress=progress.sweep_status, heartbeat_plc=devices[2],
-                                 rig_config=cfg.recording_metadata())
+                                 rig_config=cfg.recording_metadata(), response=response)
             if control.held():
                 return {"status": "held"}
             current["runner"] = runner
@@ -204,8 +213,11 @@ def _remote(args, plan) -> int:
     if not token:
         raise ShakeidError("--server needs a token: --token or SHAKEID_TOKEN (an operator's)")
     client = ServiceClient(args.server, token)
-    cid = client.request("POST", "/api/campaigns", plan.to_dict())["id"]
+    started = client.request("POST", "/api/campaigns", plan.to_dict())
+    cid = started["id"]
     print(f"campaign {plan.name} ({cid}) started on {args.server}", flush=True)
+    for label, said in ((started.get("preflight") or {}).get("warnings") or {}).items():  # near a limit
+        print("\n".join(f"preflight warning: {label}: {w}" for w in said), flush=True)
     seen: dict = {}
     try:
         while True:

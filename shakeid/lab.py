@@ -129,15 +129,19 @@ def cmd_sweep(args) -> int:
     plc, source = _sweep_devices(cfg)
     beat_plc = open_plc(cfg.plc)  # the heartbeat's own link: never behind a status poll
     progress = Progress("sweep", args.duration_s)
+    from daq.preflight import nominal_response
+
     runner = SweepRunner(plc, source, cfg.limits, float(cfg.stream["sensitivity_counts_per_ms2"]), cfg.channels,
                          on_progress=progress.sweep_status, rig_config=cfg.recording_metadata(),
-                         heartbeat_plc=beat_plc)
+                         heartbeat_plc=beat_plc, response=nominal_response(cfg))  # refuses a sweep that would clip
     try:
         result = runner.run(req, args.out)
     finally:
         progress.close()
         for dev in (plc, beat_plc, source):
             dev.close()
+    for warning in (result.get("preflight") or {}).get("warnings", []):
+        print(f"preflight warning: {warning}")
     print(f"{result['path']}: {result['status']}{' (' + result['reason'] + ')' if result['reason'] else ''}, "
           f"{result['samples']} samples, {result['gaps']} gap(s)")
     return 0 if result["status"] == "complete" else 1

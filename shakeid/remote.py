@@ -80,8 +80,11 @@ def cmd_sweep_remote(args) -> int:
     client = ServiceClient(args.server, token)
     body = {"f_start_hz": args.f_start_hz, "f_end_hz": args.f_end_hz, "duration_s": args.duration_s,
             "amplitude_mm": args.amplitude_mm, "settle_s": args.settle_s, "note": args.note}
-    sweep_id = client.request("POST", "/api/sweeps", body)["id"]
+    started = client.request("POST", "/api/sweeps", body)
+    sweep_id = started["id"]
     print(f"sweep {sweep_id} started on {args.server}", flush=True)
+    for warning in (started.get("preflight") or {}).get("warnings", []):  # near a limit (daq/preflight.py)
+        print(f"preflight warning: {warning}", flush=True)
     progress = Progress("sweep", args.duration_s)
     try:
         while (sweep := client.request("GET", f"/api/sweeps/{sweep_id}"))["state"] in ("queued", "running"):

@@ -7,12 +7,13 @@ from fastapi import APIRouter, Depends, HTTPException, Query
 from fastapi.concurrency import run_in_threadpool
 from pydantic import Field
 
-from daq.campaign import PlanError, parse_plan
+from daq.campaign import PlanError, parse_plan, plan_prediction
+from sim.config import RigConfig
 
 from .. import schemas
 from ..catalog import Catalog
 from ..deps import ERRORS, Id, Services, operator, services, viewer
-from ..preflight import check_plan, rig_response
+from ..preflight import rig_response
 
 router = APIRouter(tags=["campaigns"])
 CAMPAIGN_ERRORS = {**ERRORS, 404: {"model": schemas.Problem}, 409: {"model": schemas.Problem},
@@ -31,7 +32,8 @@ def preflight(svc: Services, plan: dict):
         parsed = parse_plan(plan)
     except PlanError:
         return None, {}
-    return check_plan(rig_response(svc.catalog, svc.settings.rig), svc.settings.rig, parsed)
+    limits = (svc.settings.rig or RigConfig()).limits
+    return plan_prediction(rig_response(svc.catalog, svc.settings.rig), limits, parsed)
 
 
 @router.post("/api/campaigns", status_code=202, response_model=CampaignAccepted,
