@@ -1,0 +1,34 @@
+"""An identification job whose frequency response cannot be made still delivers its model: the worker
+(server.worker.run_job, in this process, on a real CSV) writes frf.json with the reason beside model.json,
+and no overlay figure."""
+import json
+
+import numpy as np
+from scipy.signal import butter, sosfiltfilt
+
+from identify.recording import Recording, write_csv
+from identify.simulate import equation_rows, simulate
+from server.worker import FRF_FILE, run_job
+from sim.rig import RigParameters
+
+
+def test_a_recording_that_is_not_a_sweep_is_identified_and_its_frf_says_why(tmp_path):
+    model, fs = RigParameters.paper_table1().model(), 1024.0
+    seed = int(np.random.SeedSequence().entropy % 2**31)
+    print(f"seed {seed}")
+    rng = np.random.default_rng(seed)
+    zdd = sosfiltfilt(butter(4, [2.0, 20.0], "bandpass", fs=fs, output="sos"), rng.standard_normal(int(60 * fs))) * 5
+    run = simulate(model, 1 / fs, [0.0, 0.0], zdd[:, None], state_scale=np.array([0.1, 0.01]))
+    mass = equation_rows(model, run.states, zdd) + zdd
+    path = tmp_path / "random.csv"
+    write_csv(path, Recording(zdd + 0.005 * np.std(zdd) * rng.standard_normal(zdd.size),
+                              mass + 0.005 * np.std(mass) * rng.standard_normal(zdd.size), fs))
+    summary = run_job("identify", str(path), {}, str(tmp_path / "job"))
+    assert "q2^3" in summary["terms"]["q1_dot"]
+    frf = json.loads((tmp_path / "job" / FRF_FILE).read_text())
+    assert frf["status"] == "not_applicable" and "random.csv: not a sine sweep" in frf["reason"], frf
+    assert str(tmp_path) not in json.dumps(frf)  # the operator's name for the recording, not the server's path
+    assert json.loads((tmp_path / "job" / "model.json").read_text())["frf"] == frf
+    assert not (tmp_path / "job" / "report" / "frf_overlay.png").exists()
+    assert "No side-by-side frequency response: no sweep to compare with: random.csv: not a sine sweep" in \
+        (tmp_path / "job" / "report" / "index.html").read_text()
