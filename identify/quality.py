@@ -33,7 +33,7 @@ MIN_FLAT_SAMPLES = 64
 MIN_FLAT_S = 0.05
 #: clipped / non-finite samples closer than this (s) are one flag (a clipped sine clips every half period)
 MERGE_S = 1.0
-#: int16 full scale of the stream and CAN frames (sim.frames.to_counts clips there)
+#: int16 full scale of the stream and CAN frames (protocol.frames.to_counts clips there)
 FULL_SCALE_COUNTS = 32767
 #: plausible std(mass) / std(table). Below 0.01 the mass moves less than the accelerometers' calibration
 #: tolerance (1-2 %) of the table: q'' = x'' - z'' is then a sensitivity mismatch, and a mass channel

@@ -1,23 +1,8 @@
 """ADS front end of the simulated PLC (pyads' AdsTestServer, a real ADS/AMS server).
 
-The same variables as the Modbus map, as PLC symbols. Like a real PLC task, the simulated PLC scans its
-symbols once per cycle (every physics tick): client writes are applied at the next cycle, a command is
-executed once and reset to 0, status symbols are refreshed.
-
-    symbol                 type  access  meaning
-    MAIN.fStartFreq        REAL  rw      f_start_hz
-    MAIN.fEndFreq          REAL  rw      f_end_hz
-    MAIN.fDuration         REAL  rw      duration_s
-    MAIN.fAmplitude        REAL  rw      amplitude_mm
-    MAIN.nCommand          UINT  w       1 start, 2 stop, 3 reset, 4 emergency stop (reset to 0)
-    MAIN.nHeartbeat        UINT  rw      changed by the client at least every watchdog period
-    MAIN.nState            UINT  r       0 idle, 1 running, 2 done, 3 fault, 4 estop
-    MAIN.nFaultCode        UINT  r       sim.plc.Fault
-    MAIN.fElapsed          REAL  r       sweep time, s
-    MAIN.fFrequency        REAL  r       current sweep frequency, Hz
-    MAIN.fPosition         REAL  r       table position, mm
-    MAIN.fMaxStroke ...    REAL  r       limits: fMaxStroke (mm), fMaxVelocity (m/s), fMaxAcceleration
-                                         (m/s^2), fMinFreq, fMaxFreq (Hz), fMaxDuration, fWatchdog (s)
+It serves the symbols of protocol/ads.py (SYMBOLS: the same variables as the Modbus map). Like a real PLC
+task, the simulated PLC scans its symbols once per cycle (every physics tick): client writes are applied
+at the next cycle, a command is executed once and reset to 0, status symbols are refreshed.
 
 Every symbol is registered up front: pyads' test server kills the connection on an unknown name.
 The ADS client always dials TCP 48898, so a second server needs another loopback address (127.0.0.5;
@@ -30,48 +15,44 @@ import struct
 from pyads import constants
 from pyads.testserver import AdsTestServer, AdvancedHandler, PLCVariable
 
-from .plc import Command, RigPLC
+from protocol.ads import (COMMAND, HEARTBEAT, LIMIT_SYMBOLS, REAL, SETPOINT_SYMBOLS, STATUS_SYMBOLS, UINT, Symbol,
+                          default_net_id)
+from protocol.plc import Command
 
-REAL, UINT = (constants.ADST_REAL32, "REAL", "<f"), (constants.ADST_UINT16, "UINT", "<H")
-SETPOINTS = {"MAIN.fStartFreq": "f_start_hz", "MAIN.fEndFreq": "f_end_hz", "MAIN.fDuration": "duration_s",
-             "MAIN.fAmplitude": "amplitude_mm"}
-STATUS = {"MAIN.nState": ("state", UINT), "MAIN.nFaultCode": ("fault_code", UINT),
-          "MAIN.fElapsed": ("elapsed_s", REAL), "MAIN.fFrequency": ("frequency_hz", REAL),
-          "MAIN.fPosition": ("position_mm", REAL)}
-LIMITS = {"MAIN.fMaxStroke": "max_stroke_mm", "MAIN.fMaxVelocity": "max_velocity_ms",
-          "MAIN.fMaxAcceleration": "max_acceleration_ms2", "MAIN.fMinFreq": "f_min_hz", "MAIN.fMaxFreq": "f_max_hz",
-          "MAIN.fMaxDuration": "max_duration_s", "MAIN.fWatchdog": "watchdog_s"}
-AMS_PORT = 851
+from .plc import RigPLC
+
+#: the protocol's types as pyads' test server declares them
+ADS_TYPE = {REAL: constants.ADST_REAL32, UINT: constants.ADST_UINT16}
 
 
 class AdsFrontEnd:
     def __init__(self, plc: RigPLC, ip_address: str):
         self.plc = plc
         self.ip_address = ip_address
-        self.net_id = f"{ip_address}.1.1"
+        self.net_id = default_net_id(ip_address)
         self.handler = AdvancedHandler()
-        self.kinds = {}
-        for name, key in SETPOINTS.items():
-            self._add(name, plc.setpoints[key], REAL)
-        self._add("MAIN.nCommand", 0, UINT)
-        self._add("MAIN.nHeartbeat", 0, UINT)
-        for name, (_, kind) in STATUS.items():
-            self._add(name, 0, kind)
-        for name, key in LIMITS.items():
-            self._add(name, getattr(plc.config.limits, key), REAL)
-        self.seen = {n: self.handler.get_variable_by_name(n).value for n in (*SETPOINTS, "MAIN.nHeartbeat")}
+        for s in SETPOINT_SYMBOLS:
+            self._add(s, plc.setpoints[s.field])
+        self._add(COMMAND, 0)
+        self._add(HEARTBEAT, 0)
+        for s in STATUS_SYMBOLS:
+            self._add(s, 0)
+        for s in LIMIT_SYMBOLS:
+            self._add(s, getattr(plc.config.limits, s.field))
+        self.seen = {s.name: self._raw(s) for s in (*SETPOINT_SYMBOLS, HEARTBEAT)}
         self.server = AdsTestServer(handler=self.handler, ip_address=ip_address, logging=False)
 
-    def _add(self, name, value, kind):
-        ads_type, symbol_type, fmt = kind
-        self.kinds[name] = fmt
-        self.handler.add_variable(PLCVariable(name, value, ads_type, symbol_type))
+    def _add(self, symbol: Symbol, value) -> None:
+        self.handler.add_variable(PLCVariable(symbol.name, value, ADS_TYPE[symbol.type], symbol.type))
 
-    def _get(self, name):
-        return struct.unpack(self.kinds[name], self.handler.get_variable_by_name(name).value)[0]
+    def _raw(self, symbol: Symbol) -> bytes:
+        return self.handler.get_variable_by_name(symbol.name).value
 
-    def _set(self, name, value):
-        self.handler.get_variable_by_name(name).value = struct.pack(self.kinds[name], value)
+    def _get(self, symbol: Symbol):
+        return struct.unpack(symbol.struct_format, self._raw(symbol))[0]
+
+    def _set(self, symbol: Symbol, value) -> None:
+        self.handler.get_variable_by_name(symbol.name).value = struct.pack(symbol.struct_format, value)
 
     def start(self) -> None:
         self.server.start()
@@ -82,23 +63,23 @@ class AdsFrontEnd:
 
     def cycle(self) -> None:
         """One PLC scan: apply what clients changed, execute a command, refresh the status symbols."""
-        for name, key in SETPOINTS.items():
-            raw = self.handler.get_variable_by_name(name).value
-            if raw != self.seen[name]:
-                self.seen[name] = raw
-                self.plc.set_setpoint(key, self._get(name))
+        for s in SETPOINT_SYMBOLS:
+            raw = self._raw(s)
+            if raw != self.seen[s.name]:
+                self.seen[s.name] = raw
+                self.plc.set_setpoint(s.field, self._get(s))
             else:  # keep in step with writes from the other front end
-                self._set(name, self.plc.setpoints[key])
-                self.seen[name] = self.handler.get_variable_by_name(name).value
-        hb = self.handler.get_variable_by_name("MAIN.nHeartbeat").value
-        if hb != self.seen["MAIN.nHeartbeat"]:
-            self.seen["MAIN.nHeartbeat"] = hb
-            self.plc.set_heartbeat(self._get("MAIN.nHeartbeat"))
-        cmd = self._get("MAIN.nCommand")
+                self._set(s, self.plc.setpoints[s.field])
+                self.seen[s.name] = self._raw(s)
+        hb = self._raw(HEARTBEAT)
+        if hb != self.seen[HEARTBEAT.name]:
+            self.seen[HEARTBEAT.name] = hb
+            self.plc.set_heartbeat(self._get(HEARTBEAT))
+        cmd = self._get(COMMAND)
         if cmd:
-            self._set("MAIN.nCommand", 0)
+            self._set(COMMAND, 0)
             if cmd in Command._value2member_map_:
                 self.plc.command(Command(cmd))
         st = self.plc.status()
-        for name, (key, _) in STATUS.items():
-            self._set(name, st[key])
+        for s in STATUS_SYMBOLS:
+            self._set(s, st[s.field])

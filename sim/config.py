@@ -27,8 +27,9 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from identify.errors import ShakeidError
+from protocol.plc import Limits
 
-from .plc import Limits, PLCConfig
+from .plc import PLCConfig
 from .rig import RigParameters
 from .sensors import Accelerometer
 

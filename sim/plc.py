@@ -1,4 +1,5 @@
-"""The simulated PLC: one logic for every protocol front end (Modbus TCP, ADS).
+"""The simulated PLC: one logic for every protocol front end (Modbus TCP, ADS); its states, commands,
+faults and limits are the protocol's (protocol/plc.py).
 
 It holds the sweep setpoints, obeys commands, checks the safety limits before a sweep starts, keeps a
 heartbeat watchdog, and moves the table. `advance(dt_s)` runs the rig physics for dt_s of rig time and
@@ -12,93 +13,20 @@ motion stays physical and the accelerometers see no step. The rig runs with its 
 """
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from identify.simulate import simulate
+from protocol.plc import SETPOINT_NAMES, Command, Fault, Limits, State
+from protocol.sweep import SineSweep, smoothstep
 
 from .rig import RigParameters
 from .sensors import Accelerometer
-from .sweep import SineSweep, _smoothstep
 
 
 #: Bound on the rig state (m, m/s): far beyond any physical motion of the mass between its end stops.
 BOUND = 10.0
-
-
-class State(enum.IntEnum):
-    IDLE = 0
-    RUNNING = 1
-    DONE = 2
-    FAULT = 3
-    ESTOP = 4
-
-
-class Command(enum.IntEnum):
-    NONE = 0
-    START = 1
-    STOP = 2
-    RESET = 3
-    ESTOP = 4
-
-
-class Fault(enum.IntEnum):
-    NONE = 0
-    STROKE = 1        # amplitude above the stroke limit
-    VELOCITY = 2      # peak table velocity above the limit
-    ACCELERATION = 3  # peak table acceleration above the limit
-    FREQUENCY = 4     # frequency outside [f_min, f_max]
-    DURATION = 5      # duration not positive or above the limit
-    WATCHDOG = 6      # heartbeat stopped changing during a sweep
-    INJECTED = 7      # drive fault injected for tests
-    NOT_READY = 8     # START while not IDLE/DONE
-    SIMULATION = 9    # the rig response left the simulable range (|q| or |q'| > BOUND, or not finite)
-
-
-#: the shortest sweep, s: a sweep is at least one period at the lowest frequency the rig runs at (Limits.f_min_hz
-#: 0.2 Hz: 5 s would refuse short test sweeps; 1 s is 100 PLC cycles). Shorter durations were accepted and
-#: then read as 0 by the PLC's float32 setpoint (1e-300 s), which faulted the rig and needed a reset.
-MIN_SWEEP_DURATION_S = 1.0
-
-
-@dataclass
-class Limits:
-    """Safety limits of the table, checked before a sweep starts (and by the DAQ before it writes)."""
-
-    max_stroke_mm: float = 5.0
-    max_velocity_ms: float = 0.5
-    max_acceleration_ms2: float = 40.0
-    f_min_hz: float = 0.2
-    f_max_hz: float = 50.0
-    max_duration_s: float = 600.0
-    # heartbeat timeout; + the 0.2 s ramp + one 10 ms PLC cycle keeps the table at rest within 0.5 s.
-    # 4x the largest interval between 50 ms heartbeats measured under load with the rig controller
-    # real-time (63 ms, docs/service.md); without real-time rights use 0.5 s (examples/sim-rig.toml)
-    watchdog_s: float = 0.25
-
-    def check(self, sweep: SineSweep) -> tuple[Fault, str]:
-        """(Fault.NONE, "") if the sweep is safe, else the first violated limit and a message naming it."""
-        a = sweep.amplitude_mm * 1e-3
-        f_top = max(sweep.f_start_hz, sweep.f_end_hz)
-        f_low = min(sweep.f_start_hz, sweep.f_end_hz)
-        if not (self.f_min_hz <= f_low and f_top <= self.f_max_hz):
-            return Fault.FREQUENCY, (f"frequency {f_low:g}-{f_top:g} Hz outside the limit "
-                                     f"{self.f_min_hz:g}-{self.f_max_hz:g} Hz")
-        if not MIN_SWEEP_DURATION_S <= sweep.duration_s <= self.max_duration_s:
-            return Fault.DURATION, (f"duration {sweep.duration_s:g} s outside the limit {MIN_SWEEP_DURATION_S:g}-"
-                                    f"{self.max_duration_s:g} s")
-        if sweep.amplitude_mm > self.max_stroke_mm:
-            return Fault.STROKE, f"amplitude {sweep.amplitude_mm:g} mm above the stroke limit {self.max_stroke_mm:g} mm"
-        v = a * 2 * np.pi * f_top
-        if v > self.max_velocity_ms:
-            return Fault.VELOCITY, f"peak velocity {v:.3g} m/s above the limit {self.max_velocity_ms:g} m/s"
-        acc = a * (2 * np.pi * f_top) ** 2
-        if acc > self.max_acceleration_ms2:
-            return Fault.ACCELERATION, (f"peak acceleration {acc:.3g} m/s^2 above the limit "
-                                        f"{self.max_acceleration_ms2:g} m/s^2")
-        return Fault.NONE, ""
 
 
 @dataclass
@@ -116,8 +44,6 @@ class PLCConfig:
 
 class RigPLC:
     """Setpoints (f_start_hz, f_end_hz, duration_s, amplitude_mm), commands, status, and the rig."""
-
-    SETPOINTS = ("f_start_hz", "f_end_hz", "duration_s", "amplitude_mm")
 
     def __init__(self, config: PLCConfig | None = None):
         self.config = config or PLCConfig()
@@ -145,7 +71,7 @@ class RigPLC:
 
     # -- interface of every front end --------------------------------------------------------------
     def set_setpoint(self, name: str, value: float) -> None:
-        if name not in self.SETPOINTS:
+        if name not in SETPOINT_NAMES:
             raise KeyError(name)
         self.setpoints[name] = float(value)
 
@@ -291,6 +217,6 @@ class RigPLC:
         if self.stop_t is None:
             return z, zd, zdd
         r = self.stop_ramp
-        w, dw, ddw = _smoothstep((t - self.stop_t) / r)
+        w, dw, ddw = smoothstep((t - self.stop_t) / r)
         env, denv, ddenv = 1 - w, -dw / r, -ddw / r**2
         return env * z, denv * z + env * zd, ddenv * z + 2 * denv * zd + env * zdd

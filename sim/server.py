@@ -6,7 +6,7 @@
 
 One asyncio loop runs everything: every tick it advances the PLC by tick x speed of rig time (so
 speed=10 runs the rig ten times faster, PLC clock and streams alike) and sends the new samples as
-frames (sim.frames) to every connected stream client. A stall of the process is not made up in one
+frames (protocol.frames) to every connected stream client. A stall of the process is not made up in one
 jump (SimulatedRig.max_step_s): the rig's clock stops with it, as a real PLC's would not stall at all.
 """
 from __future__ import annotations
@@ -17,7 +17,9 @@ import threading
 
 import numpy as np
 
-from . import can_frames, frames
+from protocol import can_frames, frames
+from protocol.ads import AMS_PORT, default_net_id
+
 from .modbus import make_server
 from .plc import PLCConfig, RigPLC
 
@@ -136,7 +138,7 @@ class SimulatedRig:
     @property
     def endpoints(self) -> dict:
         return {"modbus": (self.host, self.modbus_port), "stream": f"socket://{self.stream_host}:{self.stream_port}",
-                "ads": (f"{self.ads_address}.1.1", 851, self.ads_address) if self.ads_address else None,
+                "ads": (default_net_id(self.ads_address), AMS_PORT, self.ads_address) if self.ads_address else None,
                 "fs_hz": self.plc.config.fs_hz, "sensitivity_counts_per_ms2": self.sensitivity,
                 "channels": ["table_acc", "mass_acc"] + (["table_acc_2", "mass_acc_2"] if self.redundant_sensors else [])}
 

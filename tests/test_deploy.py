@@ -180,7 +180,7 @@ def test_the_wheel_the_image_installs_carries_the_service(tmp_path):
     assert p.returncode == 0, p.stderr[-2000:]
     (wheel,) = tmp_path.glob("shakeid-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
-    for package in ("identify", "sim", "daq", "reports", "server", "shakeid"):
+    for package in ("identify", "protocol", "sim", "daq", "reports", "server", "shakeid"):
         for module in (REPO / package).rglob("*.py"):
             assert str(module.relative_to(REPO)) in names, module
     assert {"server/dashboard.html", "server/static/dashboard.js", "server/static/dashboard.css"} <= names

@@ -13,7 +13,7 @@ QUOTED = re.compile(r"`([A-Z][A-Z0-9_]+)` \(= ([^)]+)\)")
 def _constants() -> dict[str, list]:
     """Module-level NAME = literal assignments in the packages, by name (a name may be in several modules)."""
     found: dict[str, list] = {}
-    for package in ("identify", "sim", "daq", "reports", "server", "shakeid"):
+    for package in ("identify", "protocol", "sim", "daq", "reports", "server", "shakeid"):
         for path in (ROOT / package).rglob("*.py"):
             for node in ast.parse(path.read_text()).body:
                 if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):

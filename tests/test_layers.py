@@ -1,6 +1,8 @@
-"""The import rule of the product card: identify stands alone (numpy/scipy only); sim may use identify
-and the protocol libraries it serves (pymodbus, pyads, python-can, pyserial); daq uses identify and sim
-(and h5py); reports (what a person reads: report folders, text) use identify and matplotlib; server
+"""The import rule of the product card: identify stands alone (numpy/scipy only); protocol (the rig on the
+wire: PLC states, limits, register map, ADS symbols, frame formats, sweep profile) stands alone too (numpy);
+sim may use identify, protocol and the protocol libraries it serves (pymodbus, pyads, python-can,
+pyserial); daq uses identify and protocol (and h5py), never sim: a DAQ client does not load the
+simulator; reports (what a person reads: report folders, text) use identify and matplotlib; server
 composes them (and the web stack) but never imports the command-line package shakeid, which sits on top of
 everything. Within shakeid/ no modules import each other in a circle (function-level imports count: a
 circle there is a circle in the design). Checked on the source, so a stray import fails here."""
@@ -13,16 +15,18 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 ALLOWED = {
     "identify": {"numpy", "scipy", "identify", "threadpoolctl"},  # threadpoolctl: identify.threads, BLAS limit
-    "sim": {"numpy", "scipy", "identify", "sim", "pymodbus", "pyads", "can", "serial"},
+    # the rig protocol, declared once for the simulated rig that serves it and the DAQ that speaks it
+    "protocol": {"numpy", "protocol"},
+    "sim": {"numpy", "scipy", "identify", "protocol", "sim", "pymodbus", "pyads", "can", "serial"},
     # daq is the acquisition and file layer: the readers of the lab's file formats (daq/formats/) use npTDMS
     # (TDMS), pyuff (UFF 58) and asammdf (MDF4)
-    "daq": {"numpy", "scipy", "h5py", "identify", "sim", "daq", "pymodbus", "pyads", "can", "serial",
+    "daq": {"numpy", "scipy", "h5py", "identify", "protocol", "daq", "pymodbus", "pyads", "can", "serial",
             "nptdms", "pyuff", "asammdf"},
     "reports": {"numpy", "matplotlib", "identify", "reports"},
     # the service composes the layers; nothing below it may import it (checked by the sets above), and it
     # does not import the CLI (shakeid/): both use reports/
-    "server": {"numpy", "h5py", "matplotlib", "identify", "sim", "daq", "reports", "server", "fastapi", "pydantic",
-               "uvicorn", "distributed"},  # distributed: jobs on an existing Dask cluster ([compute] scheduler)
+    "server": {"numpy", "h5py", "matplotlib", "identify", "protocol", "sim", "daq", "reports", "server", "fastapi",
+               "pydantic", "uvicorn", "distributed"},  # distributed: jobs on an existing Dask cluster ([compute] scheduler)
 }
 
 

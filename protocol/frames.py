@@ -1,4 +1,5 @@
-"""Wire format of the accelerometer stream (TCP, opened by pyserial as socket://host:port).
+"""Wire format of the accelerometer stream (TCP, opened by pyserial as socket://host:port): the simulated
+rig encodes it (sim/server.py), the DAQ decodes it (daq/sources.py).
 
 Little-endian frame:
 

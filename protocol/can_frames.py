@@ -1,4 +1,5 @@
-"""The accelerometer samples as CAN frames (python-can), for rigs whose sensors sit on a CAN bus.
+"""The accelerometer samples as CAN frames, for rigs whose sensors sit on a CAN bus: the simulated rig
+sends them (sim/server.py, python-can), the DAQ reads them (daq/sources.py).
 
 One classic CAN frame (11-bit id, 8 data bytes) per sample instant, little-endian:
 

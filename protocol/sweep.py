@@ -1,4 +1,7 @@
-"""The shaking table's motion: a linear sine sweep of displacement with smooth fade-in and fade-out."""
+"""The shaking table's motion: a linear sine sweep of displacement with smooth fade-in and fade-out.
+
+Part of the rig protocol: the PLC computes it from its setpoints and moves the table along it; the DAQ
+checks the same sweep against the limits before it writes them; the simulator synthesizes runs from it."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -6,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 
-def _smoothstep(s: np.ndarray):
+def smoothstep(s: np.ndarray):
     """Quintic fade 0 -> 1 on s in [0, 1] and its first two derivatives (C2: z'' stays continuous)."""
     s = np.clip(s, 0.0, 1.0)
     w = s**3 * (10 - 15 * s + 6 * s**2)
@@ -56,8 +59,8 @@ class SineSweep:
         w, dw, ddw = np.ones_like(tc), np.zeros_like(tc), np.zeros_like(tc)
         for edge in (tc < F, tc > T - F):
             te = tc[edge]
-            w_in, dw_in, ddw_in = _smoothstep(te / F)
-            w_out, dw_out, ddw_out = _smoothstep((T - te) / F)
+            w_in, dw_in, ddw_in = smoothstep(te / F)
+            w_out, dw_out, ddw_out = smoothstep((T - te) / F)
             w[edge] = w_in * w_out
             dw[edge] = (dw_in * w_out - w_in * dw_out) / F  # d/dt of the fade-out flips sign
             ddw[edge] = (ddw_in * w_out - 2 * dw_in * dw_out + w_in * ddw_out) / F**2

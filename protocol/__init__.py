@@ -1,0 +1,8 @@
+"""The rig protocol: what the PLC and the sensors say on the wire, declared once for both ends.
+
+`plc` (states, commands, faults, safety limits, setpoint and status names), `modbus` (the register map),
+`ads` (the PLC symbols), `frames` (the accelerometer stream), `can_frames` (accelerometers on CAN),
+`sweep` (the table's sweep profile, which the PLC runs and the DAQ checks). The simulated rig (sim/)
+serves it and the DAQ (daq/) speaks it; this package imports neither (numpy only), so a DAQ client
+never loads the simulator. Tables: docs/rig-protocols.md.
+"""
