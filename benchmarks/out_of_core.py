@@ -5,7 +5,7 @@ plain h5py read of the same files.
     python benchmarks/out_of_core.py [--samples 1e6 1e7 1e8] [--in-core 1e6] [--fs-hz 2048] [--keep DIR]
                                      [--seed N]
 
-The records (daq.long_record.write_long_sweep): the paper's Table 1 rig swept 1-20 Hz over 60 s at
+The records (daq.long_record.write_long_record over sim.synth.noise_free_sweep): the paper's Table 1 rig swept 1-20 Hz over 60 s at
 1.3 mm (it starts and ends at rest), the motion repeated up to N samples, with fresh sensor noise (0.5 %
 of each channel's std) on every sample: the seed is fresh each run and printed (--seed repeats one).
 Written in the DAQ's HDF5 layout (/entry/data/{time, table_acc, mass_acc}, float32 channels, @fs_hz,
@@ -43,9 +43,13 @@ BLOCK = 1 << 20
 
 def write_record(path: Path, n: int, fs_hz: float, seed: int) -> dict:
     """A DAQ-layout HDF5 file of n samples with fresh noise throughout (module doc): the truth and seconds."""
-    from daq.long_record import write_long_sweep
+    from daq.long_record import write_long_record
+    from sim.synth import noise_free_sweep
 
-    return write_long_sweep(path, n, fs_hz, seed=seed)
+    t0 = time.perf_counter()
+    run = noise_free_sweep(fs_hz=fs_hz)
+    write_long_record(path, n, run.recording, seed=seed)
+    return {"model": run.recording.metadata["truth"]["model"], "seconds": time.perf_counter() - t0}
 
 
 def peak_rss_mb() -> float:

@@ -42,7 +42,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from identify.errors import ShakeidError
-from sim.plc import Limits
+from protocol.plc import Limits
 
 from .preflight import RigResponse, Verdict
 from .sweep import SweepRequest, limit_violation, predicted_verdict

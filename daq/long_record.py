@@ -1,26 +1,23 @@
-"""Long synthetic recordings in the DAQ's HDF5 layout, with fresh sensor noise on every sample: what
-out-of-core identification is measured and tested on (benchmarks/out_of_core.py,
+"""Long recordings in the DAQ's HDF5 layout, with fresh sensor noise on every sample: what out-of-core
+identification is measured and tested on (benchmarks/out_of_core.py,
 tests/identify/test_out_of_core_coverage.py).
 
-The rig's motion is one simulated sweep (sim.synth.run_sweep, noise-free; it starts and ends at rest,
-so sweeps placed end to end are the rig's motion over a repeated sweep), repeated up to n samples. The
-sensor noise is not repeated: white noise of NOISE_FRACTION of each channel's std (the Accelerometer's
-rule) is drawn afresh for every block written. Repeating a few noisy sweeps instead (as the benchmark
-once did) repeats their noise too: a 1e7-sample record then holds the noise of four minutes, and
-standard errors computed as if its blocks were independent are too small by the square root of the
-repeats.
+The rig's motion is the caller's: one noise-free record that starts and ends at rest (the simulated
+Table 1 sweep, sim.synth.noise_free_sweep), so records placed end to end are the rig's motion over a
+repeated sweep, repeated up to n samples. The sensor noise is not repeated: white noise of NOISE_FRACTION
+of each channel's std (the Accelerometer's rule) is drawn afresh for every block written. Repeating a few
+noisy sweeps instead (as the benchmark once did) repeats their noise too: a 1e7-sample record then holds
+the noise of four minutes, and standard errors computed as if its blocks were independent are too small
+by the square root of the repeats. The motion comes in as a recording, so the DAQ never runs the simulator.
 """
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import h5py
 import numpy as np
 
-from sim.sensors import Accelerometer
-from sim.sweep import SineSweep
-from sim.synth import run_sweep
+from identify.recording import Recording
 
 #: Rows written at a time.
 BLOCK_ROWS = 1 << 20
@@ -28,16 +25,13 @@ BLOCK_ROWS = 1 << 20
 NOISE_FRACTION = 0.005
 
 
-def write_long_sweep(path, n: int, fs_hz: float = 2048.0, seed: int | None = None,
-                     noise_fraction: float = NOISE_FRACTION, sweep: SineSweep | None = None) -> dict:
-    """Write n samples (module doc) to `path`; returns {"model": the true model's equations, "seconds"}.
-    The sweep defaults to the Table 1 acceptance sweep (1-20 Hz over 60 s at 1.3 mm)."""
-    t0 = time.perf_counter()
-    quiet = Accelerometer(noise_fraction=0.0)
-    run = run_sweep(sweep=sweep or SineSweep(1.0, 20.0, 60.0, 1.3), fs_hz=fs_hz, table_sensor=quiet,
-                    mass_sensor=quiet, seed=0)
-    clean = (run.recording.input, run.recording.output)
-    std = [noise_fraction * float(np.std(x)) for x in clean]
+def write_long_record(path, n: int, clean: Recording, seed: int | None = None,
+                      noise_fraction: float = NOISE_FRACTION) -> None:
+    """Write n samples to `path`: `clean` (table and mass acceleration, noise-free, at its fs_hz)
+    repeated, with fresh noise on every sample (module doc)."""
+    fs_hz = clean.fs_hz
+    channels = (clean.input, clean.output)
+    std = [noise_fraction * float(np.std(x)) for x in channels]
     rng = np.random.default_rng(seed)
     with h5py.File(Path(path), "w") as f:
         e = f.create_group("entry")
@@ -53,8 +47,7 @@ def write_long_sweep(path, n: int, fs_hz: float = 2048.0, seed: int | None = Non
         e.create_dataset("gaps", (0, 2), dtype="i8")
         for a in range(0, n, BLOCK_ROWS):
             b = min(a + BLOCK_ROWS, n)
-            idx = np.arange(a, b) % clean[0].size
+            idx = np.arange(a, b) % channels[0].size
             ds["time"][a:b] = np.arange(a, b) / fs_hz
-            for ch, x, s in zip(("table_acc", "mass_acc"), clean, std):
+            for ch, x, s in zip(("table_acc", "mass_acc"), channels, std):
                 ds[ch][a:b] = (x[idx] + s * rng.standard_normal(b - a)).astype("f4")
-    return {"model": run.recording.metadata["truth"]["model"], "seconds": time.perf_counter() - t0}

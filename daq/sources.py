@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim import can_frames
-from sim.frames import FrameDecoder
+from protocol import can_frames
+from protocol.frames import FrameDecoder
 
 from .devices import DeviceError
 
@@ -38,7 +38,7 @@ class AccelerometerSource:
 
 
 class SerialSource(AccelerometerSource):
-    """Framed stream (sim.frames: sync, sequence number, timestamp, CRC-32) from any pyserial URL.
+    """Framed stream (protocol.frames: sync, sequence number, timestamp, CRC-32) from any pyserial URL.
     The sample index comes from the frame's timestamp, so lost frames leave exact gaps."""
 
     READ_BYTES = 65536
@@ -79,7 +79,7 @@ class SerialSource(AccelerometerSource):
 
 
 class CanSource(AccelerometerSource):
-    """One CAN frame per sample instant (sim.can_frames: 16-bit counter, two channels' counts, flags) on
+    """One CAN frame per sample instant (protocol.can_frames: 16-bit counter, two channels' counts, flags) on
     any python-can bus. The counter is unwrapped to a running sample index; a jump of the counter is a
     lost stretch (CAN's own CRC rejects corrupt frames on the wire, so they arrive as losses too).
     The first index is the counter of the first frame heard (the bus carries no absolute time)."""

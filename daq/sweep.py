@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from identify.errors import ShakeidError
-from sim.plc import Command, Fault, Limits, State
-from sim.sweep import SineSweep
+from protocol.plc import Command, Fault, Limits, State
+from protocol.sweep import SineSweep
 
 from .devices import PLC, DeviceError
 from .preflight import RigResponse, Verdict, assess
@@ -70,7 +70,7 @@ def _ended_by(exc: BaseException) -> tuple[str, str]:
 
 
 def plc_not_ready(status) -> str | None:
-    """Why no sweep can start on a PLC in this status (sim.plc's status fields), in the operator's words
+    """Why no sweep can start on a PLC in this status (protocol.plc.PLCStatus), in the operator's words
     and with what to do; None when it is idle or done. One wording for the DAQ and the service."""
     state = State(status.state)
     if state in (State.IDLE, State.DONE):

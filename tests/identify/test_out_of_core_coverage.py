@@ -1,5 +1,5 @@
-"""Out of core with the same trust as in core: long DAQ recordings (daq.long_record: fresh sensor noise on
-every sample) written to HDF5 and read chunk by chunk (daq.h5source), against the in-core identifier on
+"""Out of core with the same trust as in core: long DAQ recordings (daq.long_record over the simulated
+sweep of sim.synth.noise_free_sweep: fresh sensor noise on every sample) written to HDF5 and read chunk by chunk (daq.h5source), against the in-core identifier on
 the same samples and against the truth. Fresh seeds every run, printed (pytest -s shows them; a failure
 names them)."""
 import h5py
@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 
 from daq.h5source import H5ChunkSource
-from daq.long_record import write_long_sweep
+from daq.long_record import write_long_record
 from identify.identifier import SparseIdentifier
 from identify.out_of_core import ChunkedIdentifier
 from identify.recording import Recording
+from sim.synth import noise_free_sweep
 
 #: Coverage: the truth within Z_COVER standard errors for at least COVERED of the q1_dot terms x seeds.
 Z_COVER, COVERED = 3.0, 0.95
@@ -34,7 +35,7 @@ def test_in_core_and_out_of_core_agree_on_a_million_samples(tmp_path):
     by chunk over the overlap (2e-4 on the acceptance sweep in four chunks, tests/identify/test_out_of_core.py)."""
     (seed,) = _fresh_seeds(1)
     path = tmp_path / "long.h5"
-    write_long_sweep(path, 1_000_000, seed=seed)
+    write_long_record(path, 1_000_000, noise_free_sweep().recording, seed=seed)
     out = ChunkedIdentifier(chunk_samples=1 << 18).fit_source(H5ChunkSource(path)).result()
     with h5py.File(path) as f:
         d = f["entry/data"]
@@ -56,9 +57,11 @@ def test_out_of_core_standard_errors_cover_the_truth_at_ten_million_samples(tmp_
     Before the chain bias was removed out of core, 1e7 samples gave |z| up to 45 (issue 30, on records that
     also repeated their noise); measured now |z| <= 1.47 (docs/out-of-core.md)."""
     zs = {}
+    run = noise_free_sweep()
     for seed in _fresh_seeds(4):
         path = tmp_path / f"long_{seed}.h5"
-        truth = write_long_sweep(path, 10_000_000, seed=seed)["model"]["q1_dot"]
+        write_long_record(path, 10_000_000, run.recording, seed=seed)
+        truth = run.recording.metadata["truth"]["model"]["q1_dot"]
         res = ChunkedIdentifier().fit_source(H5ChunkSource(path)).result()
         path.unlink()
         coefs, ses = _q1_terms(res)
