@@ -36,7 +36,7 @@ from daq.devices import DeviceError
 from daq.realtime import CONTROLLER_PRIORITY, ESTOP_PRIORITY, make_realtime
 from daq.recorder import recover_directory
 from daq.sweep import SweepRequest
-from sim.plc import State
+from protocol.plc import State
 
 from .campaign import CampaignService
 from .catalog import Catalog, new_id

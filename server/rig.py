@@ -19,11 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
-from daq.devices import DeviceError, open_plc
+from daq.plc import open_plc
+from daq.devices import DeviceError
 from daq.sources import open_source
 from daq.sweep import SweepRefused, SweepRequest, SweepRunner, limit_violation, plc_not_ready
 from sim.config import RigConfig
-from sim.plc import Command, Fault, PLCConfig, State
+from protocol.plc import Command, Fault, State
+from sim.plc import PLCConfig
 
 #: the PLC status served to pollers is at most this old, s (the dashboard refreshes every second)
 STATUS_MAX_AGE_S = 0.1

@@ -81,12 +81,13 @@ def _load(args, plan, out: Path):
 
 def _local(args, plan) -> int:
     from daq.campaign import CampaignControl, plan_violation, run_campaign
-    from daq.devices import DeviceError, open_plc
+    from daq.plc import open_plc
+    from daq.devices import DeviceError
     from daq.realtime import CONTROLLER_PRIORITY, make_realtime
     from daq.recorder import recover_directory
     from daq.sweep import SweepRefused, SweepRunner
     from sim.config import load_config
-    from sim.plc import Fault, State
+    from protocol.plc import Fault, State
 
     from .lab import _sweep_devices
     from .progress import Progress

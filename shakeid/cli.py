@@ -251,7 +251,7 @@ def _add_sweep_options(p: argparse.ArgumentParser) -> None:
 def _synthesize(args):
     from sim.rig import RigParameters
     from sim.sensors import Accelerometer
-    from sim.sweep import SineSweep
+    from protocol.sweep import SineSweep
     from sim.synth import run_sweep
 
     rig = RigParameters.paper_table1() if args.rig == "paper-table1" else RigParameters.design()

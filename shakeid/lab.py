@@ -11,12 +11,13 @@ from identify.errors import ShakeidError
 def cmd_demo(args) -> int:
     """The main job on the simulated rig: sweep over Modbus with the serial stream -> HDF5 ->
     identification -> report."""
-    from daq.devices import ModbusPLC
+    from daq.plc import ModbusPLC
     from daq.sources import SerialSource
     from daq.recorder import read_h5_recording
     from daq.sweep import SweepRequest, SweepRunner
     from identify.identifier import SparseIdentifier
-    from sim.plc import Limits, PLCConfig
+    from protocol.plc import Limits
+    from sim.plc import PLCConfig
     from sim.server import SENSITIVITY, SimulatedRig
 
     from reports.identification import write_report
@@ -91,7 +92,7 @@ def truth_lines(identified: dict, truth: dict, design_k3_per_kg: float) -> list[
 
 def _sweep_devices(cfg):
     """PLC and accelerometer backends from a rig configuration."""
-    from daq.devices import open_plc
+    from daq.plc import open_plc
     from daq.sources import open_source
 
     plc = open_plc(cfg.plc)
@@ -120,7 +121,7 @@ def cmd_sweep(args) -> int:
         print(f"{path}: was left running by a crash; marked aborted, its data kept")
     req = SweepRequest(args.f_start_hz, args.f_end_hz, args.duration_s, args.amplitude_mm, args.settle_s,
                        args.operator, args.note)
-    from daq.devices import open_plc
+    from daq.plc import open_plc
     from daq.realtime import CONTROLLER_PRIORITY, make_realtime
 
     from .progress import Progress

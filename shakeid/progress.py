@@ -43,7 +43,7 @@ class Progress:
 
     def sweep_status(self, frac: float, status) -> None:
         """SweepRunner's on_progress(fraction, PLC status): the state, frequency and table position."""
-        from sim.plc import State
+        from protocol.plc import State
 
         self.update(frac, rig_label(State(status.state).name.lower(), status.frequency_hz, status.position_mm))
 

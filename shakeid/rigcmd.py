@@ -4,7 +4,7 @@ service (its embedded simulated rig included: the only way to it), or the PLC of
 With --server, `estop` goes first to the rig controller's stop listener (server/stoplistener.py: the
 --server URL's host on its port + STOP_PORT_OFFSET, or --stop-url), where no viewer traffic is queued, and
 to the web server's own route only when nothing answers there.
-With --config: no HTTP service and no rig controller in between (daq.devices.open_plc: Modbus TCP or ADS), so an
+With --config: no HTTP service and no rig controller in between (daq.plc.open_plc: Modbus TCP or ADS), so an
 operator can read and stop the rig while the service is wedged. Exit 0 when the command took effect,
 2 (one line `shakeid: error: ...`) when the PLC does not answer or did not do what it was told.
 """
@@ -28,7 +28,7 @@ RIG_ACTIONS = {
 
 
 def _describe(st) -> dict:
-    from sim.plc import Fault, State
+    from protocol.plc import Fault, State
 
     def name(enum, code):
         try:
@@ -141,9 +141,10 @@ def _estop(client, given: str | None) -> tuple[dict, str]:
 
 
 def _direct(args) -> int:
-    from daq.devices import DeviceError, open_plc
+    from daq.plc import open_plc
+    from daq.devices import DeviceError
     from sim.config import load_config
-    from sim.plc import Command, State
+    from protocol.plc import Command, State
 
     cfg = load_config(args.config)
     p = cfg.plc
