@@ -17,7 +17,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from identify.identifier import SparseIdentifier  # noqa: E402
 from sim.rig import RigParameters  # noqa: E402
 from sim.sensors import Accelerometer  # noqa: E402
-from sim.sweep import SineSweep  # noqa: E402
+from protocol.sweep import SineSweep  # noqa: E402
 from sim.synth import run_sweep  # noqa: E402
 
 METHODS = ("auto", "simex")

@@ -24,7 +24,7 @@ from identify.optimizers.base import least_squares
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 
 def random_case(rng: np.random.Generator, noise_range=(0.002, 0.05)):

@@ -57,7 +57,8 @@ def recorder(path, blocks, fs):
 def sustained(kind: str, fs_hz: float, speed: float, seconds: float, directory) -> dict:
     """Stream from the simulated rig into a recording for `seconds` of wall time; see module doc."""
     from daq.sources import CanSource, SerialSource
-    from sim.plc import Command, Limits, PLCConfig
+    from protocol.plc import Command, Limits
+    from sim.plc import PLCConfig
     from sim.server import SENSITIVITY, SimulatedRig
 
     cfg = PLCConfig(fs_hz=fs_hz, limits=Limits(watchdog_s=1e9, max_duration_s=1e5))

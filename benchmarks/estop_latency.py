@@ -38,8 +38,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from daq.devices import ModbusPLC  # noqa: E402
-from sim.plc import State  # noqa: E402
+from daq.plc import ModbusPLC  # noqa: E402
+from protocol.plc import State  # noqa: E402
 from daq.realtime import make_realtime  # noqa: E402
 from sim.server import free_port  # noqa: E402
 

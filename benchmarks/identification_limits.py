@@ -21,7 +21,7 @@ from identify.identifier import SparseIdentifier  # noqa: E402
 from sim.rig import RigParameters  # noqa: E402
 from sim.sensors import Accelerometer  # noqa: E402
 from sim.synth import run_sweep  # noqa: E402
-from sim.sweep import SineSweep  # noqa: E402
+from protocol.sweep import SineSweep  # noqa: E402
 
 
 def run(rig, sweep, noise=0.005, seed=0, **kw):

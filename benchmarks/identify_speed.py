@@ -57,7 +57,7 @@ from identify.simulate import simulate  # noqa: E402
 from identify.spectral import _cached_twiddles  # noqa: E402
 from identify.uncertainty import N_PLACEMENTS  # noqa: E402
 from sim.rig import RigParameters  # noqa: E402
-from sim.sweep import SineSweep  # noqa: E402
+from protocol.sweep import SineSweep  # noqa: E402
 from sim.synth import run_sweep  # noqa: E402
 
 FS = 2048.0

@@ -21,7 +21,7 @@ from identify.joint import CHANGE_FLOOR, CHANGE_RATIO, Z_CHANGE
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 
 def main() -> None:

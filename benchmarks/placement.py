@@ -18,7 +18,7 @@ from identify.identifier import SparseIdentifier
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 WEAK, TRUTH = "q1*q2^2", 1.1620e4
 

@@ -41,7 +41,7 @@ SHAKEID, DASK = str(BIN / "shakeid"), str(BIN / "dask")
 def make_recordings(folder: Path, n: int, distinct: int, duration_s: float, fs_hz: float) -> list[Path]:
     from daq.recorder import Recorder
     from sim.sensors import Accelerometer
-    from sim.sweep import SineSweep
+    from protocol.sweep import SineSweep
     from sim.synth import run_sweep
 
     sensor = Accelerometer(noise_fraction=0.005)

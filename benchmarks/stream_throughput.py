@@ -22,7 +22,7 @@ import serial
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sim import frames  # noqa: E402
+from protocol import frames  # noqa: E402
 from sim.server import SENSITIVITY, free_port  # noqa: E402
 
 

@@ -38,7 +38,7 @@ def dump(path: str) -> None:
     from sim.rig import RigParameters
     from sim.sensors import Accelerometer
     from sim.synth import run_sweep
-    from sim.sweep import SineSweep
+    from protocol.sweep import SineSweep
 
     shares = {}
     closed_form = unc.analytic_chain_bias

@@ -9,8 +9,9 @@ import pytest
 
 from daq.campaign import (Campaign, CampaignControl, PlanError, load_plan, parse_plan, plan_violation,
                           run_campaign)
-from sim.plc import Command, Limits, PLCConfig, RigPLC, State
-from sim.sweep import SineSweep
+from protocol.plc import Command, Limits, State
+from sim.plc import PLCConfig, RigPLC
+from protocol.sweep import SineSweep
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "campaign.toml"
 PLAN = {"name": "t", "sweep": {"f_start_hz": 2.0, "f_end_hz": 15.0, "duration_s": 4.0},

@@ -7,13 +7,14 @@ import h5py
 import numpy as np
 import pytest
 
-from daq.devices import ModbusPLC
+from daq.plc import ModbusPLC
 from daq.recorder import Recorder, describe
 from daq.sources import SerialSource
 from daq.sweep import SweepRequest, SweepRunner
 from identify.quality import clip_level
 from shakeid.cli import main
-from sim.plc import Limits, PLCConfig
+from protocol.plc import Limits
+from sim.plc import PLCConfig
 from sim.server import SENSITIVITY, SimulatedRig
 
 SENSORS = {c: {"sensitivity": SENSITIVITY} for c in ("table_acc", "mass_acc")}

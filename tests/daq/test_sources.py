@@ -3,13 +3,14 @@ CAN through a python-can bus. Lost and corrupted frames must arrive in the file 
 import numpy as np
 import pytest
 
-from daq.devices import ModbusPLC
+from daq.plc import ModbusPLC
 from daq.recorder import describe, read_h5_recording
 from daq.sources import CanSource, SerialSource
 from daq.sweep import SweepRequest, SweepRunner
 from identify.errors import RecordingError
 from identify.identifier import SparseIdentifier
-from sim.plc import Limits, PLCConfig
+from protocol.plc import Limits
+from sim.plc import PLCConfig
 from sim.server import SENSITIVITY, SimulatedRig
 
 FRAME = 64  # samples per stream frame (the simulated rig's default)
@@ -156,7 +157,7 @@ def test_a_read_capped_at_its_limit_drops_no_frame():
     """More frames queued than one read() takes: the rest come with the next read, none lost between."""
     import can
 
-    from sim import can_frames
+    from protocol import can_frames
 
     source = CanSource("virtual", "shakeid-cap", 2048.0)
     source.MAX_FRAMES_PER_READ = 100

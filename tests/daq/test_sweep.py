@@ -2,12 +2,13 @@
 import numpy as np
 import pytest
 
-from daq.devices import AdsPLC, ModbusPLC
+from daq.plc import AdsPLC, ModbusPLC
 from daq.sources import SerialSource
 from daq.recorder import describe, read_h5_recording
 from daq.sweep import SweepRefused, SweepRequest, SweepRunner
 from identify.identifier import SparseIdentifier
-from sim.plc import Limits, PLCConfig, State
+from protocol.plc import Limits, State
+from sim.plc import PLCConfig
 from sim.server import SENSITIVITY, SimulatedRig, free_ads_address
 
 SPEED = 10.0
@@ -124,7 +125,7 @@ def test_sigkill_of_the_sweep_process_the_watchdog_stops_the_table(tmp_path):
 
     import h5py
 
-    from sim.plc import Fault, State
+    from protocol.plc import Fault, State
 
     rig = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=2.0)), speed=SPEED).start()
     exe = str(Path(sys.executable).with_name("shakeid"))
@@ -180,7 +181,7 @@ def test_abort_paths_leave_the_table_stopped_and_the_file_valid(rig, tmp_path, e
     the recording with its status and reason, the samples so far intact, and the table at rest."""
     import time
 
-    from sim.plc import Command, State
+    from protocol.plc import Command, State
 
     plc = ModbusPLC(*rig.endpoints["modbus"])
     runner = _runner(rig, plc)

@@ -7,7 +7,7 @@ from identify.identifier import SparseIdentifier
 from identify.model import SparseModel
 from identify.validation import physics_verdict
 from sim.rig import RigParameters
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 RIG = RigParameters.design(end_stop_travel_mm=None)
 SWEEP = SineSweep(1.0, 20.0, 30.0, 3.5)

@@ -27,7 +27,7 @@ from identify.recording import read_recording
 from identify.optimizers.base import least_squares
 from identify.selection import _backward_eliminate
 from identify.simulate import choose_substeps
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 REPO = Path(__file__).resolve().parents[2]
 SPURIOUS = ("1", "q2^2", "q1^3", "q1^2*q2")

@@ -18,7 +18,7 @@ from identify.band import excited_band
 from identify.chain import reconstruct_states
 from identify.chunked import ChunkedChain, chunk_ranges
 from identify.recording import Recording
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 STATES = ("q1", "q2", "q1_dot", "input")
 TOLERANCE = 1e-5  # of each state's peak on the valid rows (module doc)

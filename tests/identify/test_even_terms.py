@@ -5,7 +5,7 @@ import pytest
 
 from identify.identifier import SparseIdentifier
 from sim.rig import RigParameters
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 SWEEP = SineSweep(1.0, 20.0, 40.0, 1.3)
 

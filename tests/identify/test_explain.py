@@ -10,7 +10,7 @@ from identify.explain import DiscrepancyAnalysis
 from identify.model import SparseModel
 from identify.recording import write_csv
 from sim.rig import RigParameters
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 #: magnitudes that visibly change the response of the design rig (max |q| 12 mm without effects)
 EFFECTS = {

@@ -13,7 +13,7 @@ from identify.simulate import simulate
 from sim.rig import RigParameters
 from sim.scenarios import make_scenario
 from sim.sensors import Accelerometer
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 from sim.synth import run_sweep
 
 FS = 1000.0

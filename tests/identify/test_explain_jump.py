@@ -10,7 +10,7 @@ from identify.explain import DiscrepancyAnalysis
 from identify.shooting import TRIM_SHARE, n_trimmed, trimmed_total
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 from sim.synth import run_sweep
 
 SWEEP = SineSweep(1.0, 20.0, 30.0, 2.0)

@@ -10,7 +10,7 @@ import pytest
 
 from identify.recording import write_csv
 from sim.rig import RigParameters
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 SCHEMA = json.loads((Path(__file__).resolve().parents[2] / "docs" / "schemas" / "explanation.schema.json").read_text())
 

@@ -7,7 +7,7 @@ import pytest
 from identify.frf.measured import compare_sweep, cycle_envelope, measured_jump, sweep_envelope
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 from sim.synth import run_sweep
 
 RIG = RigParameters.paper_table1()

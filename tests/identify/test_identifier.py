@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from identify.identifier import SparseIdentifier
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 #: issue 2 acceptance: coefficients within 2 %, the weak q1*q2^2 within 5 %
 TOLERANCE = {"q1*q2^2": 0.05}

@@ -14,7 +14,7 @@ from identify.uncertainty import refit_all_rows
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 WEAK = "q1*q2^2"
 AMPLITUDES_MM = (1.3, 1.2, 1.1)

@@ -11,7 +11,7 @@ from identify.identifier import SparseIdentifier, holdout_blocks, per_record
 from identify.model import SparseModel
 from identify.refine import FreeRunError, PooledFreeRunError, free_run_error
 from identify.validation import validate
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 SWEEPS = ((1.3, 30.0), (1.1, 24.0))  # (amplitude mm, duration s)
 WEAK = "q1*q2^2"

@@ -15,7 +15,7 @@ from identify.spectral import lowband_rfft
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 FS, BAND = 2048.0, (1.2, 106.25)
 

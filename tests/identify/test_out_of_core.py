@@ -8,7 +8,7 @@ from identify.errors import IdentificationError
 from identify.identifier import SparseIdentifier
 from identify.out_of_core import ChunkedIdentifier
 from identify.recording import Recording
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 #: as tests/identify/test_identifier.py (issue 2 acceptance): within 2 %, the weak q1*q2^2 within 5 %
 TOLERANCE = {"q1*q2^2": 0.05}

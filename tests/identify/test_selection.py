@@ -5,7 +5,7 @@ import pytest
 import identify.uncertainty as unc
 from identify.identifier import SparseIdentifier, effective_samples, holdout_blocks
 from identify.selection import heldout_supports
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 TRUE_Q1 = {"q1", "q2", "q1*q2^2", "q2^3", "zdd"}
 

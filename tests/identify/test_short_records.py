@@ -6,7 +6,7 @@ from identify.band import excited_band
 from identify.chain import reconstruct_states
 from identify.identifier import SparseIdentifier
 from sim.rig import RigParameters
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 SHORT = SineSweep(0.5, 17.0, 13.0, 1.3)
 

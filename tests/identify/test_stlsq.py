@@ -35,7 +35,7 @@ def test_raw_threshold_as_in_the_paper_depends_on_units(make_run):
     coefficient is below 0.95: a lightly damped rig (c/m = 0.8 1/s) loses its damping term. ADMM and
     STLSQ on unit-RMS columns do not."""
     from sim.rig import RigParameters
-    from sim.sweep import SineSweep
+    from protocol.sweep import SineSweep
 
     # lightly damped, it swings to 19.8 mm: past the default end stops (17.5 mm), so a rail without them
     rig = RigParameters.design(damping_ns_per_m=0.8 * 0.49, end_stop_travel_mm=None)

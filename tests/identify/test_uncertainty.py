@@ -14,7 +14,7 @@ from identify.validation import validate
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 WEAK = "q1*q2^2"
 TABLE1_WEAK = 1.1620e4

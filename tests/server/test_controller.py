@@ -14,8 +14,8 @@ import httpx
 import numpy as np
 import pytest
 
-from daq.devices import ModbusPLC
-from sim.plc import Fault, State
+from daq.plc import ModbusPLC
+from protocol.plc import Fault, State
 
 from .conftest import SHAKEID, Service, wait_for
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from identify.recording import write_csv
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 from .conftest import OPERATOR, VIEWER, Service, wait_for
 

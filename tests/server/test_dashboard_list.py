@@ -17,7 +17,7 @@ import pytest
 
 from identify.recording import write_csv
 from server.catalog import Catalog, new_id
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 from .conftest import OPERATOR, Service, wait_for
 from .test_dashboard import browser, page, sweep_body, wait_idle  # noqa: F401 - fixtures and helpers shared

@@ -14,7 +14,7 @@ from server.jobs import JobQueue
 from server.settings import Settings, SettingsError
 from shakeid.batch_cmd import worker_name
 from sim.server import free_port
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 from .conftest import OPERATOR, Service, wait_for
 

@@ -30,7 +30,7 @@ def identified(service, tmp_path_factory, make_run):
     import httpx
 
     from identify.recording import write_csv
-    from sim.sweep import SineSweep
+    from protocol.sweep import SineSweep
 
     op, viewer = service.client(), service.client(VIEWER)
     csv = tmp_path_factory.mktemp("csv") / "sweep.csv"

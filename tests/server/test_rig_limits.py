@@ -8,7 +8,7 @@ import math
 import h5py
 import numpy as np
 
-from sim.plc import Limits
+from protocol.plc import Limits
 
 from .conftest import wait_for
 

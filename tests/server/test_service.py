@@ -274,7 +274,7 @@ def test_explain_job_names_a_hidden_effect(service, tmp_path, make_run):
     """POST /explain on an uploaded sweep of a rig with hidden quadratic damping: the analysis names it and
     adding it closes the free-run gap; its figures are served."""
     from identify.recording import write_csv
-    from sim.sweep import SineSweep
+    from protocol.sweep import SineSweep
 
     run = make_run(rig=RigParameters.design(effects={"quadratic_damping": 2.0}), sweep=SineSweep(1.0, 20.0, 30.0, 1.3),
                    fs_hz=1000.0, seed=5)  # the analysis tries every catalog effect, faults included: a short record

@@ -14,7 +14,7 @@ from daq.recorder import Recorder
 from identify.recording import write_csv
 from shakeid.cli import main
 from sim.server import free_port
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 SHORT = SineSweep(1.0, 20.0, 25.0, 1.3)  # 25 s at 1024 Hz: identifies the Table 1 terms in ~1 s

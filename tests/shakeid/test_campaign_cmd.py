@@ -12,8 +12,8 @@ from pathlib import Path
 import h5py
 import pytest
 
-from daq.devices import ModbusPLC
-from sim.plc import Command, State
+from daq.plc import ModbusPLC
+from protocol.plc import Command, State
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 

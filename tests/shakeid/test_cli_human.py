@@ -242,7 +242,7 @@ def test_a_selection_the_placements_disagree_with_is_said_to_be_unsettled(make_r
     summary says the selection is unsettled, term by term; a full sweep's summary does not."""
     from identify.identifier import SparseIdentifier
     from reports.text import summary, unsettled_terms
-    from sim.sweep import SineSweep
+    from protocol.sweep import SineSweep
 
     rec = make_run(sweep=SineSweep(1, 20, 30, 1.3), noise=0.005, seed=0).recording
     short = SparseIdentifier().fit(rec.slice(20000, 28000)).result()
@@ -261,7 +261,7 @@ def test_a_term_the_free_run_budget_dropped_is_named_as_such(make_run):
     instead of calling the selection unsettled (it did, before)."""
     from identify.identifier import SparseIdentifier
     from reports.text import budget_dropped, summary, unsettled_terms
-    from sim.sweep import SineSweep
+    from protocol.sweep import SineSweep
 
     rec = make_run(sweep=SineSweep(1, 20, 30, 1.3), fs_hz=1024.0, seed=1).recording
     res = SparseIdentifier(max_terms=4, budget="free-run").fit(rec).result()

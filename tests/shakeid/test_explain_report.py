@@ -10,7 +10,7 @@ import reports.identification as idrep
 from identify.explain import DiscrepancyAnalysis
 from reports.explain import FIGURES, write_explain_report
 from sim.rig import RigParameters
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 FRICTION_N = 0.1  # N: the hidden effect (tests/identify/test_explain.py's magnitude)
 

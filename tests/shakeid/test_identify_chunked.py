@@ -11,7 +11,7 @@ from daq.recorder import Recorder
 from identify.errors import RecordingError
 from shakeid import ooc_cmd
 from shakeid.cli import main
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 
 @pytest.fixture(scope="module")

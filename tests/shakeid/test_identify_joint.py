@@ -14,7 +14,7 @@ from shakeid.cli import main
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 

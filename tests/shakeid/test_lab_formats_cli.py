@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 
 from ..daq.lab_writers import write_csv_exact, write_mdf, write_tdms, write_uff
 

@@ -6,7 +6,8 @@ import pytest
 
 from shakeid import rigcmd
 from shakeid.cli import main
-from sim.plc import Command, Fault, Limits, PLCConfig, State
+from protocol.plc import Command, Fault, Limits, State
+from sim.plc import PLCConfig
 from sim.server import SimulatedRig, free_port
 
 

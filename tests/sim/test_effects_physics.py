@@ -12,7 +12,7 @@ from scipy.integrate import solve_ivp
 from sim.plc import PLCConfig, RigPLC
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer, delay
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 from sim.synth import run_sweep
 
 M, C, K, K3 = 0.5, 1.0, 800.0, 5e6           # fn = 6.4 Hz, damping ratio 0.025

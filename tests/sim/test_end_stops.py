@@ -7,12 +7,13 @@ import pytest
 
 from identify.model import SparseModel
 from identify.simulate import simulate
-from sim import frames
-from sim.plc import Command, Fault, PLCConfig, RigPLC, State
+from protocol import frames
+from protocol.plc import Command, Fault, State
+from sim.plc import PLCConfig, RigPLC
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.server import SENSITIVITY
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 from sim.synth import run_sweep
 
 FS = 2048.0

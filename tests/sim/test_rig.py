@@ -5,7 +5,7 @@ from scipy.integrate import solve_ivp
 
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
-from sim.sweep import SineSweep
+from protocol.sweep import SineSweep
 from sim.synth import run_sweep
 
 

@@ -9,8 +9,9 @@ from pymodbus.client import ModbusTcpClient
 
 from identify.identifier import SparseIdentifier
 from identify.recording import Recording
-from sim.frames import FrameDecoder
-from sim.plc import Fault, Limits, PLCConfig, State
+from protocol.frames import FrameDecoder
+from protocol.plc import Fault, Limits, State
+from sim.plc import PLCConfig
 from sim.server import SimulatedRig, free_ads_address
 
 SPEED = 10.0  # rig seconds per wall second
@@ -307,7 +308,7 @@ def test_accelerometer_samples_as_can_frames():
     values equal to the TCP stream's."""
     import can
 
-    from sim import can_frames
+    from protocol import can_frames
 
     # 2x: 4096 frames/s, within what a 1 Mbit/s CAN bus carries (~8000 classic frames/s)
     rig = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=3.0)), speed=2.0, can_interface="virtual",
@@ -380,7 +381,7 @@ def test_can_across_processes_through_python_can_remote(tmp_path, can_relay):
 
     import can
 
-    from sim import can_frames
+    from protocol import can_frames
     from sim.server import free_port
 
     mb, st = free_port(), free_port()

@@ -13,7 +13,8 @@ import time
 
 from pymodbus.client import ModbusTcpClient
 
-from sim.plc import Fault, Limits, PLCConfig, State
+from protocol.plc import Fault, Limits, State
+from sim.plc import PLCConfig
 from sim.server import SimulatedRig
 
 SPEED = 10.0
