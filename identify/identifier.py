@@ -33,6 +33,7 @@ from .physical import RigConstants, physical_parameters
 from .recording import Recording
 from .selection import DEFAULT_TOLERANCE
 from .sources import RecordingEquations, state_gram
+from .threads import one_blas_thread
 
 N_REPORTED = 10  # budget candidates listed in the result
 
@@ -124,6 +125,7 @@ class SparseIdentifier:
             return RigConstants(mass_kg=float(mass)), "recording"
         return RigConstants(), "assumed"
 
+    @one_blas_thread  # the whole fit: small BLAS products, oversubscribed under load (identify.threads)
     def fit(self, recording: "Recording | list[Recording]") -> "SparseIdentifier":
         """Fit to one Recording, or to a list of them: one model for several recordings of the same
         rig (identify.joint: chain and held-out blocks per recording, normal equations summed)."""

@@ -54,6 +54,7 @@ from .identifier import SparseIdentifier
 from .inband import has_even_force
 from .library import Library
 from .model import SparseModel
+from .threads import one_blas_thread
 from .uncertainty import floors_read, noise_floors
 from .validation import first_equation, fit_metrics, free_run
 
@@ -234,6 +235,7 @@ class ChunkedIdentifier(SparseIdentifier):
         """A Recording in memory, identified chunk by chunk (tests compare it with the in-core path)."""
         return self.fit_source(recording)
 
+    @one_blas_thread  # as SparseIdentifier.fit (identify.threads)
     def fit_source(self, source, progress=None, map_chunks=None) -> "ChunkedIdentifier":
         """Identify the record of a chunk source (identify.chunked). progress(stage, done, total) after
         each chunk; map_chunks(fn, jobs) -> iterable of fn(*job) results, any order (default: in turn)."""

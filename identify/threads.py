@@ -1,27 +1,58 @@
-"""BLAS threads where they do not pay: one.
+"""BLAS threads where they do not pay: one, for the whole of a fit.
 
-numpy's OpenBLAS starts 2 threads here (one per core). The identification's BLAS work is many small
-products (BlockGram.from_library: ~120 GEMMs of 8192 x 18 per million samples), where a second thread
-costs more in hand-over than it saves (measured: 84 ms CPU with 2 threads against 26 ms with one for
-those ~120), and on a loaded machine (the service's job workers, `shakeid batch`, Dask workers beside each
-other) the threads oversubscribe the cores: a 1e6-sample fit took 3-59x the CPU time. The limit is set in
-the library, at the call site, so every caller (CLI, batch, job workers, Dask) runs under it.
+numpy's OpenBLAS starts one thread per core (2 here). The identification's BLAS work is many small
+products: BlockGram.from_library's ~120 GEMMs of 8192 x 18 per million samples, Welch's per-segment
+lines (identify.spectral.welch_psd), the noise's share, the path's small solves. A second thread costs
+more in hand-over than it saves, and on a loaded machine (the service's job workers, `shakeid batch`,
+Dask workers beside each other, other users) the threads oversubscribe the cores and spin. Measured at
+1e6 samples (docs/identification.md, "Threads"): welch_psd of two channels alone 0.056 s CPU with one
+thread against 0.17-0.30 s with OpenBLAS's default 2 at load ~4; the earlier limit on from_library alone
+left the fit at 1.4-1.6x the one-thread CPU under load.
+
+The limit is set in the library, at the public entry points (SparseIdentifier.fit, the out-of-core
+fit_source, the discrepancy analysis), so every caller (CLI, batch, job workers, Dask workers, a
+notebook) runs under it. threadpoolctl's limit is process-wide, so overlapping fits in threads of one
+process (a Dask worker's threads) share one limit: the first to enter sets it, the last to leave
+restores what was there (a reference count), never one fit restoring two threads under another.
+threadpoolctl (3.8) lets only the thread that first set a limit change OpenBLAS's while it lives; in a
+Dask worker that is the first task thread, whose limit of one then stays (what the worker wants).
 threadpoolctl is the standard control (scikit-learn uses it the same way)."""
 from __future__ import annotations
 
 import functools
+import threading
 
 import scipy.linalg  # noqa: F401  (loads scipy's BLAS, if it is its own, before the libraries are listed)
 from threadpoolctl import ThreadpoolController
 
 #: the loaded BLAS libraries, found once (a fresh threadpool_limits scans them on every call)
 _CONTROLLER = ThreadpoolController()
+_LOCK = threading.Lock()
+_HOLDERS = 0  # fits running under the limit in this process
+_LIMITER = None  # threadpoolctl's limiter while _HOLDERS > 0 (restores the previous limits)
 
 
 def one_blas_thread(fn):
-    """Run fn with BLAS limited to one thread (the previous limit restored after)."""
+    """Run fn with BLAS limited to one thread; the previous limit restored when the last such call in
+    the process returns."""
     @functools.wraps(fn)
     def limited(*args, **kwargs):
-        with _CONTROLLER.limit(limits=1, user_api="blas"):
+        global _HOLDERS, _LIMITER
+        with _LOCK:
+            if _HOLDERS == 0:
+                _LIMITER = _CONTROLLER.limit(limits=1, user_api="blas")
+            _HOLDERS += 1
+        try:
             return fn(*args, **kwargs)
+        finally:
+            with _LOCK:
+                _HOLDERS -= 1
+                if _HOLDERS == 0:
+                    _LIMITER.restore_original_limits()
+                    _LIMITER = None
     return limited
+
+
+def blas_threads() -> int:
+    """The BLAS thread count now in force (the largest over the loaded BLAS libraries)."""
+    return max((lib.num_threads for lib in _CONTROLLER.select(user_api="blas").lib_controllers), default=1)
