@@ -127,13 +127,18 @@ function showRig(r) {
 let sweep = null;  // the sweep whose state and live plot are shown
 $("start").onclick = async () => {
   const body = {f_start_hz: +$("f0").value, f_end_hz: +$("f1").value, duration_s: +$("dur").value, amplitude_mm: +$("amp").value};
-  try { const s = await api("POST", "/api/sweeps", body); say(`sweep ${s.id} started`); follow(s.id); }
+  try {
+    const s = await api("POST", "/api/sweeps", body); say(`sweep ${s.id} started`); follow(s.id);
+    ((s.preflight || {}).warnings || []).forEach(w => say(`sweep ${s.id}: preflight warning: ${w}`, "warn"));
+  }
   catch (e) { fail("sweep refused")(e); }  // nothing to follow: no live plot of a sweep that did not start
 };
 $("abort").onclick = () => sweep ? api("POST", `/api/sweeps/${sweep.id}/abort`).then(() => say(`sweep ${sweep.id} aborting`))
   .catch(fail("abort refused")) : say("no sweep to abort", "error");
 function sweepLine(s) {
   const base = `sweep ${s.id}: ${s.state}`;
+  const warned = ((s.request || {}).preflight || {}).warnings || [];  // the prediction near a limit (daq/preflight.py)
+  if (warned.length) return `${sweepLine({...s, request: {}})} · preflight warning: ${warned.join("; ")}`;
   if (s.state === "completed") return base;
   if (s.state === "aborted" || s.state === "failed") return `${base} at ${pct(s.progress)}` + (s.error ? ` (${s.error})` : "");
   return `${base} · ${pct(s.progress)}`;
@@ -219,7 +224,11 @@ function planHint() {
 }
 document.querySelectorAll("fieldset input[id^=c-]").forEach(i => i.addEventListener("input", planHint));
 $("c-start").onclick = async () => {
-  try { const c = await api("POST", "/api/campaigns", campaignPlan()); say(`campaign ${c.id} started`); refresh(); }
+  try {
+    const c = await api("POST", "/api/campaigns", campaignPlan()); say(`campaign ${c.id} started`); refresh();
+    Object.entries((c.preflight || {}).warnings || {}).forEach(([label, ws]) =>
+      ws.forEach(w => say(`campaign ${c.id}, ${label}: preflight warning: ${w}`, "warn")));
+  }
   catch (e) { fail("campaign refused")(e); }
 };
 let campaignsShown = "";

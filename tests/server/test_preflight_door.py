@@ -57,6 +57,20 @@ def test_a_campaign_with_a_sweep_that_would_clip_is_refused(service):
     assert op.get("/api/campaigns").json() == []
     assert op.get("/api/sweeps").json() == []
     _idle(op)
+    # a safe campaign: each of its sweeps predicted again right before it starts, the prediction in its record
+    safe = {"name": "safe", "sweep": {"f_start_hz": 3.0, "f_end_hz": 15.0, "duration_s": 4.0, "settle_s": 0.5},
+            "amplitudes_mm": [0.7, 1.0], "directions": ["up"]}
+    started = op.post("/api/campaigns", json=safe)
+    assert started.status_code == 202 and started.json()["preflight"] == {"warnings": {}}, started.text
+    done = wait_for(lambda: (c := op.get(f"/api/campaigns/{started.json()['id']}").json())["state"] == "completed"
+                    and c, 120, "the campaign")
+    sweeps = {s["id"]: s for s in op.get("/api/sweeps").json()}
+    for item in done["sweeps"]:
+        record = sweeps[item["sweep_id"]]["request"]["preflight"]
+        assert record["warnings"] == []
+        assert record["source"] == "the rig's nominal parameters" or record["source"].startswith(
+            "the model identified from recording ")  # the first sweep's model, if identified by then
+        assert 0 < record["travel_peak_mm"] < 17.5 * 0.9
 
 
 def test_prediction_warns_near_the_travel_and_matches_the_recording(service, tmp_path):
