@@ -24,52 +24,22 @@ of +0.02 to +0.1 that was statistically zero, or for "pushing outwards" by a hai
 """
 from __future__ import annotations
 
-import numpy as np
-
 from .effects import CATALOG
+from .effects.base import SIGN_TOL, SIGN_Z_WRONG, sides, wrong_side  # noqa: F401  (the rules' helpers)
 
 #: A baseline coefficient is well determined when |value| exceeds this many standard errors.
 SIGN_Z = 4.0
-#: Relative tolerance on a restoring/dissipating sign (numerical zero).
-SIGN_TOL = 1e-9
-#: A coefficient of the wrong sign is a violation only beyond this many of its standard errors from zero.
-SIGN_Z_WRONG = 2.0
-
-
-def _wrong_side(value: float, scale: float, se: float) -> bool:
-    """`value` > 0 beyond numerical zero (relative to `scale`) and beyond SIGN_Z_WRONG x `se`."""
-    return value > SIGN_TOL * scale and value > SIGN_Z_WRONG * se
-
-
-def _sides(coef: dict, se: dict, sym: str, asym: str):
-    """Per side (upper, lower) of an end stop: (coefficient, scale, standard error) of sym +- asym."""
-    c1, c2 = coef.get(sym, 0.0), coef.get(asym, 0.0)
-    s = float(np.hypot(se.get(sym, 0.0), se.get(asym, 0.0)))
-    return [(c1 + c2, abs(c1) + abs(c2), s), (c1 - c2, abs(c1) + abs(c2), s)]
 
 
 def check(name: str, coef: dict, baseline_coef: dict, baseline_se: dict, se: dict | None = None) -> str:
     """'' when admissible, else the reason (one sentence). `se`: the candidate's standard errors (none
-    given: every sign is taken at face value)."""
+    given: every sign is taken at face value). Rule 1 is the effect's own (Effect.admissibility)."""
     se = se or {}
     effect = CATALOG.get(name)
     if effect is not None and effect.kind == "physics":
-        if effect.dissipative:
-            for t in effect.terms:
-                if _wrong_side(coef.get(t, 0.0), 0.0, se.get(t, 0.0)):
-                    return f"{t} has coefficient {coef[t]:+.4g} in dq1/dt: it injects energy instead of dissipating it"
-        if name == "end_stop":
-            if any(_wrong_side(*v) for v in _sides(coef, se, "stop(q2)", "sign(q2)*stop(q2)")):
-                return "the end stop pushes the mass outwards on one side instead of stopping it"
-            if any(_wrong_side(*v) for v in _sides(coef, se, "q1*contact(q2)", "q1*sign(q2)*contact(q2)")):
-                return "the end stop's contact damping injects energy on one side instead of dissipating it"
-            c1, c2 = coef.get("stop(q2)", 0.0), coef.get("sign(q2)*stop(q2)", 0.0)
-            k, contact = -coef.get("q2", 0.0), max(-(c1 + c2), -(c1 - c2))
-            if k > 0 and contact < k:
-                return (f"its contact ({contact:.4g} N/m per kg on its stiffer side) is softer than the rig's own "
-                        f"spring ({k:.4g}): a stiffness change beyond the travel, not a stop")
-        if name == "hysteresis" and _wrong_side(coef.get("z", 0.0), 0.0, se.get("z", 0.0)):
-            return "the hysteretic force pushes along the displacement instead of restoring"
+        reason = effect.admissibility(coef, se)
+        if reason:
+            return reason
     for t, c0 in baseline_coef.items():
         s0 = baseline_se.get(t)
         c = coef.get(t)

@@ -28,6 +28,7 @@ from . import uncertainty as unc
 from .errors import IdentificationError
 from .fitting import (effective_samples, fit_sources, holdout_blocks, make_optimizer, per_record,  # noqa: F401
                       placement_supports, select_supports)
+from .effects import expand_terms
 from .library import Library
 from .physical import RigConstants, physical_parameters
 from .recording import Recording
@@ -42,7 +43,8 @@ class SparseIdentifier:
     """Parameters (stored as given, sklearn-style; fitted attributes end in `_`):
 
     degree : highest monomial degree of the library (4 as in the paper).
-    extra_terms : further library terms, e.g. ("sign(q1)", "q1*|q1|").
+    extra_terms : further library terms, e.g. ("sign(q1)", "q1*|q1|"), or a plain effect by its name
+        (identify.effects: "coulomb_friction" stands for sign(q1)).
     method : "admm" (LASSO path) or "stlsq".
     n_lambdas, lambda_eps : path length and lambda_min / lambda_max (ADMM).
     threshold, normalize_threshold : STLSQ threshold (None: a path) and whether it applies to
@@ -140,7 +142,7 @@ class SparseIdentifier:
         timings["chain"] = time.perf_counter() - t0
         if several:
             joint.refuse_mixed_layouts(sources)
-        self.library_ = Library(("q1", "q2"), (sources[0].sig.input_name,), self.degree, self.extra_terms)
+        self.library_ = Library(("q1", "q2"), (sources[0].sig.input_name,), self.degree, expand_terms(self.extra_terms))
         self.recording_, self.joint_ = (None if several else recordings[0]), None
         runs = fit_sources(self, sources, timings)
         # states_ names the states and input; a joint fit's bands and rows are per recording (joint_)

@@ -52,6 +52,7 @@ from .fitting import fit_sources
 from .gram import BlockGram
 from .identifier import SparseIdentifier
 from .inband import has_even_force
+from .effects import expand_terms
 from .library import Library
 from .model import SparseModel
 from .threads import one_blas_thread
@@ -250,7 +251,7 @@ class ChunkedIdentifier(SparseIdentifier):
         eqs = ChunkedEquations(source, chain, self.chunk_samples, self.window_s, progress, map_chunks)
         self.recording_, self.joint_, self.source_, self.chain_ = None, None, source, chain
         self.states_ = eqs.sig
-        self.library_ = Library(("q1", "q2"), (eqs.sig.input_name,), self.degree, self.extra_terms)
+        self.library_ = Library(("q1", "q2"), (eqs.sig.input_name,), self.degree, expand_terms(self.extra_terms))
         fit_sources(self, [eqs], timings)
         timings["chain_library_gram"] = timings.pop("library_gram")
         self.computed_on_ = eqs.computed_on

@@ -43,6 +43,9 @@ class Structure:
     #: a one-sided end stop: +1 upper, -1 lower (None: two sided). Its asymmetry terms are tied to the
     #: symmetric ones, coef(sign(q2)*f) = side x coef(f), so the stop acts on that side only.
     side: int | None = None
+    #: the end-stop travel is refit with the coefficients (identify.effects.end_stop sets it when it adds
+    #: the stop; adding any later effect clears it)
+    travel_free: bool = False
 
     @property
     def ties(self) -> dict:
@@ -61,6 +64,7 @@ class Structure:
 
     def adding(self, name: str, terms=(), **kw) -> "Structure":
         new = tuple(self.terms) + tuple(t for t in terms if t not in self.terms)
+        kw.setdefault("travel_free", False)
         return replace(self, terms=new, effects=self.effects + (name,), **kw)
 
 
@@ -213,7 +217,7 @@ class Fitter:
         theta0 = np.array([st.coefficients[t] for t in names])
         k = len(names)
         hyst = st.hyst is not None
-        travel = bool(st.travel) and st.effects[-1:] == ("end_stop",)
+        travel = bool(st.travel) and st.travel_free
         extra = (list(np.log(np.maximum(st.hyst, 1e-3))) if hyst else []) + ([np.log(st.travel)] if travel else [])
         theta0 = np.concatenate([theta0, extra])
         train = ~self.seg_held
