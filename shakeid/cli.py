@@ -23,6 +23,7 @@ from .helpformat import Parser
 from .lab_options import add_lab_parsers, add_sweep_shape
 from .ooc_cmd import add_out_of_core_options
 from .param_options import add_estimator_options, estimator_kwargs
+from .plan_cmd import add_plan_parser
 
 EXIT_USAGE = 2
 
@@ -341,6 +342,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_campaign_parser(sub)
     add_export_parser(sub)
     add_frf_parser(sub)
+    add_plan_parser(sub)
     q = sub.add_parser("simulate", help="write a synthetic recording of the simulated rig (CSV + truth JSON)")
     q.add_argument("--out", required=True, metavar="FILE.csv",
                    help="the recording (t, table_acc, mass_acc); the truth goes to FILE.truth.json")
