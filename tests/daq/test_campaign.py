@@ -22,8 +22,8 @@ def test_the_example_plan_expands_in_run_order():
     plan = load_plan(EXAMPLE)
     sweeps = plan.sweeps()
     assert [(s.index, s.amplitude_mm, s.direction) for s in sweeps] == [
-        (1, 0.4, "up"), (2, 0.4, "down"), (3, 0.8, "up"), (4, 0.8, "down"),
-        (5, 1.2, "up"), (6, 1.2, "down"), (7, 1.6, "up"), (8, 1.6, "down")]
+        (1, 0.3, "up"), (2, 0.3, "down"), (3, 0.6, "up"), (4, 0.6, "down"),
+        (5, 0.9, "up"), (6, 0.9, "down"), (7, 1.2, "up"), (8, 1.2, "down")]
     assert all((s.f_start_hz, s.f_end_hz) == ((1.0, 20.0) if s.direction == "up" else (20.0, 1.0)) for s in sweeps)
     assert {(s.duration_s, s.settle_s) for s in sweeps} == {(120.0, 2.0)}
     assert plan_violation(Limits(), plan) is None  # the example runs on the default limits

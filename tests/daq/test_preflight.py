@@ -82,6 +82,20 @@ def test_a_sweep_near_the_travel_is_warned():
     assert quiet.refusal is None and quiet.warnings == []
 
 
+def test_the_example_campaign_passes_and_a_louder_one_is_refused_by_its_sweep():
+    """examples/campaign.toml passes the preflight on the simulated rig; at 1.6 mm (its amplitudes before) its
+    7th sweep, 1.6 mm upward, is refused by name."""
+    from pathlib import Path
+
+    from daq.campaign import load_plan, plan_prediction
+
+    plan = load_plan(Path(__file__).resolve().parents[2] / "examples" / "campaign.toml")
+    assert plan_prediction(RESPONSE, RIG.limits, plan) == (None, {})
+    louder = dataclasses.replace(plan, amplitudes_mm=(0.4, 0.8, 1.2, 1.6))
+    refusal, _ = plan_prediction(RESPONSE, RIG.limits, louder)
+    assert refusal.startswith("sweep 7 of 8 (1.6 mm, up): the mass would hit the end stops")
+
+
 def test_the_accelerometer_range_refuses_on_its_own():
     """A rig without end stops whose mass accelerometer has a +-20 m/s^2 range: the 60 s 1.3 mm sweep
     (29.1 m/s^2 on the mass) is refused for the acceleration, with its frequency."""
