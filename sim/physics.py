@@ -35,12 +35,10 @@ import math
 from identify.model import SparseModel
 from identify.terms import FeatureSpace
 
-#: Plain-term physics the simulator describes itself: {name: {term: weight}}, F = value * sum(weight * term).
-#: asymmetric_stiffness is given for the q > 0 side; asymmetric_side = -1 flips the |q2| weight.
-SIM_TERM_EFFECTS = {
-    "cubic_damping": {"q1^3": 1.0},
-    "asymmetric_stiffness": {"q2": 0.5, "|q2|": 0.5},
-}
+#: Plain-term physics built here rather than by RigParameters' own path; every effect's force,
+#: F = value * sum(weight * term), is its class's (identify.effects, Effect.force). asymmetric_stiffness is
+#: given for the q > 0 side; asymmetric_side = -1 flips the |q2| weight.
+SIM_TERM_EFFECTS = ("cubic_damping", "asymmetric_stiffness")
 #: Effect names that are not `effects` entries but fields (physics) or sensor faults (measurement).
 NOT_AN_EFFECTS_ENTRY = {
     "end_stop": "RigParameters end_stop_travel_mm / end_stop_lower_mm / end_stop_upper_mm",
@@ -159,7 +157,7 @@ def build_model(rig, q1_base: dict, end_stops: bool) -> SparseModel:
         add("q1_dot", f"{spring}*drift", -k * rig.stiffness_drift / m)
     from identify.effects import CATALOG
     for name, value in rig.effects.items():
-        weights = dict(SIM_TERM_EFFECTS[name]) if name in SIM_TERM_EFFECTS else {t: 1.0 for t in CATALOG[name].terms}
+        weights = dict(CATALOG[name].force)
         if name == "asymmetric_stiffness" and rig.asymmetric_side == -1:
             weights["|q2|"] = -weights["|q2|"]
         for term, w in weights.items():

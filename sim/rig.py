@@ -144,8 +144,8 @@ class RigParameters:
         if physics.general(self):
             return physics.build_model(self, q1, end_stops)
         for name, coef in self.effects.items():
-            for term in CATALOG[name].terms:
-                q1[term] = q1.get(term, 0.0) - coef / m
+            for term, weight in CATALOG[name].force.items():  # the effect's own force (identify.effects)
+                q1[term] = q1.get(term, 0.0) - coef * weight / m
         if not (end_stops and self.end_stops):
             return SparseModel({"q1_dot": q1, "q2_dot": {"q1": 1.0}})
         q1.update({"stop(q2)": -self.contact_stiffness_n_per_m / m, "q1*contact(q2)": -self.contact_damping_ns_per_m / m})

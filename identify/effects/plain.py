@@ -43,3 +43,4 @@ class AsymmetricStiffness(Effect):
     description = ("a spring stiffer on one side: F = dk max(q2, 0) = dk/2 (q2 + |q2|), the |q2| term next to "
                    "the model's own q2")
     group = "asymmetry"
+    force = {"q2": 0.5, "|q2|": 0.5}  # the simulator's: dk max(q2, 0) (sim.physics flips it for the lower side)
