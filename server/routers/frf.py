@@ -7,7 +7,12 @@ import json
 from pathlib import Path as FsPath
 
 from fastapi import APIRouter, Depends, HTTPException
+from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse
+from pydantic import Field
+
+from daq.campaign import NAME_PATTERN
+from identify.errors import ShakeidError
 
 from .. import schemas
 from ..deps import ERRORS, Id, Services, services, viewer
@@ -61,3 +66,34 @@ def _campaign_file(svc: Services, campaign_id: str, name: str) -> FsPath:
         raise HTTPException(404, f"no frequency response for campaign {campaign_id}: its joint identification "
                                  f"{job['id']} {why}")
     return path
+
+
+class ProposalIn(schemas.Strict):
+    """What to propose a campaign from: a recording's latest identified model (default: the rig's latest,
+    as the preflight predicts with, or its nominal parameters)."""
+    recording_id: str | None = Field(None, pattern=r"^[0-9a-f]{12}$", description="whose model (default: the rig's latest)")
+    name: str = Field("fold-bracket", pattern=NAME_PATTERN, description="the proposed campaign's name")
+    jump_amplitudes: int = Field(2, ge=1, le=5, description="amplitudes with a predicted jump (one more below its onset)")
+
+
+@router.post("/api/campaigns/proposal", responses={422: {"model": schemas.Problem}})
+async def propose(body: ProposalIn, svc: Services = Depends(services)) -> dict:
+    """A campaign proposed from the model's predicted folds (daq.plan, `shakeid plan-campaign`): `plan`
+    (for POST /api/campaigns) whose amplitudes and band bracket each predicted jump, every sweep inside
+    the PLC's limits and predicted inside the rig's; `amplitudes` with the predicted jumps and peaks.
+    Nothing moves. 422 when the model predicts no jump within what the rig takes."""
+    from daq.plan import propose_campaign, with_model
+    from identify.model import SparseModel
+    from sim.config import RigConfig
+
+    from ..preflight import rig_response
+
+    rig = rig_response(svc.catalog, svc.settings.rig)
+    if body.recording_id:
+        doc = json.loads(latest_result(svc, body.recording_id, "identify", "model.json").read_text())
+        rig = with_model(rig, SparseModel.from_dict(doc), f"the model identified from recording {body.recording_id}")
+    limits = (svc.settings.rig or RigConfig()).limits
+    try:
+        return await run_in_threadpool(propose_campaign, rig, limits, body.name, body.jump_amplitudes)
+    except ShakeidError as exc:
+        raise HTTPException(422, f"no campaign proposed from {rig.source}: {exc}") from None

@@ -69,3 +69,18 @@ async function showCampaign(id) {
     setTimeout(() => { if (openCampaign === id && location.hash === `#/campaign/${id}`) showCampaign(id); }, 2000);
   }
 }
+
+// -- the campaign builder's proposal: amplitudes and band from the rig model's predicted folds (daq.plan)
+$("c-propose").onclick = async () => {
+  try {
+    const p = await api("POST", "/api/campaigns/proposal", {name: $("c-name").value.trim() || "fold-bracket"});
+    const s = p.plan.sweep;
+    $("c-amps").value = p.plan.amplitudes_mm.join(", ");
+    $("c-f0").value = s.f_start_hz; $("c-f1").value = s.f_end_hz; $("c-dur").value = s.duration_s; $("c-settle").value = s.settle_s;
+    $("c-up").checked = p.plan.directions.includes("up"); $("c-down").checked = p.plan.directions.includes("down");
+    $("c-rest").value = p.plan.rest_between_s;
+    planHint();
+    say(`proposed from ${p.model_source}: the jump from ${p.onset_mm.toFixed(2)} mm, up to ${p.largest_mm.toFixed(2)} mm inside the rig's limits; ` +
+        `band ${s.f_start_hz}-${s.f_end_hz} Hz brackets every predicted jump`);
+  } catch (e) { fail("no campaign proposed")(e); }
+};

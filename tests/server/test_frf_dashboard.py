@@ -71,6 +71,27 @@ def test_recording_page_shows_the_overlay(page, service):  # noqa: F811
     assert popup_json(page, "#rec-frf-json") == frf
 
 
+def test_campaign_builder_proposes_from_the_model(page, service):  # noqa: F811
+    """The builder's "propose from the model" fills the campaign's fields with POST /api/campaigns/proposal's
+    plan (the rig's latest model: the recording identified above), which brackets its predicted jumps."""
+    page.fill("#c-name", "frf-proposed")
+    page.click("#c-propose")
+    page.locator(".msg", has_text="proposed from").wait_for(timeout=240_000)
+    with service.client() as api:
+        proposal = api.post("/api/campaigns/proposal", json={"name": "frf-proposed"}, timeout=240).json()
+        refused = api.post("/api/campaigns/proposal", json={"recording_id": "000000000000"})
+    plan, sweep = proposal["plan"], proposal["plan"]["sweep"]
+    assert [float(a) for a in page.input_value("#c-amps").split(",")] == plan["amplitudes_mm"]
+    assert [float(page.input_value(f"#c-{k}")) for k in ("f0", "f1", "dur")] == \
+        [sweep["f_start_hz"], sweep["f_end_hz"], sweep["duration_s"]]
+    assert page.is_checked("#c-up") and page.is_checked("#c-down")
+    folding = [a for a in proposal["amplitudes"] if a["jump_down_hz"] is not None]
+    assert len(folding) == 2 and proposal["amplitudes"][0]["jump_down_hz"] is None
+    for a in folding:
+        assert sweep["f_start_hz"] < a["jump_up_hz"] <= a["jump_down_hz"] < sweep["f_end_hz"]
+    assert refused.status_code == 404 and "no recording 000000000000" in refused.json()["detail"]
+
+
 def test_campaign_page_shows_every_amplitude(page, service):  # noqa: F811
     with service.client() as api:
         wait_idle(api)
