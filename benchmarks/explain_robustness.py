@@ -120,7 +120,7 @@ def line(r: dict) -> str:
     tags = (f"{'v' if d['sweep']['f_start_hz'] > d['sweep']['f_end_hz'] else '^'} Z={d['sweep']['amplitude_mm']:.1f}"
             f" {r['record_s']:.0f}s" + "".join(f" {k}" for k in r["nuisances"]))
     return (f"{'OK ' if r['right'] else 'BAD'} {head} {tags:24s} -> {named:50s} "
-            f"closed={'-' if closed is None else f'{closed:.2f}'} {r['seconds']:.1f}s{flags}")
+            f"closed={'-' if closed is None else f'{closed:.2f}'} {r['seconds']:.1f}s ({r['cpu_seconds']:.1f} s CPU){flags}")
 
 
 def calibration(pairs: list[tuple[float, bool]]) -> list[dict]:
@@ -252,6 +252,20 @@ def write(out: Path, seed: int, records: list[dict], meta: dict) -> None:
     out.write_text(json.dumps({"seed": seed, **meta, "summary": s, "cases": records}, indent=1, default=float))
 
 
+def summarise(paths: list[Path]) -> int:
+    """Print the summary of each written run and of all of them pooled."""
+    pooled = []
+    for p in paths:
+        d = json.loads(p.read_text())
+        print(f"\n== {p}: seed {d['seed']}, {d.get('command', '')}, load {d.get('load_at_start')} -> {d.get('load_at_end')}")
+        print_summary(d["summary"])
+        pooled += d["cases"]
+    if len(paths) > 1:
+        print(f"\n== pooled: {len(paths)} runs")
+        print_summary(summary(pooled, sum("draw_error" in r for r in pooled)))
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--cases", type=int, default=150, help="cases 0..N-1 (default 150)")
@@ -260,7 +274,10 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=os.cpu_count(), help="processes (default: os.cpu_count())")
     ap.add_argument("--budget-min", type=float, default=float("inf"), help="start no case after this many minutes")
     ap.add_argument("--json", help="write every case and the summary here (rewritten after each case)")
+    ap.add_argument("--summarise", nargs="+", metavar="JSON", help="print the summary of written runs, and pooled")
     args = ap.parse_args(argv)
+    if args.summarise:
+        return summarise([Path(p) for p in args.summarise])
     if args.seed is None:
         args.seed = int(np.random.SeedSequence().entropy % 2**32)
     cases = args.case if args.case else list(range(args.cases))
