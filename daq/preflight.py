@@ -6,7 +6,7 @@ the rig's smooth model: q1 = q', q2 = q = x - z) at PREDICTION_SAMPLES_PER_PERIO
 sweep's top frequency, one RK4 step per sample; peaks are refined by a parabola through the three samples
 around the largest. Against the same model run as the rig simulator runs it (2048 Hz, RK4 steps of
 h omega <= 0.1) the peaks agree within 0.12 % (1-20 Hz, 20-300 s, 1.0-1.3 mm on the Table 1 rig;
-tests/daq/test_preflight.py), and a 300 s sweep predicts in about 0.2 s on a loaded 2-core machine.
+tests/daq/test_preflight.py), and a 300 s sweep predicts in 0.15-0.33 s on a 2-core machine at load 6-21.
 
 A predicted peak above a limit refuses the sweep (the mass accelerometer's range: its samples would clip;
 the end-stop travel: the mass would hit the stops, whose impacts clip it too); above WARN_SHARE of a limit
@@ -171,7 +171,8 @@ def assess(rig: RigResponse, sweep, suggest: bool = True) -> Verdict:
     lower, upper = rig.travel_mm
     travel = min(lower, upper)
     shares = _shares(rig, p)
-    record = {"source": rig.source, "mass_peak_ms2": round(p.mass_peak_ms2, 3), "mass_peak_hz": round(p.mass_peak_hz, 2),
+    record = {"source": rig.source, "mass_peak_ms2": round(p.mass_peak_ms2, 3),
+              "mass_peak_hz": round(p.mass_peak_hz, 2),
               "mass_range_ms2": round(rig.mass_range_ms2, 3), "travel_peak_mm": round(p.travel_peak_mm, 3),
               "travel_peak_hz": round(p.travel_peak_hz, 2), "travel_mm": None if math.isinf(travel) else travel,
               "table_peak_ms2": round(p.table_peak_ms2, 3), "warn_share": WARN_SHARE,

@@ -77,7 +77,8 @@ def test_a_sweep_near_the_travel_is_warned():
     assert verdict.refusal is None and len(verdict.warnings) == 1
     assert verdict.warnings[0].startswith("predicted relative travel 17.1 mm at 6.4")
     assert "98 % of the end-stop travel 17.5 mm" in verdict.warnings[0]
-    assert verdict.record["warnings"] == verdict.warnings and verdict.record["travel_peak_mm"] == pytest.approx(17.1, abs=0.05)
+    assert verdict.record["warnings"] == verdict.warnings
+    assert verdict.record["travel_peak_mm"] == pytest.approx(17.1, abs=0.05)
     quiet = assess(RESPONSE, SineSweep(1.0, 20.0, 60.0, 1.0))
     assert quiet.refusal is None and quiet.warnings == []
 
