@@ -1,30 +1,37 @@
 """Identification speed end to end, next to its anchors, in one process so the ratios hold on a busy machine.
 
-    python benchmarks/identify_speed.py [--sizes 200000 1000000] [--repeat 3] [--no-simulation] [--validation-parts]
-        [--uncertainty-parts]
+    python benchmarks/identify_speed.py [--sizes 1000000] [--repeat 3] [--busy 0 1] [--no-cli] [--no-pysindy]
+        [--no-simulation] [--validation-parts] [--uncertainty-parts] [--seed S]
+
+Runs in the user's default environment: BLAS as installed (OpenBLAS starts one thread per core; the
+identification limits itself, identify.threads), scipy.fft's default one worker. Each --busy level N
+runs the whole measurement with N processes spinning `while True: pass` beside it (default: 0, then 1);
+the load average and BLAS threads are printed with each block, so an "idle" block on a machine others
+load says so.
 
 Recording: the paper's Table 1 rig, a 1-20 Hz sweep at 1.2 mm over n / 2048 Hz - 2 s plus 2 s at rest,
-two accelerometers at 0.5 % noise (sim.synth.run_sweep). At 1.2 mm the slow sweep's resonance peaks at
-15.4 mm (n = 1e6), clear of the 17.5 mm end stops; at 1.3 mm it jumps onto them.
+two accelerometers at 0.5 % noise (sim.synth.run_sweep), fresh noise every run: the seed is printed
+(--seed repeats one). At 1.2 mm the slow sweep's resonance peaks at 15.4 mm (n = 1e6), clear of the
+17.5 mm end stops; at 1.3 mm it jumps onto them.
 
 For each record length n, timed in rounds (anchor, then each call once per round; best of --repeat):
-  anchor "one pass over the data": the 16-column library (freshly allocated) + A.T@A + one rfft/irfft pair
-      at next_fast_len(n) per recorded channel (table and mass acceleration);
+  anchor "one pass over the data": the 16-column library (freshly allocated) + A.T@A + one rfft/irfft
+      pair at next_fast_len(n) per recorded channel (table and mass acceleration);
   shakeid, the public call: SparseIdentifier(validate=False).fit(recording) and SparseIdentifier().fit
-      (with the free-run validation), and its parts (SparseIdentifier.timings_); both also without the
-      uncertainty step (bias_replicates=0, placements=0), whose cost does not depend on the rest;
-  PySINDy end to end from the same recording: the relative acceleration integrated to velocity and
-      displacement by cumulative trapezoid with a straight line removed (what a PySINDy user has to hand),
-      then SINDy.fit with the same 16 columns (poly degree 4 in q1, q2, plus zdd), STLSQ, and the measured
-      derivatives given (x_dot = (q1_dot, q1)); no validation.
-Targets (issue 11): fit <= 2x the anchor, fit with validation <= 3x, PySINDy end to end / fit >= 10x.
-Everything runs on one thread (BLAS limited to one unless OPENBLAS_NUM_THREADS / OMP_NUM_THREADS are set;
-scipy.fft uses one worker by default), and each figure is given as wall time and as the process's CPU
-time: on a shared machine the CPU-time ratios are the ones a load spike does not move. Every timed call
-starts with shakeid's twiddle cache empty (identify.spectral), so a repeat of the same record pays what a
-user's first call on a new recording does (~1 ms of a million-sample fit; 0.02-0.04 s before the first
-row of twiddles came from two short tables of exponentials); scipy's own FFT
-plan cache, which cannot be cleared, is warm for the anchor and the calls alike.
+      (with the free-run validation), and its parts (SparseIdentifier.timings_: chain, library and Gram,
+      path, selection and refit, uncertainty, validation); both also without the uncertainty step
+      (bias_replicates=0, placements=0), whose cost does not depend on the rest;
+  the CLI (largest n): `shakeid identify FILE.mat --json` as a process, default threads and
+      OPENBLAS_NUM_THREADS=1 in alternating rounds (user CPU), `import shakeid.cli` alone, and the
+      call's parts from its JSON;
+  PySINDy at equal quality (largest n, first --busy level): given shakeid's chain states (its own
+      trapezoidal integration recovers no support), SINDy.fit with the same 16 columns, STLSQ on
+      normalized columns at the first threshold that recovers the true support (speedkit.py).
+Targets (issue 30): fit <= 1.5x the anchor, fit with validation <= 2.5x, idle and with one busy process;
+the CLI's user CPU with default threads within 1.3x of one thread under load. Each figure is given as
+wall time and as the process's CPU time. Every timed call starts with shakeid's twiddle cache empty
+(identify.spectral), so a repeat of the same record pays what a user's first call on a new recording
+does; scipy's own FFT plan cache, which cannot be cleared, is warm for the anchor and the calls alike.
 
 Then free-run simulation of a 60 s sweep against scipy solve_ivp (RK45, rtol 1e-8) at equal accuracy:
 both integrate the same cubic-spline input; the error of each is measured against DOP853 at rtol 1e-12,
@@ -35,19 +42,18 @@ from __future__ import annotations
 
 import argparse
 import gc
-import os
 import sys
+import tempfile
 import time
-import warnings
 from pathlib import Path
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")  # before numpy loads its BLAS: one thread, like the FFTs
-
-import numpy as np  # noqa: E402
-from scipy.fft import irfft, next_fast_len, rfft  # noqa: E402
+import numpy as np
+from scipy.fft import irfft, next_fast_len, rfft
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import speedkit  # noqa: E402
 
 from identify.chain import reconstruct_states  # noqa: E402
 from identify.identifier import SparseIdentifier  # noqa: E402
@@ -62,7 +68,7 @@ from sim.synth import run_sweep  # noqa: E402
 
 FS = 2048.0
 AMPLITUDE_MM = 1.2
-TARGETS = {"fit": 2.0, "fit_validated": 3.0, "pysindy": 10.0}
+TARGETS = {"fit": 1.5, "fit_validated": 2.5, "cli_threads": 1.3}
 PARTS = ("chain", "library_gram", "path", "selection_refit", "offset", "refit_uncertainty", "validation")
 
 
@@ -85,8 +91,9 @@ def best_of(fn, repeat):
     return (min(t[0] for t in times), min(t[1] for t in times)), out
 
 
-def sweep_recording(n: int):
-    run = run_sweep(sweep=SineSweep(1.0, 20.0, n / FS - 2.0, AMPLITUDE_MM), settle_s=2.0)
+def sweep_recording(n: int, seed: int | None = None):
+    """The benchmark's recording of n samples; its sensor noise drawn from `seed` (None: fresh)."""
+    run = run_sweep(sweep=SineSweep(1.0, 20.0, n / FS - 2.0, AMPLITUDE_MM), settle_s=2.0, seed=seed)
     return run.recording.slice(0, n), run.truth
 
 
@@ -123,30 +130,10 @@ def chain_transforms(rec, sig) -> dict:
     return out
 
 
-def pysindy_end_to_end(rec):
-    """PySINDy from the recording: trapezoidal integration (line removed) + SINDy.fit given derivatives."""
-    import pysindy as ps
-    from scipy.integrate import cumulative_trapezoid
-
-    def detrended_integral(x):
-        y = cumulative_trapezoid(x, dx=rec.dt, initial=0.0)
-        t = np.arange(y.size)
-        return y - np.polyval(np.polyfit(t, y, 1), t)
-
-    qdd = rec.output - rec.input
-    q1 = detrended_integral(qdd)
-    q2 = detrended_integral(q1)
-    lib_ps = ps.GeneralizedLibrary([ps.PolynomialLibrary(degree=4), ps.IdentityLibrary()],
-                                   inputs_per_library=[[0, 1], [2]])
-    model = ps.SINDy(optimizer=ps.STLSQ(threshold=0.1), feature_library=lib_ps)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        model.fit(np.column_stack([q1, q2]), t=rec.dt, x_dot=np.column_stack([qdd, q1]), u=rec.input[:, None])
-    return model
-
-
-def identification_figures(n: int, repeat: int, pysindy: bool = True) -> dict:
-    rec, truth = sweep_recording(n)
+def identification_figures(n: int, repeat: int, seed: int, pysindy: bool = False, cli: bool = False) -> dict:
+    """Anchor, the public call and its parts in rounds on a recording of n samples with noise from `seed`;
+    with cli, the CLI on the same recording written to a .mat file; with pysindy, PySINDy at equal quality."""
+    rec, truth = sweep_recording(n, seed)
     sig = reconstruct_states(rec)  # states for the anchor's library (not timed)
     X, U = (sig.q1, sig.q2), sig.input[:, None]
     lib = Library()
@@ -167,12 +154,17 @@ def identification_figures(n: int, repeat: int, pysindy: bool = True) -> dict:
     for key, rs in runs.items():  # best wall and best CPU time; parts (wall) of the fastest run
         f[key] = dict(min(rs, key=lambda r: r["total"][0]))
         f[key]["total"] = (min(r["total"][0] for r in rs), min(r["total"][1] for r in rs))
+    if cli:
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "sweep.mat"
+            speedkit.write_mat(path, rec)
+            f["cli"] = speedkit.cli_figures(path, repeat)
     if pysindy:
-        f["pysindy"], _ = best_of(lambda: pysindy_end_to_end(rec), max(1, repeat - 1))
+        f["pysindy"] = speedkit.pysindy_equal_quality(sig)
     return f
 
 
-def validation_parts(n: int, repeat: int) -> dict:
+def validation_parts(n: int, repeat: int, seed: int) -> dict:
     """What the free-run validation of the fitted (training-only) model spends, CPU seconds, best of
     `repeat`: validate() as a whole, and its parts done alone: the input on the RK4 half-step grid (from
     the chain's spectrum, StateSignals.input_fine; what a run in steps of `stride` samples reads), the
@@ -183,7 +175,7 @@ def validation_parts(n: int, repeat: int) -> dict:
     from identify.simulate import choose_step
     from identify.validation import _runs, _runs_of, fit_metrics, heldout_and_all_metrics, validate
 
-    rec, _ = sweep_recording(n)
+    rec, _ = sweep_recording(n, seed)
     ident = SparseIdentifier(validate=False, bias_replicates=0, placements=0).fit(rec)
     sig, model, rows = ident.states_, ident.training_model_, ident.heldout_rows_
     v = sig.valid
@@ -213,7 +205,7 @@ def validation_parts(n: int, repeat: int) -> dict:
                            + [fit_metrics(held(sig.q1[v]), held(sim[:, 0]))])}
 
 
-def uncertainty_parts(n: int, repeat: int) -> dict:
+def uncertainty_parts(n: int, repeat: int, seed: int) -> dict:
     """What the uncertainty step (identify.uncertainty.assess, as SparseIdentifier runs it) spends on the
     default fit, CPU seconds, best of `repeat`, its parts done alone: the all-rows refits with their
     block-robust covariances, the noise floors (read from the band search's Welch spectra, whose cost is
@@ -227,7 +219,7 @@ def uncertainty_parts(n: int, repeat: int) -> dict:
     from identify.identifier import effective_samples, holdout_blocks
     from identify.noise_spread import noise_variance
 
-    rec, _ = sweep_recording(n)
+    rec, _ = sweep_recording(n, seed)
     ident = SparseIdentifier(validate=False, bias_replicates=0, placements=0).fit(rec)
     sig, lib = ident.states_, ident.library_
     edges, held = holdout_blocks(sig)
@@ -258,13 +250,13 @@ def uncertainty_parts(n: int, repeat: int) -> dict:
             "paths": cpu(lambda: opt.fit_paths(trains, start=ident.path_))}
 
 
-def padding_lever(n: int, repeat: int) -> dict:
+def padding_lever(n: int, repeat: int, seed: int) -> dict:
     """What the chain's zero padding costs: the chain as it is (PAD_PERIODS periods of f_lo, at most the
     record's length) against the previous rule (always the record's length, 2n in all), CPU time and how
     far the states move (max |difference| / peak on valid rows)."""
     import identify.chain as chain
 
-    rec, _ = sweep_recording(n)
+    rec, _ = sweep_recording(n, seed)
     t_cut, cut = best_of(lambda: reconstruct_states(rec), repeat)
     product = chain.PAD_PERIODS
     chain.PAD_PERIODS = 1e12
@@ -315,10 +307,60 @@ def _parts(timings: dict) -> str:
     return ", ".join(f"{k} {timings[k]:.3f}" for k in PARTS if k in timings)
 
 
+def _print_identification(n: int, f: dict) -> None:
+    a, fit, val = f["anchor"], f["fit"], f["fit_validated"]
+    for i, kind in enumerate(("wall", "cpu")):
+        print(f"{n if i == 0 else '':>9} {kind:>5s} {a['total'][i]:8.3f} {fit['total'][i]:8.3f} "
+              f"{fit['total'][i] / a['total'][i]:6.2f} {val['total'][i]:8.3f} {val['total'][i] / a['total'][i]:6.2f}",
+              flush=True)
+    print(f"          anchor (wall/cpu): library {a['library'][0]:.3f}/{a['library'][1]:.3f}, A.T@A "
+          f"{a['gram'][0]:.3f}/{a['gram'][1]:.3f}, 2 FFT pairs at next_fast_len(n) "
+          f"{a['fft_pairs'][0]:.3f}/{a['fft_pairs'][1]:.3f}")
+    tr = f["transforms"]
+    print(f"          the chain's transforms (wall/cpu): 2 forward + 4 inverse rfft, padded as the chain pads, band "
+          f"bins, single precision {tr['padded_ffts'][0]:.3f}/{tr['padded_ffts'][1]:.3f}, 2 Welch spectra "
+          f"{tr['welch'][0]:.3f}/{tr['welch'][1]:.3f} = {(tr['padded_ffts'][1] + tr['welch'][1]) / a['total'][1]:.2f}"
+          " x the anchor (cpu)")
+    print(f"          fit parts (wall, fastest run): {_parts(fit['parts'])}")
+    core, core_val = f["fit_no_uncertainty"], f["validated_no_uncertainty"]
+    print(f"          fit without the uncertainty step (bias_replicates=0, placements=0; all-rows refit kept), "
+          f"wall/cpu: {core['total'][0]:.3f}/{core['total'][1]:.3f} = {core['total'][1] / a['total'][1]:.2f} x the "
+          f"anchor (cpu); with the free-run validation {core_val['total'][0]:.3f}/{core_val['total'][1]:.3f} = "
+          f"{core_val['total'][1] / a['total'][1]:.2f} x; validation {core_val['total'][1] - core['total'][1]:.3f} s "
+          "CPU by difference")
+    print(f"          fit+val parts (wall, fastest run): {_parts(val['parts'])} (verdict {val['verdict']})")
+    print(f"          peak |q2| {f['peak_mm']:.1f} mm, {f['contact_samples']} samples on the end stops; "
+          f"model: {fit['model']!r}", flush=True)
+    if "cli" in f:
+        c = f["cli"]
+        print(f"          CLI `shakeid identify FILE.mat --json` (best of rounds, wall/user/sys s): default threads "
+              f"{c['default']['wall']:.2f}/{c['default']['user']:.2f}/{c['default']['sys']:.2f}, one BLAS thread "
+              f"{c['one_thread']['wall']:.2f}/{c['one_thread']['user']:.2f}/{c['one_thread']['sys']:.2f}: user CPU "
+              f"default / one thread {c['default']['user'] / c['one_thread']['user']:.2f} (target <= "
+              f"{TARGETS['cli_threads']:g}); `import shakeid.cli` alone {c['import']['wall']:.2f}/"
+              f"{c['import']['user']:.2f}/{c['import']['sys']:.2f}; its fit parts (wall) "
+              + ", ".join(f"{k} {v:.3f}" for k, v in c["parts"].items()) + f" ({c['status']})", flush=True)
+    if "pysindy" in f:
+        ps_ = f["pysindy"]
+        if ps_["threshold"] is None:
+            print(f"          PySINDy: no threshold of {[t for t, _ in ps_['tried']]} recovered the true support "
+                  f"(terms in the first equation: {[k for _, k in ps_['tried']]})")
+        else:
+            print(f"          PySINDy at equal quality (given shakeid's chain states; STLSQ threshold "
+                  f"{ps_['threshold']:g} x sqrt(rows), normalized columns; thresholds tried {[t for t, _ in ps_['tried']]}): "
+                  f"wall/cpu {ps_['time'][0]:.3f}/{ps_['time'][1]:.3f} = {ps_['time'][1] / fit['total'][1]:.1f} x "
+                  f"shakeid's whole fit (cpu), {ps_['time'][1] / a['total'][1]:.1f} x the anchor; first equation "
+                  + ", ".join(f"{k} {v:.5g}" for k, v in ps_["model"].items()), flush=True)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--sizes", type=int, nargs="*", default=[200_000, 1_000_000])
+    p.add_argument("--sizes", type=int, nargs="*", default=[1_000_000])
     p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--busy", type=int, nargs="*", default=[0, 1],
+                   help="busy processes beside the measurement, one block per level (default: 0, then 1)")
+    p.add_argument("--seed", type=int, default=None, help="the noise's seed (default: fresh, printed)")
+    p.add_argument("--no-cli", action="store_true", help="skip timing `shakeid identify` as a process")
     p.add_argument("--no-pysindy", action="store_true", help="skip the PySINDy anchor")
     p.add_argument("--no-simulation", action="store_true", help="skip the free-run vs solve_ivp figures")
     p.add_argument("--validation-parts", action="store_true",
@@ -333,57 +375,40 @@ def main(argv=None) -> int:
             import pysindy  # noqa: F401 - the anchor; checked before minutes of timing, not after
         except ImportError:
             p.error("the PySINDy anchor is not installed: `make bench` installs it (.[bench]), or pass --no-pysindy")
-    print(f"{'n':>9s} {'time':>5s} {'anchor':>8s} {'fit':>8s} {'ratio':>6s} {'fit+val':>8s} {'ratio':>6s} "
-          f"{'pysindy':>8s} {'speedup':>8s}")
-    print(f"{'':9s} {'':5s} {'':8s} {'':8s} {'<=' + format(TARGETS['fit'], 'g'):>6s} {'':8s} "
-          f"{'<=' + format(TARGETS['fit_validated'], 'g'):>6s} {'':8s} {'>=' + format(TARGETS['pysindy'], 'g'):>8s}"
-          "   seconds, best of --repeat rounds; ratio = call / anchor; speedup = PySINDy / fit")
-    for n in args.sizes:
-        f = identification_figures(n, args.repeat, pysindy=not args.no_pysindy)
-        a, fit, val = f["anchor"], f["fit"], f["fit_validated"]
-        ps_t = f.get("pysindy")
-        for i, kind in enumerate(("wall", "cpu")):
-            print(f"{n if i == 0 else '':>9} {kind:>5s} {a['total'][i]:8.3f} {fit['total'][i]:8.3f} "
-                  f"{fit['total'][i] / a['total'][i]:6.2f} {val['total'][i]:8.3f} {val['total'][i] / a['total'][i]:6.2f} "
-                  + (f"{ps_t[i]:8.3f} {ps_t[i] / fit['total'][i]:8.1f}" if ps_t else f"{'-':>8s} {'-':>8s}"), flush=True)
-        print(f"          anchor (wall/cpu): library {a['library'][0]:.3f}/{a['library'][1]:.3f}, A.T@A "
-              f"{a['gram'][0]:.3f}/{a['gram'][1]:.3f}, 2 FFT pairs at next_fast_len(n) "
-              f"{a['fft_pairs'][0]:.3f}/{a['fft_pairs'][1]:.3f}")
-        tr = f["transforms"]
-        print(f"          the chain's transforms (wall/cpu): 2 forward + 4 inverse rfft, padded as the chain pads, band bins, single precision "
-              f"{tr['padded_ffts'][0]:.3f}/{tr['padded_ffts'][1]:.3f}, 2 Welch spectra "
-              f"{tr['welch'][0]:.3f}/{tr['welch'][1]:.3f} = {(tr['padded_ffts'][1] + tr['welch'][1]) / a['total'][1]:.2f}"
-              " x the anchor (cpu)")
-        print(f"          fit parts (wall, fastest run): {_parts(fit['parts'])}")
-        core = f["fit_no_uncertainty"]
-        print(f"          fit without the uncertainty step (bias_replicates=0, placements=0; all-rows refit kept), "
-              f"wall/cpu: {core['total'][0]:.3f}/{core['total'][1]:.3f} = {core['total'][1] / a['total'][1]:.2f} x the "
-              f"anchor (cpu); PySINDy / it {ps_t[1] / core['total'][1] if ps_t else float('nan'):.1f} (cpu)")
-        core_val = f["validated_no_uncertainty"]
-        print(f"          the same with the free-run validation, wall/cpu: {core_val['total'][0]:.3f}/"
-              f"{core_val['total'][1]:.3f} = {core_val['total'][1] / a['total'][1]:.2f} x the anchor (cpu); validation "
-              f"{core_val['parts']['validation']:.3f} s wall in its fastest run, "
-              f"{core_val['total'][1] - core['total'][1]:.3f} s CPU by difference")
-        print(f"          fit+val parts (wall, fastest run): {_parts(val['parts'])} (verdict {val['verdict']})")
-        print(f"          peak |q2| {f['peak_mm']:.1f} mm, {f['contact_samples']} samples on the end stops; "
-              f"model: {fit['model']!r}", flush=True)
+    seed = int(np.random.SeedSequence().entropy % 2**32) if args.seed is None else args.seed
+    print(f"seed {seed} (--seed {seed} repeats this run's noise); BLAS as installed: {speedkit.blas_threads()} "
+          "thread(s); identify.threads limits its fits to one")
+    largest = max(args.sizes) if args.sizes else None
+    for level, n_busy in enumerate(args.busy):
+        with speedkit.busy(n_busy):
+            print(f"\n--- {n_busy} busy process(es) beside; {speedkit.load()} at the start")
+            print(f"{'n':>9s} {'time':>5s} {'anchor':>8s} {'fit':>8s} {'ratio':>6s} {'fit+val':>8s} {'ratio':>6s}")
+            print(f"{'':9s} {'':5s} {'':8s} {'':8s} {'<=' + format(TARGETS['fit'], 'g'):>6s} {'':8s} "
+                  f"{'<=' + format(TARGETS['fit_validated'], 'g'):>6s}   seconds, best of --repeat rounds; "
+                  "ratio = call / anchor")
+            for k, n in enumerate(args.sizes):
+                f = identification_figures(n, args.repeat, seed + 1000 * level + k,
+                                           pysindy=not args.no_pysindy and level == 0 and n == largest,
+                                           cli=not args.no_cli and n == largest)
+                _print_identification(n, f)
+            print(f"          {speedkit.load()} at the end of the block", flush=True)
     if args.validation_parts and args.sizes:
-        vp = validation_parts(max(args.sizes), args.repeat)
+        vp = validation_parts(largest, args.repeat, seed)
         print(f"\nfree-run validation, {vp['rows']} rows, {vp['substeps']} RK4 substep(s), steps of {vp['stride']} "
               f"sample(s), CPU s (best of {args.repeat}): validate {vp['validate']:.3f}; alone: input on the half-step "
               f"grid {vp['input_grid']:.3f}, RK4 run {vp['rk4']:.3f} (in steps of one sample {vp['rk4_one_sample']:.3f}), "
               f"the displacement through the band with its 2 derivatives {vp['band_limit']:.3f}, "
               f"7 fit metrics (3 signals held out and all, 1 one-step) {vp['metrics']:.3f}", flush=True)
     if args.uncertainty_parts and args.sizes:
-        up = uncertainty_parts(max(args.sizes), args.repeat)
-        print(f"\nuncertainty step, n = {max(args.sizes)}, CPU s (best of {args.repeat}), parts alone: all-rows refits "
+        up = uncertainty_parts(largest, args.repeat, seed)
+        print(f"\nuncertainty step, n = {largest}, CPU s (best of {args.repeat}), parts alone: all-rows refits "
               f"and covariances {up['refits']:.3f}, closed-form chain bias {up['closed_form']:.3f} (of which noise "
-              f"floors {up['floors']:.3f} (read from the chain's spectra), the noise's share of the variance {up['noise_share']:.3f}), inclusion "
-              f"probabilities ({N_PLACEMENTS} placements) {up['inclusion']:.3f} (of which ADMM paths "
-              f"{up['paths']:.3f})", flush=True)
+              f"floors {up['floors']:.3f} (read from the chain's spectra), the noise's share of the variance "
+              f"{up['noise_share']:.3f}), inclusion probabilities ({N_PLACEMENTS} placements) {up['inclusion']:.3f} "
+              f"(of which ADMM paths {up['paths']:.3f})", flush=True)
     if args.padding_lever and args.sizes:
-        lev = padding_lever(max(args.sizes), args.repeat)
-        print(f"\npadding, n = {max(args.sizes)}: chain CPU {lev['chain_cpu']:.3f} s padded to 2n, "
+        lev = padding_lever(largest, args.repeat, seed)
+        print(f"\npadding, n = {largest}: chain CPU {lev['chain_cpu']:.3f} s padded to 2n, "
               f"{lev['cut_cpu']:.3f} s padded by {lev['periods']:g} periods of f_lo; states move by (max / peak) "
               + ", ".join(f"{k} {d:.1e}" for k, d in lev["difference"].items()), flush=True)
     if args.no_simulation:
