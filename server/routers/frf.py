@@ -3,6 +3,7 @@ identification stored it: a recording's (its latest identify job) and a campaign
 table amplitude of the campaign). docs/frf.md, docs/service.md."""
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path as FsPath
 
@@ -93,7 +94,21 @@ async def propose(body: ProposalIn, svc: Services = Depends(services)) -> dict:
         doc = json.loads(latest_result(svc, body.recording_id, "identify", "model.json").read_text())
         rig = with_model(rig, SparseModel.from_dict(doc), f"the model identified from recording {body.recording_id}")
     limits = (svc.settings.rig or RigConfig()).limits
-    try:
-        return await run_in_threadpool(propose_campaign, rig, limits, body.name, body.jump_amplitudes)
-    except ShakeidError as exc:
-        raise HTTPException(422, f"no campaign proposed from {rig.source}: {exc}") from None
+    key = json.dumps([rig.model.to_dict(), rig.source, rig.mass_range_ms2, rig.table_range_ms2, list(rig.travel_mm),
+                      dataclasses.asdict(limits), body.jump_amplitudes], sort_keys=True)
+    if key not in _PROPOSALS:  # the same model and rig propose the same campaign: computed once (seconds)
+        try:
+            _PROPOSALS[key] = await run_in_threadpool(propose_campaign, rig, limits, "proposal", body.jump_amplitudes)
+        except ShakeidError as exc:
+            _PROPOSALS[key] = HTTPException(422, f"no campaign proposed from {rig.source}: {exc}")
+        while len(_PROPOSALS) > PROPOSALS_KEPT:
+            _PROPOSALS.pop(next(iter(_PROPOSALS)))
+    out = _PROPOSALS[key]
+    if isinstance(out, HTTPException):
+        raise out
+    return {**out, "plan": {**out["plan"], "name": body.name}}
+
+
+#: proposals kept, newest last (a proposal costs seconds of CPU; the dashboard asks again for the same rig)
+PROPOSALS_KEPT = 16
+_PROPOSALS: dict[str, dict | HTTPException] = {}
