@@ -116,8 +116,9 @@ class Rounds:
         held = fitter.seg_held
         c.err = fitter.errors(st)
         reason = admissibility.check(c.name, st.coefficients, cur.coefficients, cur_se, c.fit.se)
-        if not reason and c.kind == "physics" and not c.p_value < self.alpha:
-            reason = f"not significant (Wald p = {c.p_value:.2g} >= {self.alpha:g})"
+        if not reason and not c.p_value < self.alpha:  # a measurement name needs the same evidence
+            test = "Wald p" if c.kind == "physics" else "p of its own test"
+            reason = f"not significant ({test} = {c.p_value:.2g} >= {self.alpha:g})"
         c.rejected = reason
         c.admissible = not reason
         e0, e1 = self._total(err[held]), self._total(c.err[held])

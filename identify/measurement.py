@@ -12,6 +12,8 @@ states (identify.chain). What each fault does, for a true mass acceleration x'' 
   (energy-injecting) damping to a model of the true states.
 - bias drift b: a_x = x'' + b (t/T - 1/2): mostly below the band, but the taper and the band's roll-off
   pass part of a ramp's integral into the states.
+- mains hum: a_x = x'' + a cos(2 pi f t) + b sin(2 pi f t) at f = 50 or 60 Hz, inside the band of a
+  fast-sampled sweep, where it reads as a misfit at f that no force can make.
 The chain is linear, so each channel is integrated once and the corrected states for any fault are
 combinations of the parts (delay: the mass channel is shifted by tau in the frequency domain first).
 The corrected model predicts the recorded q'' as (1 + g_m) (q''_model - q''_corrected) + q''_recorded,
@@ -25,9 +27,13 @@ from scipy.fft import irfft, next_fast_len, rfft, rfftfreq
 from .chain import StateSignals, spectral_op
 from .recording import Recording
 
-#: Fault parameters and their search bounds: gains +-10 %, delay +-5 ms, drift +-1 m/s^2 over the record.
+#: Fault parameters and their search bounds: gains +-10 %, delay +-5 ms, drift +-1 m/s^2 over the record;
+#: mains hum (identify.effects.mains_hum): its frequency and each channel's cosine and sine amplitudes
+#: (m/s^2), fitted by projection, not searched (bounds: what a channel could carry).
 PARAMS = {"mass_acc_gain": (-0.1, 0.1), "table_acc_gain": (-0.1, 0.1), "channel_delay": (-5e-3, 5e-3),
-          "bias_drift_mass": (-1.0, 1.0), "bias_drift_table": (-1.0, 1.0)}
+          "bias_drift_mass": (-1.0, 1.0), "bias_drift_table": (-1.0, 1.0), "hum_hz": (0.0, 1e3),
+          "hum_mass_cos": (-1e3, 1e3), "hum_mass_sin": (-1e3, 1e3), "hum_table_cos": (-1e3, 1e3),
+          "hum_table_sin": (-1e3, 1e3)}
 ZERO = {k: 0.0 for k in PARAMS}
 
 
@@ -44,10 +50,23 @@ class ChannelChain:
         self.Z = self._chain(rec.input)
         self.R = self._chain(self.ramp)
         self._cache: dict[tuple, StateSignals] = {}
+        self._hum: dict[float, tuple] = {}
 
     def _chain(self, a: np.ndarray) -> np.ndarray:
         """(velocity, displacement, acceleration) of one acceleration channel through the band."""
         return np.stack([spectral_op(a, self.fs, self.band, p, self.taper) for p in (-1, -2, 0)])
+
+    def hum(self, p: dict, channel: str):
+        """The chained mains hum of `channel` (a sinusoid at p["hum_hz"]: the chain is linear, so the
+        cosine and sine are chained once per frequency); 0 without hum."""
+        hz = p.get("hum_hz", 0.0)
+        if not hz:
+            return 0.0
+        if hz not in self._hum:
+            t = np.arange(self.rec.n_samples) / self.fs
+            self._hum[hz] = (self._chain(np.cos(2 * np.pi * hz * t)), self._chain(np.sin(2 * np.pi * hz * t)))
+        c, s = self._hum[hz]
+        return p.get(f"hum_{channel}_cos", 0.0) * c + p.get(f"hum_{channel}_sin", 0.0) * s
 
     def shifted(self, a: np.ndarray, tau: float) -> np.ndarray:
         """a(t + tau): a channel recorded tau late, put back in time (frequency-domain shift)."""
@@ -64,8 +83,8 @@ class ChannelChain:
         gm, gt = 1 + p.get("mass_acc_gain", 0.0), 1 + p.get("table_acc_gain", 0.0)
         tau = p.get("channel_delay", 0.0)
         X = self._chain(self.shifted(self.rec.output, tau)) if tau else self.X
-        X = (X - p.get("bias_drift_mass", 0.0) * self.R) / gm
-        Z = (self.Z - p.get("bias_drift_table", 0.0) * self.R) / gt
+        X = (X - p.get("bias_drift_mass", 0.0) * self.R - self.hum(p, "mass")) / gm
+        Z = (self.Z - p.get("bias_drift_table", 0.0) * self.R - self.hum(p, "table")) / gt
         Q = X - Z
         s = self.sig
         out = StateSignals(Q[0], Q[1], Q[2], Z[2], s.fs_hz, s.band_hz, s.valid, s.input_name, s.taper_n)

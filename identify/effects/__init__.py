@@ -5,7 +5,7 @@ identification library (an effect's name among extra_terms), the discrepancy wor
 (identify.explain) and its report and JSON all read this registry.
 
 Physics (a force on the mass): identify.effects.plain (plain library terms), end_stop, stiffness_drift,
-hysteresis. Measurement (the recording is wrong, not the rig): faults (gains, delay), bias_drift.
+hysteresis. Measurement (the recording is wrong, not the rig): faults (gains, delay), bias_drift, mains_hum.
 """
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from .bias_drift import BiasDrift
 from .end_stop import EndStop
 from .faults import ChannelDelay, MassAccGain, TableAccGain
 from .hysteresis import Hysteresis
+from .mains_hum import MainsHum
 from .plain import (AsymmetricStiffness, CoulombFriction, CubicDamping, DisplacementDependentDamping,
                     QuadraticDamping, QuadraticStiffness)
 from .stiffness_drift import StiffnessDrift
@@ -31,5 +32,6 @@ register(MassAccGain())
 register(TableAccGain())
 register(ChannelDelay())
 register(BiasDrift())
+register(MainsHum())
 
 __all__ = ["CATALOG", "Candidate", "Effect", "expand_terms", "plain_effects", "register", "unregister", "wald_p"]
