@@ -48,6 +48,7 @@ from .noise import noise_floor
 from .recording import Recording
 from .shooting import TRIM_SHARE
 from .structure import GAP_SIGNAL, Fitter, Structure
+from .threads import one_blas_thread
 
 __all__ = ["DiscrepancyAnalysis", "closed_shares"]
 
@@ -102,6 +103,7 @@ class DiscrepancyAnalysis(Rounds):
         self.band_hz = band_hz
 
     # -- fitting ----------------------------------------------------------------------------------
+    @one_blas_thread  # as SparseIdentifier.fit: small BLAS products, oversubscribed under load (identify.threads)
     def fit(self, recording: Recording) -> "DiscrepancyAnalysis":
         catalog = default_catalog() if self.catalog is None else self.catalog
         sig = reconstruct_states(recording, self.band_hz)
