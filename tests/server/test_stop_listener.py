@@ -18,7 +18,8 @@ from server.stoplistener import ESTOP_PATH
 from shakeid.rigcmd import stop_url
 from sim.server import free_port
 
-from .conftest import OPERATOR, SHAKEID, VIEWER, Service, wait_for
+from .conftest import OPERATOR, SHAKEID, START_TIMEOUT_S, VIEWER, Service, wait_for
+from .test_dashboard import TIMEOUT_MS, browser  # noqa: F401 - the browser fixture (Debian's Chromium)
 from .test_live import open_stream
 
 SWEEP = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 600.0, "amplitude_mm": 1.0}
@@ -35,8 +36,8 @@ def stop_service(tmp_path_factory):
 
 
 def _stop_url(service: Service) -> str:
-    return wait_for(lambda: httpx.get(service.url + "/api/health", timeout=10).json()["stop_url"],
-                    what="the controller attached and its stop listener named")
+    return wait_for(lambda: httpx.get(service.url + "/api/health", timeout=30).json()["stop_url"],
+                    timeout_s=START_TIMEOUT_S, what="the controller attached and its stop listener named")
 
 
 def _running_sweep(op: httpx.Client) -> tuple[str, str]:
@@ -88,6 +89,31 @@ def test_the_dashboard_may_post_the_stop_there(stop_service):
     assert "POST" in ok.headers["access-control-allow-methods"]
     foreign = httpx.options(url, headers={"Origin": "http://attacker.example", **asked}, timeout=10)
     assert foreign.status_code == 403 and "access-control-allow-origin" not in foreign.headers
+
+
+def test_the_dashboards_stop_button_posts_to_the_stop_listener(browser, stop_service):  # noqa: F811
+    """In Chromium, under the page's own CSP: the press goes to the stop listener (a CSP or CORS refusal
+    would show as the fallback's POST to the web server's route instead)."""
+    url = _stop_url(stop_service)
+    ctx = browser.new_context()
+    page = ctx.new_page()
+    page.set_default_timeout(TIMEOUT_MS)
+    posts, errors = [], []
+    page.on("request", lambda r: r.method == "POST" and posts.append(r.url))
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        with stop_service.client() as op:
+            sweep_id, _ = _running_sweep(op)
+            with page.expect_response(lambda r: r.url.endswith("/api/health")):
+                page.goto(f"{stop_service.url}/#token={OPERATOR}")
+            page.wait_for_selector("#session:has-text('operator')")
+            page.click("#estop")
+            page.wait_for_selector(f".msg.error:has-text('sweep {sweep_id} aborted')")
+            assert posts == [url], posts
+            _stopped(op, sweep_id)
+        assert not errors, errors
+    finally:
+        ctx.close()
 
 
 def test_the_stop_is_delivered_while_many_viewers_load_the_web_server(stop_service):
