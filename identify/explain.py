@@ -15,7 +15,7 @@ and how much adding them closes the gap.
    bifurcation a model's last digits move, can decide whether anything is missing or what (later
    rounds decide on plain sums, _total). The jump itself is reported
    apart: its time and frequency, measured and as the models' free runs predict it (identify.jumps).
-3. Explain until explained (identify.explain_rounds; each effect's candidate from identify.effects): while the gap is above
+3. Explain until explained (identify.explain_rounds, candidates from identify.effects): while the gap is above
    `none_factor` x the noise floor, every catalog effect (physics and measurement faults) is fitted on
    top of the current explanation; candidates a rule excludes are dropped; the best by training
    shooting error is added if it removes at least `min_gap_closed` of the held-out squared shooting

@@ -17,7 +17,8 @@ HYST_GAMMA_SHARE = (0.0, 0.5)
 
 class Hysteresis(Effect):
     name, terms, unit = "hysteresis", ("z",), "N/m"
-    description = "Bouc-Wen hysteresis with an internal state z: z' = q1 - beta |q1| z - gamma q1 |z|; (beta, gamma) searched"
+    description = ("Bouc-Wen hysteresis with an internal state z: z' = q1 - beta |q1| z - gamma q1 |z|; "
+                   "(beta, gamma) searched")
     plain = False
 
     def propose(self, fitter, cur):
