@@ -109,3 +109,26 @@ def test_prediction_warns_near_the_travel_and_matches_the_recording(service, tmp
     assert identified["source"].startswith(f"the model identified from recording {rec_id} (")
     assert identified["mass_peak_ms2"] == pytest.approx(recorded, rel=IDENTIFIED_TOLERANCE)
     assert op.post(f"/api/sweeps/{again.json()['id']}/abort").status_code == 202
+
+
+def test_the_cli_through_the_service_prints_the_warning_and_the_refusal(service):
+    """`shakeid sweep --server`: the standard sweep's warning printed as it starts; the attack's sweep refused
+    with its prediction, in one line (exit 2)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from .conftest import OPERATOR
+
+    def sweep(duration_s):
+        return subprocess.run([str(Path(sys.executable).with_name("shakeid")), "sweep", "--server", service.url,
+                               "--token", OPERATOR, "--f-start-hz", "1", "--f-end-hz", "20", "--duration-s",
+                               str(duration_s), "--amplitude-mm", "1.3", "--settle-s", "0.5"],
+                              capture_output=True, text=True, timeout=300)
+
+    refused = sweep(300)
+    assert refused.returncode == 2 and "the mass would hit the end stops" in refused.stderr, refused.stderr
+    warned = sweep(60)
+    assert warned.returncode == 0, warned.stdout + warned.stderr
+    assert "preflight warning: predicted relative travel 17.1 mm at 6.4" in warned.stdout
+    assert "98 % of the end-stop travel 17.5 mm" in warned.stdout
