@@ -200,7 +200,7 @@ def _index_html(out: Path, analysis, result: dict, u: str) -> str:
                    "simulated) on its own scale.",
     }
     for f in FIGURES:
-        if f in captions and (out / f).exists():
+        if (out / f).exists():
             page.figure(f, captions[f])
     if "frf" in result:  # after the figures the text numbers
         add_side_by_side(page, result["frf"], OVERLAY_FIGURE if (out / OVERLAY_FIGURE).exists() else None,

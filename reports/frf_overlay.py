@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from .frf import COLOURS, _branch
-from .html import Page
+from .html import OVERLAY_FIGURES, Page
 
-OVERLAY_FIGURE = "frf_overlay.png"
+OVERLAY_FIGURE = OVERLAY_FIGURES[0]
 #: the panels show frequencies where a response exceeds this share of the panel's largest, widened
 ZOOM_LEVEL, ZOOM_MARGIN = 0.25, 0.15
 MEASURED_STYLE = {"up": ("^", "0.25"), "down": ("v", "0.55")}

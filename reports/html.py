@@ -24,14 +24,15 @@ STYLE = ("body{font-family:sans-serif;max-width:1100px;margin:1em auto;padding:0
 #: What each kind of report writes beside its index.html (reports.identification, reports.explain take
 #: theirs from here). A folder holds one report: a new report replaces an earlier one of its own kind and
 #: refuses a folder that holds the other kind or files shakeid did not write (check_report_folder).
-#: frf_overlay.png: reports.frf_overlay (the predicted frequency response beside the measured sweeps)
-IDENTIFICATION_FIGURES = ("input.png", "output.png", "lambda_path.png", "validation.png", "frf_overlay.png")
+IDENTIFICATION_FIGURES = ("input.png", "output.png", "lambda_path.png", "validation.png")
 IDENTIFICATION_DOCUMENTS = ("model.json", "coefficients.md")
-EXPLAIN_FIGURES = ("residual_time.png", "residual_state.png", "candidates.png", "gap.png", "frf_overlay.png")
+EXPLAIN_FIGURES = ("residual_time.png", "residual_state.png", "candidates.png", "gap.png")
+#: drawn by both when their document carries a side-by-side frequency response (reports.frf_overlay)
+OVERLAY_FIGURES = ("frf_overlay.png",)
 EXPLAIN_DOCUMENTS = ("explain.json",)
 FRF_FIGURES, FRF_DOCUMENTS = ("frf.png",), ("frf.json",)  # reports.frf (shakeid frf --report)
-KINDS = {"identification": (*IDENTIFICATION_FIGURES, *IDENTIFICATION_DOCUMENTS),
-         "explain": (*EXPLAIN_FIGURES, *EXPLAIN_DOCUMENTS), "frf": (*FRF_FIGURES, *FRF_DOCUMENTS)}
+KINDS = {"identification": (*IDENTIFICATION_FIGURES, *OVERLAY_FIGURES, *IDENTIFICATION_DOCUMENTS),
+         "explain": (*EXPLAIN_FIGURES, *OVERLAY_FIGURES, *EXPLAIN_DOCUMENTS), "frf": (*FRF_FIGURES, *FRF_DOCUMENTS)}
 #: where a report of each kind goes when the folder holds the other kind (a suggestion in the refusal)
 _SUBFOLDER = {"identification": "identify", "explain": "explain", "frf": "frf"}
 #: the page's titles before it carried the generator tag (reports written by earlier versions)

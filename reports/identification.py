@@ -278,7 +278,7 @@ def _index_html(out: Path, ident, result: dict) -> str:
                           "left. Shaded: held-out samples.",
     }
     for f in FIGURES:
-        if f in captions and (out / f).exists():
+        if (out / f).exists():
             page.figure(f, captions[f])
     if "frf" in result:  # after the figures the text numbers (Figure 3, ...)
         add_side_by_side(page, result["frf"], OVERLAY_FIGURE if (out / OVERLAY_FIGURE).exists() else None)

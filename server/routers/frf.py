@@ -14,6 +14,7 @@ from pydantic import Field
 
 from daq.campaign import NAME_PATTERN
 from identify.errors import ShakeidError
+from reports.frf_overlay import OVERLAY_FIGURE as OVERLAY  # drawn by the worker, served from its report
 
 from .. import schemas
 from ..deps import ERRORS, Id, Services, services, viewer
@@ -21,7 +22,6 @@ from ..worker import FRF_FILE
 from .campaigns import latest_joint_jobs
 from .results import latest_result
 
-OVERLAY = "frf_overlay.png"  # reports.frf_overlay.OVERLAY_FIGURE (the server does not draw: a worker did)
 router = APIRouter(tags=["frequency response"], dependencies=[viewer],
                    responses={**ERRORS, 404: {"model": schemas.Problem}})
 
