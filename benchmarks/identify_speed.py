@@ -61,6 +61,7 @@ from identify.library import Library  # noqa: E402
 from identify.model import SparseModel  # noqa: E402
 from identify.simulate import simulate  # noqa: E402
 from identify.spectral import _cached_twiddles  # noqa: E402
+from identify.threads import one_blas_thread  # noqa: E402
 from identify.uncertainty import N_PLACEMENTS  # noqa: E402
 from sim.rig import RigParameters  # noqa: E402
 from protocol.sweep import SineSweep  # noqa: E402
@@ -109,6 +110,7 @@ def anchor(rec, lib, X, U) -> dict:
     return out
 
 
+@one_blas_thread  # parts timed alone run as they run inside the fit (identify.threads)
 def chain_transforms(rec, sig) -> dict:
     """The chain's transforms alone, each (wall, cpu) seconds: 2 forward (qdd and the input, each without
     its mean: identify.chain.by_mean_alone) and 4 inverse (q1, q2, q1_dot, input) rffts, zero-padded as
@@ -164,6 +166,7 @@ def identification_figures(n: int, repeat: int, seed: int, pysindy: bool = False
     return f
 
 
+@one_blas_thread  # parts timed alone run as they run inside the fit (identify.threads)
 def validation_parts(n: int, repeat: int, seed: int) -> dict:
     """What the free-run validation of the fitted (training-only) model spends, CPU seconds, best of
     `repeat`: validate() as a whole, and its parts done alone: the input on the RK4 half-step grid (from
@@ -205,6 +208,7 @@ def validation_parts(n: int, repeat: int, seed: int) -> dict:
                            + [fit_metrics(held(sig.q1[v]), held(sim[:, 0]))])}
 
 
+@one_blas_thread  # parts timed alone run as they run inside the fit (identify.threads)
 def uncertainty_parts(n: int, repeat: int, seed: int) -> dict:
     """What the uncertainty step (identify.uncertainty.assess, as SparseIdentifier runs it) spends on the
     default fit, CPU seconds, best of `repeat`, its parts done alone: the all-rows refits with their
@@ -250,6 +254,7 @@ def uncertainty_parts(n: int, repeat: int, seed: int) -> dict:
             "paths": cpu(lambda: opt.fit_paths(trains, start=ident.path_))}
 
 
+@one_blas_thread  # parts timed alone run as they run inside the fit (identify.threads)
 def padding_lever(n: int, repeat: int, seed: int) -> dict:
     """What the chain's zero padding costs: the chain as it is (PAD_PERIODS periods of f_lo, at most the
     record's length) against the previous rule (always the record's length, 2n in all), CPU time and how
