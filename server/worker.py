@@ -105,9 +105,14 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
             from identify.explain import DiscrepancyAnalysis
             from reports.explain import write_explain_report
 
+            from identify.frf.side_by_side import for_explanation
+
             analysis = DiscrepancyAnalysis(band_hz=tuple(options["band_hz"]) if options.get("band_hz") else None)
             result = {**analysis.fit(rec).result(), **data}
-            write_explain_report(analysis, out / STAGING)
+            # before/after the named effect beside the sweep, as `shakeid explain` (never fails the job)
+            result["frf"] = for_explanation(result, analysis.baseline_model_, analysis.model_, [rec],
+                                            [_label(path, options)])
+            write_explain_report(analysis, out / STAGING, result["frf"])
             _write_json(out / "explain.json", result)
             return _adopt(kind, out)
         raise ShakeidError(f"unknown job kind {kind!r}")

@@ -174,7 +174,7 @@ def for_identification(result: dict, model, recordings: list, names: list[str] |
     return _guarded(lambda: side_by_side({"model": model}, recordings, fit, names=names))
 
 
-def for_explanation(result: dict, baseline, fixed, recordings: list) -> dict:
+def for_explanation(result: dict, baseline, fixed, recordings: list, names: list[str] | None = None) -> dict:
     """The explain report's side-by-side: the baseline and, when an effect was added, the baseline with
     it (judged, by its held-out free-run fit)."""
     models = {"baseline": baseline}
@@ -182,7 +182,8 @@ def for_explanation(result: dict, baseline, fixed, recordings: list) -> dict:
         models["+ " + ", ".join(e["name"] for e in result["effects"])] = fixed
     which = "after" if len(models) > 1 else "before"
     heldout = (((result.get("validation") or {}).get(which) or {}).get("heldout") or {}).get("q1_dot") or {}
-    return _guarded(lambda: side_by_side(models, recordings, heldout.get("fit_percent"), judged=list(models)[-1]))
+    return _guarded(lambda: side_by_side(models, recordings, heldout.get("fit_percent"), judged=list(models)[-1],
+                                         names=names))
 
 
 def _guarded(make) -> dict:
