@@ -63,6 +63,9 @@ def _panel(ax, entry: dict, doc: dict) -> None:
             if abs(j["amplitude_mm"] - entry["amplitude_mm"]) < 0.05 * entry["amplitude_mm"] and p["fold_hz"] \
                     and p["bias_hz"] is not None:
                 ax.axvspan(*sorted((p["fold_hz"], p["fold_hz"] + p["bias_hz"])), color=colour, alpha=0.12, lw=0)
+    limit = (next(iter(entry["predicted"].values())).get("validity") or {}).get("damping_negative_above_mm")
+    if limit and limit < 1.5 * max(max(b["amplitude_mm"]) for r in entry["predicted"].values() for b in r["branches"]):
+        ax.axhline(limit, color="grey", ls=":", lw=1, label="model's damping < 0 above (validity)")
     for m in entry["measured"]:
         marker, grey = MEASURED_STYLE[m["direction"]]
         ax.plot(m["frequency_hz"], m["response_mm"], marker, ms=2.5, color=grey, alpha=0.7,
