@@ -3,13 +3,14 @@ identification stored it: a recording's (its latest identify job) and a campaign
 table amplitude of the campaign). docs/frf.md, docs/service.md."""
 from __future__ import annotations
 
+import asyncio
 import dataclasses
 import json
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path as FsPath
 
 from fastapi import APIRouter, Depends, HTTPException
-from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import FileResponse
+from fastapi.responses import FileResponse, JSONResponse
 from pydantic import Field
 
 from daq.campaign import NAME_PATTERN
@@ -77,15 +78,18 @@ class ProposalIn(schemas.Strict):
     jump_amplitudes: int = Field(2, ge=1, le=5, description="amplitudes with a predicted jump (one more below its onset)")
 
 
-@router.post("/api/campaigns/proposal", responses={422: {"model": schemas.Problem}})
-async def propose(body: ProposalIn, svc: Services = Depends(services)) -> dict:
+@router.post("/api/campaigns/proposal", responses={202: {"model": schemas.Problem}, 422: {"model": schemas.Problem}})
+async def propose(body: ProposalIn, svc: Services = Depends(services)):
     """A campaign proposed from the model's predicted folds (daq.plan, `shakeid plan-campaign`): `plan`
     (for POST /api/campaigns) whose amplitudes and band bracket each predicted jump, every sweep inside
     the PLC's limits and predicted inside the rig's; `amplitudes` with the predicted jumps and peaks.
-    Nothing moves. 422 when the model predicts no jump within what the rig takes."""
-    from daq.plan import propose_campaign, with_model
+    Nothing moves. A proposal costs seconds: when it is not ready within PROPOSAL_WAIT_S the answer is 202
+    (`detail`: ask again), and the same request later answers from the finished one. 422 when the model
+    predicts no jump within what the rig takes."""
     from identify.model import SparseModel
     from sim.config import RigConfig
+
+    from daq.plan import with_model
 
     from ..preflight import rig_response
 
@@ -96,19 +100,34 @@ async def propose(body: ProposalIn, svc: Services = Depends(services)) -> dict:
     limits = (svc.settings.rig or RigConfig()).limits
     key = json.dumps([rig.model.to_dict(), rig.source, rig.mass_range_ms2, rig.table_range_ms2, list(rig.travel_mm),
                       dataclasses.asdict(limits), body.jump_amplitudes], sort_keys=True)
-    if key not in _PROPOSALS:  # the same model and rig propose the same campaign: computed once (seconds)
-        try:
-            _PROPOSALS[key] = await run_in_threadpool(propose_campaign, rig, limits, "proposal", body.jump_amplitudes)
-        except ShakeidError as exc:
-            _PROPOSALS[key] = HTTPException(422, f"no campaign proposed from {rig.source}: {exc}")
-        while len(_PROPOSALS) > PROPOSALS_KEPT:
-            _PROPOSALS.pop(next(iter(_PROPOSALS)))
-    out = _PROPOSALS[key]
-    if isinstance(out, HTTPException):
-        raise out
+    fut = _PROPOSALS.get(key)
+    if fut is None or fut.cancelled():  # the same model and rig propose the same campaign: computed once
+        fut = _PROPOSALS[key] = _COMPUTE.submit(_propose, rig, limits, body.jump_amplitudes)
+        for old in [k for k, f in _PROPOSALS.items() if f.done()][:max(0, len(_PROPOSALS) - PROPOSALS_KEPT)]:
+            _PROPOSALS.pop(old)
+    try:
+        out = await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(fut)), PROPOSAL_WAIT_S)
+    except asyncio.TimeoutError:
+        return JSONResponse({"detail": f"computing the proposal from {rig.source}: ask again in a few seconds"},
+                            status_code=202)
+    if isinstance(out, str):
+        raise HTTPException(422, out)
     return {**out, "plan": {**out["plan"], "name": body.name}}
 
 
-#: proposals kept, newest last (a proposal costs seconds of CPU; the dashboard asks again for the same rig)
+def _propose(rig, limits, jump_amplitudes: int):
+    """The proposal, or the refusal's message (kept like a proposal: the same request is refused at once)."""
+    from daq.plan import propose_campaign
+
+    try:
+        return propose_campaign(rig, limits, "proposal", jump_amplitudes)
+    except ShakeidError as exc:
+        return f"no campaign proposed from {rig.source}: {exc}"
+
+
+#: proposals kept (a proposal costs seconds of CPU; the dashboard asks again for the same rig), computed one
+#: at a time off the event loop; an answer waits for one at most PROPOSAL_WAIT_S, then says to ask again
 PROPOSALS_KEPT = 16
-_PROPOSALS: dict[str, dict | HTTPException] = {}
+PROPOSAL_WAIT_S = 8.0
+_PROPOSALS: dict[str, Future] = {}
+_COMPUTE = ThreadPoolExecutor(max_workers=1, thread_name_prefix="campaign-proposal")

@@ -73,7 +73,10 @@ async function showCampaign(id) {
 // -- the campaign builder's proposal: amplitudes and band from the rig model's predicted folds (daq.plan)
 $("c-propose").onclick = async () => {
   try {
-    const p = await api("POST", "/api/campaigns/proposal", {name: $("c-name").value.trim() || "fold-bracket"});
+    const ask = () => api("POST", "/api/campaigns/proposal", {name: $("c-name").value.trim() || "fold-bracket"});
+    let p = await ask();
+    if (!p.plan) say(p.detail);  // 202: computing (seconds); the same request answers once it is done
+    while (!p.plan) { await new Promise(r => setTimeout(r, 2000)); p = await ask(); }
     const s = p.plan.sweep;
     $("c-amps").value = p.plan.amplitudes_mm.join(", ");
     $("c-f0").value = s.f_start_hz; $("c-f1").value = s.f_end_hz; $("c-dur").value = s.duration_s; $("c-settle").value = s.settle_s;
