@@ -45,10 +45,10 @@ def create_app(settings: Settings) -> FastAPI:
         for note in svc.catalog.recover_after_restart():
             print(f"shakeid serve: {note}", flush=True)
         svc.jobs = JobQueue(svc.catalog, settings.data_dir / "results", settings.identify_workers,
-                            settings.scheduler, settings.connect_timeout_s)
+                            settings.scheduler, settings.connect_timeout_s, settings.auto_identify)
         svc.jobs.start()
-        svc.link = RigLink(settings, settings.controller,
-                           on_event=lambda event: svc.jobs.wake() if event.get("event") == "job_queued" else None)
+        svc.link = RigLink(settings, settings.controller, on_event=lambda event: svc.jobs.recording_completed()
+                           if event.get("event") in ("recording_complete", "campaign_complete") else None)
         await run_in_threadpool(svc.link.start)  # waits for a child controller to listen (it recovers the rig's files)
         yield
         await run_in_threadpool(svc.link.stop)

@@ -155,14 +155,11 @@ class CampaignService:
         done = campaign.recording_ids()
         print(f"shakeid controller: campaign {act['id']} ({campaign.plan.name}) {campaign.state}: {len(done)} of "
               f"{campaign.total} sweeps complete{'; ' + campaign.reason if campaign.reason else ''}", flush=True)
-        # Joint identification: every complete recording was queued for identification at its end (as any
-        # sweep; settings.auto_identify); a completed campaign of two or more also gets one model of all of
-        # them (identify.joint; job kind identify_joint, its recording the first, options naming all)
-        if campaign.state == "completed" and len(done) >= 2 and self.ctl.settings.auto_identify:
-            from .jobs import queue_job
-
-            queue_job(self.catalog, self.ctl.settings.data_dir / "results", "identify_joint", done[0],
-                      {"recording_ids": list(done), "campaign_id": act["id"]})
+        # Joint identification: every complete recording is identified (as any sweep; settings.auto_identify);
+        # a completed campaign of two or more also gets one model of all of them (identify.joint), queued by
+        # the web server (NamedQueries.owed_jobs) when told
+        if campaign.state == "completed":
+            self.ctl.notify({"event": "campaign_complete", "campaign_id": act["id"]})
 
     def _run_sweep(self, act: dict, planned, item: dict) -> dict:
         """One sweep of the campaign through the controller's own sweep path; waits for its end."""

@@ -120,6 +120,17 @@ class Catalog:
             self.db.execute(f"UPDATE {table} SET {', '.join(f'{k} = ?' for k in values)} WHERE id = ?",
                             (*values.values(), id))
 
+    def set_info(self, id: str, **keys) -> None:
+        """Set top-level keys of a recording's `info` in one statement: the rig controller and the web
+        server both add to it, and a read-modify-write by one would undo what the other wrote meanwhile."""
+        if not all(k.isidentifier() for k in keys):  # the keys are the code's (job kinds), never a client's
+            raise ValueError(f"info keys must be identifiers: {list(keys)}")
+        paths = ", ".join(f"'$.{k}', json(?)" for k in keys)
+        with self.lock:
+            self.db.execute("UPDATE recordings SET info = json_set(CASE WHEN json_valid(info) AND json_type(info) = "
+                            f"'object' THEN info ELSE '{{}}' END, {paths}) WHERE id = ?",
+                            (*(json.dumps(v) for v in keys.values()), id))
+
     def delete(self, table: str, id: str) -> None:
         with self.lock:
             self.db.execute(f"DELETE FROM {table} WHERE id = ?", (id,))
@@ -202,6 +213,20 @@ SEARCHED = ("r.id", "r.filename", "json_extract(r.info, '$.sweep.note')", "s.ope
             "json_extract(r.info, '$.uploaded_by')")
 
 
+#: complete sweep recordings with no identification job yet: what auto-identification owes (the rig
+#: controller only records; the web server, the jobs table's one writer, queues their jobs)
+OWED_IDENTIFY = """
+SELECT r.id FROM recordings r WHERE r.origin = 'sweep' AND r.status = 'complete' AND r.archived IS NULL
+AND NOT EXISTS (SELECT 1 FROM jobs j WHERE j.recording_id = r.id AND j.kind = 'identify') ORDER BY r.created
+"""
+#: completed campaigns of two or more complete recordings with no joint identification job yet
+OWED_JOINT = """
+SELECT c.id, c.recording_ids FROM campaigns c WHERE c.state = 'completed' AND json_array_length(c.recording_ids) >= 2
+AND NOT EXISTS (SELECT 1 FROM jobs j WHERE j.kind = 'identify_joint' AND json_extract(j.options, '$.campaign_id') = c.id)
+ORDER BY c.created
+"""
+
+
 class NamedQueries:
     """The catalog's composite queries, each one SQL statement (no query per listed row)."""
 
@@ -239,6 +264,16 @@ class NamedQueries:
         with self.catalog.lock:
             row = self.catalog.db.execute(RECORDINGS_PAGE.format(where="r.id = ?"), (rec_id, 1, 0)).fetchone()
         return None if row is None else _page_row(dict(row))
+
+    def owed_jobs(self) -> list[tuple[str, str, dict]]:
+        """(kind, recording id, options) of every job auto-identification owes: each complete sweep
+        recording's `identify`, each completed campaign's `identify_joint` (its first recording, options
+        naming all, in plan order)."""
+        with self.catalog.lock:
+            single = [r[0] for r in self.catalog.db.execute(OWED_IDENTIFY).fetchall()]
+            joint = [(r[0], json.loads(r[1])) for r in self.catalog.db.execute(OWED_JOINT).fetchall()]
+        return ([("identify", rec_id, {}) for rec_id in single]
+                + [("identify_joint", ids[0], {"recording_ids": ids, "campaign_id": cid}) for cid, ids in joint])
 
     def identified(self, limit: int = 200) -> list[tuple[dict, str]]:
         """The newest `limit` recordings (not archived) with an identification, and its result folder."""

@@ -7,7 +7,9 @@ pattern of Bluesky's queueserver, whose run-engine manager is a process apart fr
 The web server talks to it over server/ipc.py (a Unix socket in the data directory by default).
 
 The controller owns the sweeps and the recordings they make (their rows in the SQLite catalog, the
-HDF5 files) and queues the identification of every complete one; the web server owns jobs and uploads.
+HDF5 files) and says when one completes (an event); the web server owns jobs (it queues the
+identification) and uploads: each table has one writer, apart from `recordings.info`, whose keys each side
+sets in one statement (Catalog.set_info).
 
 Lifecycle:
 - `shakeid serve` starts it as a child (`python -m server.run_controller --parent-pid PID`) and it lives
@@ -17,10 +19,10 @@ Lifecycle:
   with `shakeid serve --controller ADDRESS`. If that web server dies the table is stopped the same way,
   and the controller waits for it to come back.
 Every request is served on its own connection thread; the emergency stop has a PLC connection of its own.
-"""
-from __future__ import annotations
 The stop listener (server/stoplistener.py) serves `POST /api/rig/estop` over HTTP on settings.stop_port
 from this process, where no viewer traffic is queued.
+"""
+from __future__ import annotations
 
 import hmac
 import os
@@ -41,11 +43,10 @@ from protocol.plc import State
 from .campaign import CampaignService
 from .catalog import Catalog, new_id
 from .ipc import Line, parse_address
-from .jobs import queue_job
 from .rig import RigBusy, RigService
 from .settings import Settings
-
 from .stoplistener import StopListener
+
 #: why a sweep ended when its web server died (session ended or its process gone, whichever is seen first)
 WEB_SERVER_GONE = "the web server went away during the sweep; the rig controller stopped the table"
 #: decimated points one live request returns at the most (~10 s at the live view's 200 per second)
@@ -85,9 +86,9 @@ class RigController:
         self.starting = threading.RLock()
         self._closed = False  # set once stopping: no sweep starts after the rig was stopped
         self.campaigns = CampaignService(self)
-
         settings.resolve_stop()  # a web server that started this controller has filled it in already
         self.stop_listener: StopListener | None = None
+
     # -- lifecycle ------------------------------------------------------------------------------------
     def start(self) -> "RigController":
         self._recover()
@@ -109,12 +110,11 @@ class RigController:
         tmp.chmod(0o600)
         os.replace(tmp, path)  # written last: a client that reads the key finds the socket listening
         threading.Thread(target=self._accept, name="controller-accept", daemon=True).start()
-        if self.parent_pid:
         self._start_stop_listener()
+        if self.parent_pid:
             threading.Thread(target=self._watch_parent, name="controller-parent", daemon=True).start()
         return self
 
-    def stop(self, reason: str) -> None:
     def _start_stop_listener(self) -> None:
         """The HTTP stop on its own port; a port that cannot be had is said, not fatal (the web server's
         route stays, and /api/health then names no stop_url)."""
@@ -128,6 +128,7 @@ class RigController:
             print(f"shakeid controller: no stop listener on {host}:{port} ({exc}); the emergency stop is served "
                   "by the web server's port only", flush=True)
 
+    def stop(self, reason: str) -> None:
         self.stop_reason = reason
         self.stopping.set()
 
@@ -139,9 +140,9 @@ class RigController:
             self._closed = True
         self.rig.stop(self.stop_reason)  # aborts a running sweep (the table is commanded to stop) and waits
         self.campaigns.join()
-        if self._listener is not None:
         if self.stop_listener is not None:
             self.stop_listener.stop()
+        if self._listener is not None:
             self._listener.close()
         family, addr = parse_address(self.address)
         if family == socket.AF_UNIX:
@@ -389,9 +390,8 @@ class RigController:
         rec = cat.get("recordings", rec_id) or {"info": {}}
         info = {**rec["info"], **{k: v for k, v in result.items() if k != "path"}}
         cat.update("recordings", rec_id, status=result["status"], info=info)
-        if sweep_state == "completed" and self.settings.auto_identify:
-            queue_job(cat, self.settings.data_dir / "results", "identify", rec_id, {})
-            self.notify({"event": "job_queued"})
+        if sweep_state == "completed":  # the web server queues its identification (server/jobs.py)
+            self.notify({"event": "recording_complete", "recording_id": rec_id})
 
 
 def main(settings: Settings, address: str | None = None, parent_pid: int | None = None) -> int:

@@ -9,7 +9,7 @@ A connection opens with `{"op": "hello", "key": ..., "role": ...}`; the key is a
 controller writes (mode 0600) beside its socket, so only processes that can read the data directory
 talk to the rig. Roles: "client" (requests), "estop" (a connection the web server keeps for the
 emergency stop alone, so a stop never queues behind another request), "session" (the web server's
-attachment: the controller pushes events on it, e.g. `{"event": "job_queued"}`, and treats its end as
+attachment: the controller pushes events on it, e.g. `{"event": "recording_complete", ...}`, and treats its end as
 the web server's death). Addresses: `unix:/path/controller.sock` (default, in the data directory) or
 `tcp:127.0.0.1:PORT` (e.g. between containers).
 """

@@ -5,6 +5,12 @@ writes into <data_dir>/results/<job id>/. With a Dask scheduler ([compute] sched
 the same jobs go to that cluster instead (server/dask_backend.py), as many at a time as it has worker
 threads; same worker function, same result files. Jobs outlive the service: the queue is the catalog, and on
 start `Catalog.recover_after_restart` puts jobs a dead service left running back in the queue.
+
+The web server is the jobs table's one writer. The rig controller only records: when a sweep or a campaign
+completes it says so (an event on its link), and the dispatcher queues what auto-identification owes
+(`NamedQueries.owed_jobs`: every complete sweep recording without an identification, every completed
+campaign without a joint one). The catalog, not the event, is the truth: on start the dispatcher queues
+what is owed, so a recording that completed while the web server was down is identified all the same.
 """
 from __future__ import annotations
 
@@ -27,7 +33,7 @@ FINISH_GRACE_S = 5.0
 
 
 def queue_job(catalog: Catalog, results_dir: Path, kind: str, recording_id: str, options: dict | None = None) -> dict:
-    """Put a job in the catalog's queue (the web server and the rig controller both queue jobs)."""
+    """Put a job in the catalog's queue (JobQueue's; nothing else writes the jobs table)."""
     job_id = new_id()
     return catalog.insert("jobs", id=job_id, created=time.time(), updated=time.time(), kind=kind,
                           recording_id=recording_id, options=options or {}, state="queued", attempts=0,
@@ -36,8 +42,13 @@ def queue_job(catalog: Catalog, results_dir: Path, kind: str, recording_id: str,
 
 class JobQueue:
     def __init__(self, catalog: Catalog, results_dir: Path, workers: int = 1, scheduler: str | None = None,
-                 connect_timeout_s: float = 10.0):
+                 connect_timeout_s: float = 10.0, auto_identify: bool = True):
+        """auto_identify: queue what NamedQueries.owed_jobs finds (on start and after each controller event)."""
         self.catalog, self.results_dir, self.workers = catalog, Path(results_dir), workers
+        self.auto_identify = auto_identify
+        self._owed = threading.Event()  # look for owed jobs at the next turn of the dispatcher
+        if auto_identify:
+            self._owed.set()
         self.scheduler, self.connect_timeout_s = scheduler, connect_timeout_s
         self.pool = self._new_pool()
         self._wake = threading.Event()
@@ -93,11 +104,24 @@ class JobQueue:
         return job
 
     def wake(self) -> None:
-        """A job was queued elsewhere (the rig controller, after a sweep): look now, not at the next poll."""
+        """Look at the queue now, not at the next poll."""
         self._wake.set()
+
+    def recording_completed(self) -> None:
+        """The rig controller completed a sweep or a campaign: queue what auto-identification owes now."""
+        if self.auto_identify:
+            self._owed.set()
+            self._wake.set()
+
+    def _queue_owed(self) -> None:
+        self._owed.clear()
+        for kind, recording_id, options in self.catalog.queries.owed_jobs():
+            queue_job(self.catalog, self.results_dir, kind, recording_id, options)
 
     def _dispatch(self) -> None:
         while not self._stop:
+            if self._owed.is_set():
+                self._queue_owed()
             with self._pool_lock:
                 pool = self.pool
             capacity = pool.capacity() if self.scheduler else self.workers
@@ -142,12 +166,7 @@ class JobQueue:
             # the recording's summary first, then the job's state: whoever sees the job completed (a client
             # polling it, then reading the recording) finds the summary there (the other order left a
             # window, seen once under load by tests/server/test_jobs.py)
-            rec = self.catalog.get("recordings", recording_id)
-            if rec is not None:
-                info = dict(rec["info"])
-                info[f"last_{kind}_job"] = job_id
-                info[kind] = summary
-                self.catalog.update("recordings", recording_id, info=info)
+            self.catalog.set_info(recording_id, **{f"last_{kind}_job": job_id, kind: summary})
             self.catalog.update("jobs", job_id, state="completed", error=None)
         elif isinstance(exc, BrokenProcessPool):
             # a worker died (killed, out of memory, a crash in native code): this job fails with that

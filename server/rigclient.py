@@ -21,7 +21,7 @@ from .settings import Settings
 
 class RigLink:
     """address: an existing controller's, or None to start one as a child; on_event(dict) for pushed
-    events (e.g. {"event": "job_queued"})."""
+    events (e.g. {"event": "recording_complete", "recording_id": ...})."""
 
     def __init__(self, settings: Settings, address: str | None = None, on_event=None):
         self.settings, self.on_event = settings, on_event

@@ -1,4 +1,6 @@
-"""The job queue on its own: real worker processes, a real SQLite catalog."""
+"""The job queue on its own: real worker processes, a real SQLite catalog. The waits' bounds are generous
+(minutes): a job takes seconds idle and several times that on a loaded machine (the suite must pass at load
+10); a bound only stops a hung test."""
 import os
 import signal
 import time
@@ -32,14 +34,14 @@ def test_a_killed_worker_fails_its_job_with_the_reason_and_the_next_job_runs(que
     cat, jobs = queue
     # a slow job (free-run refit) so it is still running when its worker is killed
     victim = jobs.submit("identify", "0000000000aa", {"refine": "free-run"})
-    wait_for(lambda: cat.get("jobs", victim["id"])["state"] == "running", 30, "running")
+    wait_for(lambda: cat.get("jobs", victim["id"])["state"] == "running", 120, "running")
     time.sleep(0.3)
     for pid in list(jobs.pool._processes):
         os.kill(pid, signal.SIGKILL)
-    failed = wait_for(lambda: (j := cat.get("jobs", victim["id"]))["state"] != "running" and j, 30, "failure")
+    failed = wait_for(lambda: (j := cat.get("jobs", victim["id"]))["state"] != "running" and j, 120, "failure")
     assert failed["state"] == "failed" and "worker process died" in failed["error"]
     after = jobs.submit("identify", "0000000000aa", {})
-    done = wait_for(lambda: (j := cat.get("jobs", after["id"]))["state"] in ("completed", "failed") and j, 60, "job")
+    done = wait_for(lambda: (j := cat.get("jobs", after["id"]))["state"] in ("completed", "failed") and j, 300, "job")
     assert done["state"] == "completed", done
     assert cat.get("recordings", "0000000000aa")["info"]["identify"]["terms"]["q1_dot"]
 
@@ -61,7 +63,7 @@ def test_stopping_with_a_job_running_returns_and_leaves_it_for_the_next_start(qu
 
 
 def _completed(cat, job_id):
-    return wait_for(lambda: (j := cat.get("jobs", job_id))["state"] in ("completed", "failed") and j, 90, "job")
+    return wait_for(lambda: (j := cat.get("jobs", job_id))["state"] in ("completed", "failed") and j, 300, "job")
 
 
 def test_a_job_whose_result_was_delivered_adopts_it_when_run_again(queue):
@@ -102,3 +104,55 @@ def test_a_half_written_report_of_an_interrupted_run_does_not_fail_the_re_run(qu
         again.stop()
     assert done["state"] == "completed", done
     assert (staging.parent / "report" / "index.html").is_file() and not staging.exists()
+
+
+def test_a_sweep_completed_while_the_web_server_was_down_is_identified_when_it_starts(tmp_path, table1_run, make_run):
+    """The rig controller only records (it never writes the jobs table): a complete sweep recording and a
+    completed campaign that nobody queued, as after a web server that was down when they ended, get their
+    identification and their joint identification on the next start, each once; an aborted recording none."""
+    cat = Catalog(tmp_path / "catalog.sqlite")
+    ids = ["0000000000b1", "0000000000b2", "0000000000b3"]
+    for k, (rec_id, status) in enumerate(zip(ids, ("complete", "complete", "aborted"))):
+        csv = tmp_path / f"{rec_id}.csv"
+        write_csv(csv, (table1_run if k == 0 else make_run(seed=k)).recording)  # two runs: a joint fit refuses copies
+        cat.insert("recordings", id=rec_id, created=time.time() + k, origin="sweep", filename=csv.name,
+                   path=str(csv), status=status, sweep_id=None, info={"kept": k})
+    cat.insert("campaigns", id="00000000c0c0", created=time.time(), state="completed", recording_ids=ids[:2])
+    jobs = JobQueue(cat, tmp_path / "results", workers=1)
+    jobs.start()
+    try:
+        try:
+            wait_for(lambda: cat.count("jobs", "state IN ('completed', 'failed')") == 3, timeout_s=600,
+                     what="the three owed jobs done")
+        except AssertionError:
+            raise AssertionError([(j["kind"], j["recording_id"], j["state"], j["error"]) for j in cat.list("jobs")])
+        jobs.recording_completed()  # a late event: nothing more is owed
+        wait_for(lambda: not jobs._owed.is_set(), what="the dispatcher's look at what is owed")
+    finally:
+        jobs.stop()
+    done = cat.list("jobs", limit=10)
+    assert sorted((j["kind"], j["recording_id"]) for j in done) == [
+        ("identify", ids[0]), ("identify", ids[1]), ("identify_joint", ids[0])]
+    assert all(j["state"] == "completed" for j in done), [(j["kind"], j["state"], j["error"]) for j in done]
+    assert next(j for j in done if j["kind"] == "identify_joint")["options"]["recording_ids"] == ids[:2]
+    # the model's summary was added to the recording's info, what was there kept
+    info = cat.get("recordings", ids[0])["info"]
+    assert info["kept"] == 0 and info["last_identify_job"] and info["identify"]["terms"]
+    cat.close()
+
+
+def test_no_owed_jobs_are_queued_without_auto_identification(tmp_path):
+    cat = Catalog(tmp_path / "catalog.sqlite")
+    cat.insert("recordings", id="0000000000b1", created=time.time(), origin="sweep", filename="x.h5",
+               path=str(tmp_path / "x.h5"), status="complete", sweep_id=None, info={})
+    jobs = JobQueue(cat, tmp_path / "results", workers=1, auto_identify=False)
+    jobs.start()
+    jobs.recording_completed()
+    jobs.wake()
+    try:
+        assert cat.queries.owed_jobs() == [("identify", "0000000000b1", {})]  # owed, yet not queued
+        wait_for(lambda: not jobs._wake.is_set(), what="the dispatcher's turn")
+        assert cat.count("jobs") == 0
+    finally:
+        jobs.stop()
+        cat.close()
