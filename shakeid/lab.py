@@ -352,12 +352,12 @@ def cmd_serve(args) -> int:
         settings.sim_speed = args.sim_speed
     if args.controller:
         settings.controller = args.controller
+    settings.resolve_stop(args.host, args.port)  # the child controller's stop listener: --port + 1 by default
     app = create_app(settings)  # prepares the data directory (and the generated token, if any)
     rig = f"rig of {args.config}" if args.config else f"embedded simulated rig at {settings.sim_speed:g}x"
     rig += f", rig controller at {settings.controller}" if settings.controller else ", rig controller as a child process"
     print(f"shakeid serve: http://{args.host}:{args.port}/ ({rig}); data in {settings.data_dir.resolve()}", flush=True)
     if settings.generated_token:
-    settings.resolve_stop(args.host, args.port)  # the child controller's stop listener: --port + 1 by default
         print(f"shakeid serve: no tokens configured; operator token: {settings.generated_token} "
               f"(kept in {settings.data_dir / 'operator-token'}); dashboard: "
               f"http://{args.host}:{args.port}/#token={settings.generated_token}", flush=True)
