@@ -134,7 +134,7 @@ def test_sigkill_of_the_sweep_process_the_watchdog_stops_the_table(tmp_path):
     cfg.write_text(f'[plc]\nport = {port}\n[stream]\nurl = "{rig.endpoints["stream"]}"\n')
     out = tmp_path / "killed.h5"
     proc = subprocess.Popen([exe, "sweep", "--config", str(cfg), "--f-start-hz", "1", "--f-end-hz", "20",
-                             "--duration-s", "120", "--amplitude-mm", "1.3", "--out", str(out)],
+                             "--duration-s", "120", "--amplitude-mm", "1.0", "--out", str(out)],  # 1.3: refused by the preflight
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
         end = time.monotonic() + 60

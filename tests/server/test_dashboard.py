@@ -102,8 +102,9 @@ def sweep_recording(service):
         return identified(api, sweep["recording_id"])
 
 
-def fill_sweep(page, duration_s: float):
-    page.fill("#f0", "1"), page.fill("#f1", "20"), page.fill("#dur", str(duration_s)), page.fill("#amp", "1.3")
+def fill_sweep(page, duration_s: float, amplitude_mm: float = 1.3):
+    page.fill("#f0", "1"), page.fill("#f1", "20"), page.fill("#dur", str(duration_s))
+    page.fill("#amp", str(amplitude_mm))
 
 
 def test_sign_in_by_link_never_shows_the_token(page, service):
@@ -175,7 +176,7 @@ def test_refusal_stays_until_dismissed(page, service):
 def test_estop_shows_real_progress_and_reset_clears_it(page, service):
     with service.client() as api:
         wait_idle(api)
-        fill_sweep(page, 300.0)
+        fill_sweep(page, 300.0, 1.0)  # 1.3 mm over 300 s: the preflight predicts the mass in the end stops
         page.click("#start")
         status = page.locator("#sweep-status")
         wait_for(lambda: (m := re.search(r"· (\d+) %", status.inner_text())) and int(m.group(1)) >= 8, 60,
