@@ -1,6 +1,7 @@
 """docker-compose.yml: validated by Debian's docker-compose (no engine needed), checked against what the
 services run, and its rig configuration exercised for real with both services as local processes."""
 from __future__ import annotations
+import pytest
 
 import shutil
 import signal
@@ -111,6 +112,7 @@ def test_a_broken_compose_file_is_caught(tmp_path):
         assert p.returncode != 0, name
 
 
+@pytest.mark.slow
 def test_compose_rig_configuration_drives_a_sweep_through_the_service(tmp_path):
     """The compose wiring without Docker: `shakeid sim`, `shakeid controller --config` and `shakeid serve
     --config --controller` as three processes with the compose rig configuration (hosts pointed at
@@ -170,6 +172,7 @@ def test_compose_rig_configuration_drives_a_sweep_through_the_service(tmp_path):
         log.close()
 
 
+@pytest.mark.slow
 def test_the_wheel_the_image_installs_carries_the_service(tmp_path):
     """The Dockerfile runs `pip install .` (no editable install, no source tree at run time): the wheel
     must carry every package module, the compiled kernel, the dashboard page and the console script."""

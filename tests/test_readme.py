@@ -15,6 +15,7 @@ Then: each command succeeded (the script stops at the first failure and names it
 the commands leave is there, and nothing they wrote is left for git to pick up (.gitignore covers it).
 """
 from __future__ import annotations
+import pytest
 
 import fcntl
 import json
@@ -138,6 +139,7 @@ def test_readme_parser_reads_continuations_and_comments():
     assert _strip_comment("shakeid x --extra-terms 'a#b' # c") == "shakeid x --extra-terms 'a#b'"
 
 
+@pytest.mark.slow
 def test_every_readme_command_runs_verbatim(tmp_path):
     blocks = readme_blocks((REPO / "README.md").read_text())
     assert sum(len(c) for lang, c in blocks if lang == "sh") >= 20  # the README's commands, all found

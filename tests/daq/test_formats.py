@@ -48,6 +48,7 @@ def _worst_relative(a: dict, b: dict) -> float:
     return worst
 
 
+@pytest.mark.slow
 def test_every_format_reads_the_same_samples(lab_files, table1_run):
     """float64 writers (CSV at 17 digits, TDMS, UFF 58b, MDF4) give the samples bit for bit, at 2048 Hz
     exactly (UFF given --fs: its E13.5 increment is not); ASCII UFF's 12 digits equal write_csv's."""
@@ -213,6 +214,7 @@ def _csv_printed(path, t, a, b, time_format: str):
     return path
 
 
+@pytest.mark.slow
 def test_csv_time_stamps_are_read_within_their_printed_resolution(tmp_path, table1_run):
     """Issue 31: stamps printed to the microsecond (%.6f) at 2048 Hz step 488 or 489 us: accepted, the rate
     from the span (2048 Hz to 1e-8); a dropped sample is still refused; stamps printed to the millisecond

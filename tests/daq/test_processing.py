@@ -61,6 +61,7 @@ def test_a_running_recording_is_not_processed(tmp_path):
     r.close()
 
 
+@pytest.mark.slow
 def test_cli_processes_and_identifies_a_gap_free_stretch(recording_with_gap):
     path, _, cut = recording_with_gap
     p = subprocess.run([SHAKEID, "recordings", str(path), "--process"], capture_output=True, text=True)

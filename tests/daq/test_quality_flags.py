@@ -81,6 +81,7 @@ def rig():
     r.stop()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fault", ["stuck", "saturate"])
 def test_sweep_with_a_sensor_fault_mid_sweep_has_the_flags_at_its_time_range(rig, tmp_path, fault, capsys):
     """The simulated rig's sensors go stuck (both channels repeat one value) or saturate (the mass

@@ -73,6 +73,7 @@ WRITER = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_sigkill_mid_recording_leaves_a_readable_file(tmp_path):
     path = tmp_path / "killed.h5"
     proc = subprocess.Popen([sys.executable, "-c", WRITER, str(path)], stdout=subprocess.PIPE, text=True)
@@ -101,6 +102,7 @@ def test_sigkill_mid_recording_leaves_a_readable_file(tmp_path):
     assert out.returncode == 0 and "aborted" in out.stdout and "found running" in out.stdout
 
 
+@pytest.mark.slow
 def test_identify_reads_hdf5_directly(tmp_path, table1_run, table1_truth):
     path = tmp_path / "sweep.h5"
     rec = table1_run.recording

@@ -26,6 +26,7 @@ def can_rig(request):
     r.stop()
 
 
+@pytest.mark.slow
 def test_sweep_recorded_over_can_identifies_the_rig(can_rig, tmp_path):
     plc = ModbusPLC(*can_rig.endpoints["modbus"])
     source = CanSource("virtual", can_rig.test_can_channel, 2048.0)
@@ -67,6 +68,7 @@ def _sweep_with_faults(rig, source, tmp_path, faults: list[dict]):
     return result, describe(tmp_path / "faults.h5")
 
 
+@pytest.mark.slow
 def test_dropped_and_corrupted_stream_frames_are_counted_gaps(tmp_path):
     rig = SimulatedRig(PLCConfig(limits=Limits(watchdog_s=3.0)), speed=10.0).start()
     try:
@@ -90,6 +92,7 @@ def test_dropped_and_corrupted_stream_frames_are_counted_gaps(tmp_path):
     assert f"gap: {3 * FRAME} samples missing from sample {info['gaps'][0][0]}" in shown.stdout
 
 
+@pytest.mark.slow
 def test_lost_can_frames_are_counted_gaps(can_rig, tmp_path):
     source = CanSource("virtual", can_rig.test_can_channel, 2048.0)
     result, info = _sweep_with_faults(can_rig, source, tmp_path, [{"drop_can_frames": 100}])
@@ -98,6 +101,7 @@ def test_lost_can_frames_are_counted_gaps(can_rig, tmp_path):
     assert info["samples"] == info["link_frames"]
 
 
+@pytest.mark.slow
 def test_can_counter_wraps_without_a_false_gap(can_rig):
     """The 16-bit counter wraps every 32 s at 2048 Hz: the index keeps counting up."""
     source = CanSource("virtual", can_rig.test_can_channel, 2048.0)
@@ -121,6 +125,7 @@ def test_missing_can_bus_is_a_clear_error():
         CanSource("nosuchinterface", "x", 2048.0)
 
 
+@pytest.mark.slow
 def test_shakeid_sweep_over_can_across_processes(tmp_path, can_relay):
     """Three real processes on loopback: a python-can-remote relay, `shakeid sim` sending the samples as
     CAN frames through it, and `shakeid sweep` with [sampling] source = "can" recording them."""

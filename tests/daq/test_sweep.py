@@ -25,6 +25,7 @@ def _runner(rig, plc):
     return SweepRunner(plc, SerialSource(rig.endpoints["stream"], 2048.0), Limits(), SENSITIVITY)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("transport", ["modbus", "ads"])
 def test_sweep_gives_a_complete_recording_that_identifies_the_rig(rig, tmp_path, transport):
     if transport == "modbus":
@@ -76,6 +77,7 @@ def test_cut_plc_link_ends_the_recording_with_the_reason(rig, tmp_path):
     assert info["status"] == "aborted" and "PLC link lost" in info["status_reason"] and info["samples"] > 0
 
 
+@pytest.mark.slow
 def test_shakeid_sweep_against_shakeid_sim(tmp_path):
     """Two real processes: `shakeid sim` (the rig) and `shakeid sweep` (the DAQ) on loopback."""
     import signal
@@ -114,6 +116,7 @@ def test_shakeid_sweep_against_shakeid_sim(tmp_path):
         sim.communicate(timeout=20)
 
 
+@pytest.mark.slow
 def test_sigkill_of_the_sweep_process_the_watchdog_stops_the_table(tmp_path):
     """`shakeid sweep` killed with SIGKILL mid-sweep: the PLC's watchdog stops the table (no client is left
     to do it), the file opens with its samples up to the last flush, and the next start marks it."""
@@ -176,6 +179,7 @@ def test_sigkill_of_the_sweep_process_the_watchdog_stops_the_table(tmp_path):
     ("estop_on_the_rig", "aborted", "emergency stop"),
     ("sensor_loss", "aborted", "accelerometer stream"),
 ])
+@pytest.mark.slow
 def test_abort_paths_leave_the_table_stopped_and_the_file_valid(rig, tmp_path, event, status, reason):
     """A drive fault, an emergency stop pressed at the rig, and a lost sensor stream mid-sweep: each ends
     the recording with its status and reason, the samples so far intact, and the table at rest."""
@@ -224,6 +228,7 @@ def test_a_sweep_that_would_not_fit_on_the_disk_is_refused_before_any_plc_write(
     plc.close()
 
 
+@pytest.mark.slow
 def test_disk_reaching_its_reserve_mid_sweep_stops_the_table_and_keeps_the_file_whole(rig, tmp_path):
     """HDF5 that runs out of space mid-write can leave a file no reader opens (seen here with a file-size
     limit: 'truncated file'), so the recorder checks the reserve at each flush and the sweep stops first."""
@@ -275,6 +280,7 @@ class _FallingBehindSource(SerialSource):
         return out
 
 
+@pytest.mark.slow
 def test_a_reader_falling_behind_without_knowing_it_still_records_the_whole_settle(rig, tmp_path):
     """The settle after the sweep is recorded in full when the reader falls behind during the sweep
     and cannot tell (delivering at 70 % of the sensors' pace from START, ~2 s behind by its end):

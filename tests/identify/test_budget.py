@@ -28,6 +28,7 @@ from identify.optimizers.base import least_squares
 from identify.selection import _backward_eliminate
 from identify.simulate import choose_substeps
 from protocol.sweep import SineSweep
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 REPO = Path(__file__).resolve().parents[2]
 SPURIOUS = ("1", "q2^2", "q1^3", "q1^2*q2")

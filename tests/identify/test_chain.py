@@ -156,6 +156,7 @@ def test_input_grid_of_a_strided_run_holds_what_its_steps_read(n_extra):
                                rtol=0, atol=1e-12 * np.max(np.abs(ref)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("layout", ["base", "force"])
 def test_single_precision_transforms_add_nothing_beside_a_quiet_sensors_noise(make_run, layout):
     """The chain transforms in single precision (chain.STATE_DTYPE): its rounding acts as white noise of

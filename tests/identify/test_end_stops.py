@@ -88,6 +88,7 @@ def test_mass_pushed_into_the_stop_bounces_back(zeta, offset):
     assert np.count_nonzero(q2 > D) == pytest.approx(np.pi / (W * s) * fs, abs=1.0)  # contact time, steps
 
 
+@pytest.mark.slow
 def test_kernel_and_library_agree_through_repeated_contacts():
     """The Table 1 rig with stops, thrown at 1 m/s and shaken: the kernel (features in C) against DOP853
     on the library's right-hand side (features in numpy), over 0.5 s and 8 contacts."""

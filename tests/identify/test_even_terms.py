@@ -17,6 +17,7 @@ def quadratic(request, make_run):
     return run, SparseIdentifier().fit(run.recording)
 
 
+@pytest.mark.slow
 def test_quadratic_stiffness_identified_without_spurious_terms(quadratic):
     """Before: q2^2 at 35-37 % of the truth, q2^3 at -19..91 %, plus spurious q1^2, q1^2*q2, q1^4 ...
     Now: exactly the rig's terms (no constant), every coefficient within 1 % (measured: 0.05 %)."""

@@ -43,6 +43,7 @@ def analysed(runs):
     return get
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("effect", sorted(EFFECTS))
 def test_names_the_hidden_effect_and_halves_the_gap(analysed, effect):
     analysis = analysed(effect)
@@ -68,6 +69,7 @@ def test_no_hidden_effect_answers_none(analysed):
     assert res["gap_after"] == res["gap_before"] and res["confidence"] > 0.5
 
 
+@pytest.mark.slow
 def test_given_baseline_model_is_compared_as_given(runs):
     """A digital twin with the design values but no friction: the gap is the twin's, friction is named."""
     twin = RigParameters.design().model()
@@ -86,6 +88,7 @@ def test_localisation_points_at_the_velocity_signature(analysed):
     assert 0 <= w["t_start_s"] < w["t_end_s"] and w["excitation_hz"] > 0
 
 
+@pytest.mark.slow
 def test_explain_cli_json_and_report(runs, tmp_path):
     path = tmp_path / "qd.csv"
     write_csv(path, runs["quadratic_damping"].recording)

@@ -11,6 +11,7 @@ from protocol.sweep import SineSweep
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 FS = 1000.0
 SWEEP = SineSweep(1.0, 20.0, 30.0, 1.3)

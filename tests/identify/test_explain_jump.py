@@ -30,6 +30,7 @@ def test_trimmed_total_leaves_out_the_largest_share():
     assert trimmed_total(np.ones((3, 10))).tolist() == [10.0] * 3   # along the last axis
 
 
+@pytest.mark.slow
 def test_plain_rig_whose_jump_is_held_out_answers_none():
     analysis = DiscrepancyAnalysis().fit(_recording())
     res = analysis.result()
@@ -40,6 +41,7 @@ def test_plain_rig_whose_jump_is_held_out_answers_none():
     assert res["gap_before"] <= 2 * res["noise_floor"]
 
 
+@pytest.mark.slow
 def test_quadratic_stiffness_with_the_jump_held_out_is_named():
     """Measured once: named at confidence 0.83, the gap from 12.4x to 5.2x the noise floor."""
     res = DiscrepancyAnalysis().fit(_recording({"quadratic_stiffness": 2.0e4})).result()

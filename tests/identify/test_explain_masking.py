@@ -10,6 +10,7 @@ from protocol.sweep import SineSweep
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 GAIN = 0.025
 

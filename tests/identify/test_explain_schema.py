@@ -11,6 +11,7 @@ import pytest
 from identify.recording import write_csv
 from sim.rig import RigParameters
 from protocol.sweep import SineSweep
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 SCHEMA = json.loads((Path(__file__).resolve().parents[2] / "docs" / "schemas" / "explanation.schema.json").read_text())
 

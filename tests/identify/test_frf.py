@@ -50,6 +50,7 @@ def _sweep(resp, model, amplitude_mm, direction):
 @pytest.mark.parametrize("model,amplitude_mm,jumps", [
     (TABLE1, 0.8, False), (TABLE1, 1.1, True), (TABLE1, 1.2, True), (QUADRATIC, 0.9, False), (QUADRATIC, 1.5, True)],
     ids=["table1-0.8mm", "table1-1.1mm", "table1-1.2mm", "quadratic-0.9mm", "quadratic-1.5mm"])
+@pytest.mark.slow
 def test_against_stepped_time_integration(model, amplitude_mm, jumps):
     resp = frequency_response(model, amplitude_mm, (1.0, 20.0))
     assert (resp.jump_down_hz is not None) == jumps and (resp.jump_up_hz is not None) == jumps

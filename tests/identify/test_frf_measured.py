@@ -20,6 +20,7 @@ def _record(amplitude_mm, direction, seed):
     return run_sweep(RIG, sweep, table_sensor=sensor, mass_sensor=sensor, seed=seed)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("amplitude_mm", [1.0, 1.1, 1.2])
 @pytest.mark.parametrize("direction", ["up", "down"])
 def test_measured_jump_agrees_with_the_predicted_fold_within_the_sweep_rate_bias(amplitude_mm, direction):

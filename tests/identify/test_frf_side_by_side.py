@@ -43,6 +43,7 @@ def sweeps():
     return _sweeps(seed)
 
 
+@pytest.mark.slow
 def test_true_model_agrees_and_a_softer_one_is_flagged(sweeps):
     truth, softer = RIG.model(), _softer(RIG.model())
     doc = side_by_side({"true": truth, "softer": softer}, sweeps, fit_percent=99.0, judged="softer")

@@ -70,6 +70,7 @@ def test_physical_parameters(fitted):
     dict(fs_hz=1000.0, noise=0.02, seed=3),                      # other sample rate, 2 % noise
     dict(sweep=SineSweep(1.0, 20.0, 25.0, 1.3), seed=4),         # fast sweep
 ])
+@pytest.mark.slow
 def test_robust_to_record_length_range_rate_and_noise(make_run, table1_truth, true_q1_terms, case):
     model = SparseIdentifier(validate=False).fit(make_run(**case).recording).model_
     _check_model(model, table1_truth, true_q1_terms, tol=0.02, weak_tol=0.05)

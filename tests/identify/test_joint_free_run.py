@@ -35,6 +35,7 @@ def joint_budget(recordings):
     return SparseIdentifier(max_terms=4, budget="free-run").fit(recordings)
 
 
+@pytest.mark.slow
 def test_per_record_splits_a_joint_mask_into_each_recordings_own(joint_budget):
     sigs = joint_budget.joint_states_
     parts = per_record(joint_budget.heldout_rows_, sigs)(np.asarray)
@@ -69,6 +70,7 @@ def test_pooled_error_weighs_every_row_the_same(joint_budget, table1_truth):
         free_run_error(sigs, [np.zeros_like(r) for r in rows], model=model)
 
 
+@pytest.mark.slow
 def test_pooled_budget_keeps_the_true_terms_among_spurious_ones(joint_budget, table1_truth, true_q1_terms):
     """choose_budget on the summed normal equations of both recordings, free-run errors pooled: given the
     true terms and spurious stand-ins (as tests/identify/test_budget.py on one record), a budget of 5
@@ -109,6 +111,7 @@ def test_joint_budget_drops_the_term_the_motion_needs_least(joint_budget, true_q
         assert rec["validation"]["heldout"]["q2"]["nrmse"] == pytest.approx(again["heldout"]["q2"]["nrmse"])
 
 
+@pytest.mark.slow
 def test_joint_refine_and_budget_refit_on_all_rows(recordings, table1_truth, true_q1_terms):
     """refine="free-run" refits the joint fit on the pooled free-run error of the fit rows; with
     budget_refit="all" the winner saw the held-out rows, and the validations of the pool and of each

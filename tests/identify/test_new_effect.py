@@ -57,6 +57,7 @@ def test_identification_takes_the_effect_by_name(effect, recording):
     assert "q1*|q2|" in model.equations["q1_dot"]
 
 
+@pytest.mark.slow
 def test_the_workflow_names_it_and_the_report_shows_it(effect, recording, tmp_path):
     analysis = DiscrepancyAnalysis().fit(recording)
     res = analysis.result()

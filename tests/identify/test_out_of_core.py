@@ -72,6 +72,7 @@ def _peak(fn):
         tracemalloc.stop()
 
 
+@pytest.mark.slow
 def test_memory_stays_bounded_by_the_chunk(make_run):
     """Peak traced memory (numpy's allocations included) of chunked identification does not grow with
     the record (12 and 24 tiles of a sweep that starts and ends at rest), while in core it grows with

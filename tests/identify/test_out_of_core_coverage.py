@@ -12,6 +12,7 @@ from identify.identifier import SparseIdentifier
 from identify.out_of_core import ChunkedIdentifier
 from identify.recording import Recording
 from sim.synth import noise_free_sweep
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 #: Coverage: the truth within Z_COVER standard errors for at least COVERED of the q1_dot terms x seeds.
 Z_COVER, COVERED = 3.0, 0.95

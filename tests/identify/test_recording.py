@@ -104,6 +104,7 @@ def test_unreadable_files(tmp_path):
         read_recording(_csv(tmp_path, "a,table_acc,mass_acc\n" + "1,2,3\n" * 300))
 
 
+@pytest.mark.slow
 def test_a_text_column_beside_the_signals_is_left_out(tmp_path, table1_run):
     """A lab's CSV often carries words beside the signals (who ran it, a note): the signals are read as if
     it were not there; asking a signal of it names the column and its first value; a row with a field

@@ -30,6 +30,7 @@ def test_free_run_error_steps_as_validation_does(table1_fit):
     assert strided.cost(model) == pytest.approx(by_sample.cost(model), rel=3e-3)
 
 
+@pytest.mark.slow
 def test_refit_in_steps_of_two_samples_matches_the_sample_by_sample_refit(table1_fit):
     """The refit's coefficients with steps of 2 samples against those with one step per sample: measured
     within 3.5e-7 of each other, against the 1e-3 - 1e-2 of a coefficient's standard error; the bound is

@@ -50,6 +50,7 @@ def test_heldout_rule_needs_heldout_samples(table1_run):
     assert TRUE_Q1 <= set(bic.model_.equations["q1_dot"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("amplitude_mm, noise", [(1.3, 0.005), (0.6, 0.04)])
 def test_placements_choose_in_one_batch_as_one_by_one(make_run, amplitude_mm, noise):
     """The inclusion probabilities' placements choose their supports in one batch (heldout_supports):

@@ -42,6 +42,7 @@ SECOND = DATA.parent / "Schroeder80mV.mat"
 CANDIDATES = {"1", "q1", "q2", "q2^2", "q1^3", "q1*q2^2", "q2^3", "u"}
 
 
+@pytest.mark.slow
 def test_silverbox_two_records_budget_extrapolates_to_the_arrowhead(silverbox):
     """The free-run budget over the estimation range and the distribution's second record (vendored; none
     of it in a test set, output peaks 23 % higher): 7 of 8 candidate terms chosen by the pooled free-run

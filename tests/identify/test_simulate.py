@@ -98,6 +98,7 @@ def test_equation_rows_is_the_models_rhs(equations, travel, equation):
         assert np.any(np.abs(x[:, 1]) > 0.02) and np.any(np.abs(x[:, 1]) < 0.02)
 
 
+@pytest.mark.slow
 def test_steps_of_several_samples_converge_at_fourth_order():
     """simulate(stride=s): RK4 steps of s samples, the samples inside a step from RK4's continuous
     extension. Against DOP853 on the Duffing sweep (analytic input): the error grows as h^4 with the step

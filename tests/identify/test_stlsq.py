@@ -1,4 +1,5 @@
 """STLSQ next to ADMM on the same recordings: the paper's Table 1 vs Table 2 comparison."""
+import pytest
 import numpy as np
 
 from identify.gram import BlockGram
@@ -30,6 +31,7 @@ def test_stlsq_and_admm_side_by_side(table1_run, table1_truth):
         assert abs(admm.model_.coefficient("q1_dot", term) / true - 1) < 0.05
 
 
+@pytest.mark.slow
 def test_raw_threshold_as_in_the_paper_depends_on_units(make_run):
     """The paper's STLSQ (lambda = 0.95 on raw coefficients, Table 2) cuts any real term whose SI
     coefficient is below 0.95: a lightly damped rig (c/m = 0.8 1/s) loses its damping term. ADMM and

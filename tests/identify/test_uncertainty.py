@@ -35,6 +35,7 @@ def _random_case(rng):
     return rig, rng.uniform(0.8, 1.3), float(np.exp(rng.uniform(np.log(0.003), np.log(0.06))))
 
 
+@pytest.mark.slow
 def test_standard_errors_cover_the_truth_on_randomised_rigs():
     """Truth within 2 SE for ~95 % and 3 SE for ~99 % of terms x cases. 24 cases give ~110 trials,
     correlated within a case; at a true coverage of 95 % / 99 % the binomial 3-sigma lower bounds for
@@ -76,6 +77,7 @@ def test_the_issue_case_is_covered(issue_case):
         assert abs(c - truth[t]) < 3 * ident.standard_errors_["q1_dot"][t], t
 
 
+@pytest.mark.slow
 def test_chain_bias_is_measured_and_removed():
     """At 5 % noise the integrated states' noise biases q2 and q2^3 (errors in variables). The noise
     floors read from the spectra match the sensors' true noise, and the bias estimate (in closed form,
@@ -119,6 +121,7 @@ def _closed_form_and_simex(recording):
     return ident, sups, coefs, closed, simex
 
 
+@pytest.mark.slow
 def test_closed_form_bias_matches_a_large_simex():
     """The corrected-score bias (identify.corrected, the default) against SIMEX with 256 replicates on
     the same fit: Table 1 rig, 60 s, 5 % noise. SIMEX is a Monte Carlo (mc_var: its variance) and
@@ -143,6 +146,7 @@ def test_closed_form_bias_matches_a_large_simex():
         assert ident.model_.equations["q1_dot"][names[j]] == pytest.approx(coefs[0][j] - closed["bias"][0][j])
 
 
+@pytest.mark.slow
 def test_closed_form_noise_spread_matches_the_replicates_spread():
     """The sensor noise's share of each coefficient's variance, linearised on the band's bins
     (identify.noise_spread), against the spread of 256 SIMEX replicates (128 antithetic pairs: each
@@ -187,6 +191,7 @@ def test_simex_where_the_closed_form_does_not_apply():
         SparseIdentifier(bias_method="exact").fit(run.recording)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("duration_s, noise_fraction", [(15, 0.005), (60, 0.05)])
 def test_noise_floors_from_the_band_search_spectra(duration_s, noise_fraction):
     """The fit reads the sensors' noise from the Welch spectra the chain's band search computed (the
@@ -220,6 +225,7 @@ def test_inclusion_probabilities_tell_real_from_spurious_terms(issue_case):
     assert p["q2_dot"] == {"q1": 1.0}
 
 
+@pytest.mark.slow
 def test_reported_coefficients_do_not_depend_on_the_heldout_placement():
     """Table 1 rig, a 40 s sweep followed by 150 s of rest: the default blocks take a large share of the
     resonance region out of the training fit, whose q1*q2^2 came out 6 % off (docs/identification.md
@@ -314,6 +320,7 @@ def test_noise_chain_is_the_chain_applied_to_the_noise(layout):
         assert np.max(np.abs(d[v] - want)) <= 1e-9 * np.max(np.abs(getattr(noisier, name)[v])), name
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("layout", ["base", "force"])
 def test_noise_drawn_on_the_band_has_the_chains_statistics(layout):
     """SIMEX draws the chain's image of fresh noise on the band's bins (NoiseChain.draw) instead of
@@ -354,6 +361,7 @@ def test_replicates_follow_the_record_length():
     assert [replicates_for(n) for n in (30_000, 250_000, 500_000, 1_000_000, 10_000_000)] == [64, 64, 32, 16, 16]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("layout", ["base", "force"])
 def test_lag0_covariance_is_that_of_the_band_limited_draws(layout):
     """The closed-form chain bias needs only the lag-0 covariance of the chain's noise image
@@ -377,6 +385,7 @@ def test_lag0_covariance_is_that_of_the_band_limited_draws(layout):
         assert want[1, 2] < -0.1 * sd[1] * sd[2]
 
 
+@pytest.mark.slow
 def test_corrected_sums_are_unbiased_for_the_noise_free_moments():
     """identify.corrected: for a monomial y^k of noisy signals y = x + d (d the chain's Gaussian noise
     image), sum_t T_k(y_t) has expectation sum_t x_t^k. Known truth: x is a fixed set of signals (a

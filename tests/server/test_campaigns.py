@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from .conftest import OPERATOR, SHAKEID, VIEWER, Service, wait_for
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 # 3-15 Hz over 4 s of rig time (0.4 s of wall time at 10x) per sweep
 PLAN = {"name": "levels", "sweep": {"f_start_hz": 3.0, "f_end_hz": 15.0, "duration_s": 4.0, "settle_s": 0.5},

@@ -18,6 +18,7 @@ from daq.plc import ModbusPLC
 from protocol.plc import Fault, State
 
 from .conftest import SHAKEID, Service, wait_for
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 #: a long sweep to stop or abort: 1 mm (at 1.3 mm a 120-300 s sweep hits the end stops: the preflight refuses it)
 SWEEP = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 300.0, "amplitude_mm": 1.0, "settle_s": 1.0}

@@ -18,6 +18,7 @@ from identify.recording import write_csv
 from protocol.sweep import SineSweep
 
 from .conftest import OPERATOR, VIEWER, Service, wait_for
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 
 def js_fixed(x: float, digits: int = 0) -> str:

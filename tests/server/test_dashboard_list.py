@@ -21,6 +21,7 @@ from protocol.sweep import SineSweep
 
 from .conftest import OPERATOR, Service, wait_for
 from .test_dashboard import browser, page, sweep_body, wait_idle  # noqa: F401 - fixtures and helpers shared
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 N_RECORDINGS = 65
 DAY_S = 86400.0

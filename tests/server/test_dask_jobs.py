@@ -40,6 +40,7 @@ def _finished(cat, job_id, timeout_s=90):
                     f"job {job_id}")
 
 
+@pytest.mark.slow
 def test_jobs_run_on_separate_dask_worker_processes_and_write_the_same_result_files(dask_cluster, tmp_path,
                                                                                      short_csv, true_q1_terms):
     pool = DaskPool(dask_cluster)
@@ -68,6 +69,7 @@ def test_jobs_run_on_separate_dask_worker_processes_and_write_the_same_result_fi
         cat.close()
 
 
+@pytest.mark.slow
 def test_a_refused_recording_fails_its_job_with_the_reason_through_a_local_cluster(tmp_path, short_csv,
                                                                                   true_q1_terms):
     from distributed import LocalCluster
@@ -94,6 +96,7 @@ def test_a_refused_recording_fails_its_job_with_the_reason_through_a_local_clust
     cat.close()
 
 
+@pytest.mark.slow
 def test_an_unreachable_scheduler_fails_the_job_with_the_reason_and_the_service_keeps_answering(tmp_path,
                                                                                                 short_csv):
     address = f"tcp://127.0.0.1:{free_port()}"  # nothing listens there

@@ -1,4 +1,6 @@
 """Refusals at the door in the operator's words: the field, the rule, no regex, no server path."""
+import pytest
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 
 def test_campaign_name_and_non_finite_upload_rate_are_refused_in_words(service):

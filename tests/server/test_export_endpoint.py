@@ -15,6 +15,7 @@ from identify.simulate import choose_substeps, simulate
 
 from .conftest import OPERATOR, VIEWER, Service, wait_for
 from .test_dashboard import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_MS
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 
 @pytest.fixture(scope="module")

@@ -11,6 +11,7 @@ import pytest
 
 from .conftest import Service, wait_for
 from .test_dashboard import TIMEOUT_MS, browser, identified, page, sweep_body, wait_idle  # noqa: F401 (fixtures)
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,7 @@
 """An identification job whose frequency response cannot be made still delivers its model: the worker
 (server.worker.run_job, in this process, on a real CSV) writes frf.json with the reason beside model.json,
 and no overlay figure."""
+import pytest
 import json
 
 import numpy as np
@@ -10,6 +11,7 @@ from identify.recording import Recording, write_csv
 from identify.simulate import equation_rows, simulate
 from server.worker import FRF_FILE, run_job
 from sim.rig import RigParameters
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 
 def test_a_recording_that_is_not_a_sweep_is_identified_and_its_frf_says_why(tmp_path):

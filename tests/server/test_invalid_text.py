@@ -1,5 +1,6 @@
 """Text that is not text (a lone UTF-16 surrogate, a control character) in any string field of any JSON
 body: 422 naming the field, nothing stored; text an older version stored never breaks a listing."""
+import pytest
 import json
 import sqlite3
 import time
@@ -35,6 +36,7 @@ def _body_with(loc: tuple, bad: str):
     return value
 
 
+@pytest.mark.slow
 def test_invalid_text_in_every_string_field_of_every_body_is_refused_and_nothing_is_stored(service):
     with service.client() as op:
         doc = op.get("/openapi.json").json()
@@ -84,6 +86,7 @@ def test_text_stored_by_an_older_version_never_breaks_a_listing(tmp_path):
     cat.close()
 
 
+@pytest.mark.slow
 def test_listings_stay_200_over_a_catalog_with_bad_text(tmp_path):
     """The same bad rows in a real service's catalog: every listing answers 200."""
     data = tmp_path / "data"

@@ -30,6 +30,7 @@ def queue(tmp_path, table1_run):
     cat.close()
 
 
+@pytest.mark.slow
 def test_a_killed_worker_fails_its_job_with_the_reason_and_the_next_job_runs(queue):
     cat, jobs = queue
     # a slow job (free-run refit) so it is still running when its worker is killed
@@ -66,6 +67,7 @@ def _completed(cat, job_id):
     return wait_for(lambda: (j := cat.get("jobs", job_id))["state"] in ("completed", "failed") and j, 300, "job")
 
 
+@pytest.mark.slow
 def test_a_job_whose_result_was_delivered_adopts_it_when_run_again(queue):
     """The service was killed after model.json was written, before the staged report was renamed (and
     after two attempts): the job is re-queued, not failed, and its re-run adopts the delivered model (the
@@ -86,6 +88,7 @@ def test_a_job_whose_result_was_delivered_adopts_it_when_run_again(queue):
     assert (out / "report" / "index.html").is_file() and not (out / "report.partial").exists()
 
 
+@pytest.mark.slow
 def test_a_half_written_report_of_an_interrupted_run_does_not_fail_the_re_run(queue):
     """An interrupted run left a staged report without its index.html and no model.json (the fit was not
     delivered): the re-run starts from a clean staging folder and completes."""
@@ -106,6 +109,7 @@ def test_a_half_written_report_of_an_interrupted_run_does_not_fail_the_re_run(qu
     assert (staging.parent / "report" / "index.html").is_file() and not staging.exists()
 
 
+@pytest.mark.slow
 def test_a_sweep_completed_while_the_web_server_was_down_is_identified_when_it_starts(tmp_path, table1_run, make_run):
     """The rig controller only records (it never writes the jobs table): a complete sweep recording and a
     completed campaign that nobody queued, as after a web server that was down when they ended, get their

@@ -5,12 +5,14 @@ nothing of them is kept once they leave (server/livefeed.py, server/routers/live
 Structure, not timing: the counts come from GET /api/live; waits are for states, never fixed sleeps.
 """
 from __future__ import annotations
+import pytest
 
 import json
 import socket
 import threading
 
 from .conftest import VIEWER, wait_for
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 VIEWERS = 30
 

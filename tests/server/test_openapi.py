@@ -2,6 +2,7 @@
 codes, content types and response bodies. The schema cannot state the rig's combined limits (peak
 velocity and acceleration), so schema-valid sweeps may still get 422: `positive_data_acceptance` is the
 one check left out."""
+import pytest
 import os
 import re
 import subprocess
@@ -9,6 +10,7 @@ import sys
 from pathlib import Path
 
 from .conftest import OPERATOR
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 SCHEMATHESIS = str(Path(sys.executable).with_name("schemathesis"))
 CHECKS = "not_a_server_error,status_code_conformance,content_type_conformance,response_schema_conformance"

@@ -1,9 +1,11 @@
 """The dashboard shows the preflight's prediction (issue 31 item 5) in a real browser (test_dashboard's Chromium
 and service): a refusal with the predicted peak, a warning kept as a message and on the sweep's line."""
 from __future__ import annotations
+import pytest
 
 from .conftest import wait_for
 from .test_dashboard import browser, fill_sweep, page, service, wait_idle  # noqa: F401 (fixtures)
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 
 def test_the_page_shows_the_refusal_and_the_warning(page, service):  # noqa: F811

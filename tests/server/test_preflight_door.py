@@ -8,6 +8,7 @@ import pytest
 from daq.recorder import read_h5_recording
 
 from .conftest import wait_for
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 #: the attack's sweep: on the embedded rig it clipped the mass accelerometer (0.09 % of the samples, the
 #: mass hitting the end stops; the rig's own physics run at full rate: 0.088 %)

@@ -1,4 +1,5 @@
 """`shakeid sweep --server`: the CLI driving a sweep through a running service (two real processes)."""
+import pytest
 import re
 import subprocess
 import sys
@@ -7,6 +8,7 @@ from pathlib import Path
 from daq.recorder import describe
 
 from .conftest import OPERATOR, VIEWER
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 ARGS = ["--f-start-hz", "1", "--f-end-hz", "20", "--duration-s", "30", "--amplitude-mm", "1.3", "--settle-s", "1"]

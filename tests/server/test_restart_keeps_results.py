@@ -1,12 +1,14 @@
 """No delivered result is lost: `shakeid sweep --server --wait-model` returns with the model, the service
 gets a normal stop (SIGTERM) at once, and is started again; three rounds on one data directory, real
 processes. Every model the operator saw is served after each restart, with its report, and no job fails."""
+import pytest
 import re
 import signal
 import subprocess
 
 from .conftest import OPERATOR, Service, wait_for
 from .test_remote_cli import SHAKEID
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 ARGS = ["--f-start-hz", "1", "--f-end-hz", "20", "--duration-s", "20", "--amplitude-mm", "1.3", "--settle-s", "1"]
 

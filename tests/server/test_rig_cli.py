@@ -1,10 +1,12 @@
 """`shakeid rig status|reset|estop --server URL` and `shakeid recordings --server URL`: the real CLI against a
 real `shakeid serve` with its embedded simulated rig (which has no --config to reach it by)."""
+import pytest
 import json
 import subprocess
 
 from .conftest import OPERATOR, VIEWER
 from .test_remote_cli import SHAKEID
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 
 def _cli(*args, token=OPERATOR):

@@ -2,6 +2,7 @@
 amplitude the limits allow. The recording is complete or ended by a named PLC fault; its quality flags
 say what the data are (checked against the file's samples); a model appears only for data that carry one."""
 from __future__ import annotations
+import pytest
 
 import math
 import re
@@ -12,6 +13,7 @@ import numpy as np
 from protocol.plc import Limits
 
 from .conftest import wait_for
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 
 def test_longest_sweep_at_the_largest_amplitude_the_limits_allow(service):

@@ -1,5 +1,6 @@
 """End to end over loopback: `shakeid serve` (uvicorn, embedded simulated rig at 10x) and HTTP clients."""
 from __future__ import annotations
+import pytest
 
 import json
 import os
@@ -13,6 +14,7 @@ import numpy as np
 from sim.rig import RigParameters
 
 from .conftest import VIEWER, Service, wait_for
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 SWEEP = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 40.0, "amplitude_mm": 1.3, "settle_s": 2.0}
 #: a long sweep to stop or abort: 1 mm (at 1.3 mm a 120-300 s sweep hits the end stops: the preflight refuses it)

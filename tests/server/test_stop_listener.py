@@ -58,6 +58,7 @@ def _stopped(op: httpx.Client, sweep_id: str) -> None:
     wait_for(lambda: op.get(f"/api/sweeps/{sweep_id}").json()["state"] == "aborted", what="the sweep aborted")
 
 
+@pytest.mark.slow
 def test_the_stop_listener_stops_a_running_sweep_and_refuses_others(stop_service):
     url = _stop_url(stop_service)
     assert url == f"http://127.0.0.1:{stop_service.extra_env['SHAKEID_STOP_PORT']}{ESTOP_PATH}"
@@ -91,6 +92,7 @@ def test_the_dashboard_may_post_the_stop_there(stop_service):
     assert foreign.status_code == 403 and "access-control-allow-origin" not in foreign.headers
 
 
+@pytest.mark.slow
 def test_the_dashboards_stop_button_posts_to_the_stop_listener(browser, stop_service):  # noqa: F811
     """In Chromium, under the page's own CSP: the press goes to the stop listener (a CSP or CORS refusal
     would show as the fallback's POST to the web server's route instead)."""
@@ -132,6 +134,7 @@ def test_the_stop_is_delivered_while_many_viewers_load_the_web_server(stop_servi
                 sock.close()
 
 
+@pytest.mark.slow
 def test_the_cli_sends_the_stop_to_the_listener_and_falls_back_to_the_server(stop_service):
     url = _stop_url(stop_service)
     run = [SHAKEID, "rig", "estop", "--server", stop_service.url, "--token", OPERATOR]

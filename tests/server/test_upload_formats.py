@@ -8,6 +8,7 @@ import pytest
 
 from ..daq.lab_writers import write_mdf, write_tdms, write_uff
 from .conftest import OPERATOR, VIEWER, wait_for
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 FS_HZ = 2048.0
 

@@ -45,6 +45,7 @@ def _support(model: dict) -> set[str]:
     return {t for t, c in model["model"]["q1_dot"].items() if c}
 
 
+@pytest.mark.slow
 def test_batch_on_a_dask_cluster_gives_one_model_per_file_each_naming_its_worker(dask_cluster, recordings, tmp_path,
                                                                                   true_q1_terms, capsys):
     from distributed import Client
@@ -74,6 +75,7 @@ def test_batch_on_a_dask_cluster_gives_one_model_per_file_each_naming_its_worker
     assert batch["model"] == alone["model"] and batch["validation"] == alone["validation"]
 
 
+@pytest.mark.slow
 def test_batch_in_the_local_pool_names_the_worker_process(recordings, capsys, true_q1_terms):
     good, _ = recordings
     assert main(["batch", str(good[0]), str(good[2]), "--workers", "2"]) == 0
@@ -88,6 +90,7 @@ def test_batch_in_the_local_pool_names_the_worker_process(recordings, capsys, tr
         assert pid != os.getpid()  # a pool process, not this one
 
 
+@pytest.mark.slow
 def test_files_differing_only_in_extension_keep_one_model_each(recordings, tmp_path, capsys):
     """sweep0.csv and sweep0.h5 are two recordings: each model is written under the whole file name (the
     name without its extension had written both to sweep0.model.json, and the last to finish won)."""
@@ -105,6 +108,7 @@ def test_files_differing_only_in_extension_keep_one_model_each(recordings, tmp_p
     assert doc["models"]["sweep0.csv"]["model"] != doc["models"]["sweep0.h5"]["model"]  # two fits, two models
 
 
+@pytest.mark.slow
 def test_a_second_batch_into_the_same_folder_keeps_the_first_in_its_index(recordings, tmp_path, capsys):
     """batch.json indexes every model in the folder: a later batch adds its files (and replaces the entries
     of files it identifies again) instead of rewriting the index with its own files alone."""

@@ -14,6 +14,7 @@ import pytest
 
 from daq.plc import ModbusPLC
 from protocol.plc import Command, State
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 

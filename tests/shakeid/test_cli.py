@@ -14,6 +14,7 @@ def run(*args, cwd=None):
     return subprocess.run([SHAKEID, *map(str, args)], capture_output=True, text=True, cwd=cwd, timeout=300)
 
 
+@pytest.mark.slow
 def test_identify_json_contract(table1_csv, table1_truth):
     proc = run("identify", table1_csv, "--json")
     assert proc.returncode == 0, proc.stderr
@@ -25,6 +26,7 @@ def test_identify_json_contract(table1_csv, table1_truth):
     assert doc["validation"]["heldout"]["q1_dot"]["fit_percent"] > 98
 
 
+@pytest.mark.slow
 def test_identify_options_and_report(table1_csv, tmp_path):
     out = tmp_path / "rep"
     proc = run("identify", table1_csv, "--method", "stlsq", "--selection", "paper", "--lambdas", "50",
@@ -51,6 +53,7 @@ def test_identify_options_and_report(table1_csv, tmp_path):
     assert (out / "model.json").read_bytes() == model and (out / "index.html").exists()
 
 
+@pytest.mark.slow
 def test_identify_budget_option(table1_csv, table1_truth):
     """--budget reaches the identifier; the rule's support already fits the budget here, so no candidates
     are screened (tests/identify/test_budget.py runs the choice itself)."""
@@ -80,6 +83,7 @@ def test_identify_budget_option(table1_csv, table1_truth):
                                         enumerate(np.random.default_rng(0).standard_normal((4000, 2)))), [],
      "rec.csv: the input shows no excited frequency band"),
 ])
+@pytest.mark.slow
 def test_errors_are_one_clear_line(tmp_path, content, args, message):
     path = tmp_path / "rec.csv"
     if content is not None:
@@ -105,6 +109,7 @@ def test_errors_are_one_clear_line(tmp_path, content, args, message):
     (["explain", "{csv}", "--model", "{csv}"], "not a model file: a model is the JSON `shakeid identify --json` "
                                                "prints or a report's model.json (this is not JSON"),
 ])
+@pytest.mark.slow
 def test_an_impossible_option_is_named_in_one_line(table1_csv, tmp_path, args, message):
     """A value no rig has (a zero mass, a negative sample rate) is refused while the command line is read,
     naming the option, in one line pointing at --help (not a ZeroDivisionError's traceback, not numpy's
@@ -124,6 +129,7 @@ def test_an_impossible_option_is_named_in_one_line(table1_csv, tmp_path, args, m
         ("notes.h5", "not an HDF5 file at all\n", "notes.h5: not an HDF5 file (shakeid's recordings are the HDF5"),
     ]
 ] + [("identify", "rec.dat", "t,table_acc,mass_acc\n0,1,2\n", "rec.dat: unsupported file type '.dat' (HDF5 .h5")])
+@pytest.mark.slow
 def test_a_wrong_file_is_named_in_words_not_in_hdf5s(tmp_path, command, name, content, message):
     """A mistyped path, a text file named .h5, an unknown extension: one line saying which, without h5py's
     errno and library wording ("Unable to synchronously open file ... errno = 2")."""
@@ -137,6 +143,7 @@ def test_a_wrong_file_is_named_in_words_not_in_hdf5s(tmp_path, command, name, co
     assert message in lines[0] and "errno" not in lines[0] and "Unable to" not in lines[0], lines[0]
 
 
+@pytest.mark.slow
 def test_simulate_writes_recording_and_truth(tmp_path):
     out = tmp_path / "s.csv"
     proc = run("simulate", "--out", out, "--duration-s", "10", "--effect", "coulomb_friction=0.1",
@@ -160,6 +167,7 @@ def test_simulate_writes_recording_and_truth(tmp_path):
     assert out.read_bytes() != before  # the default rig without friction: another recording
 
 
+@pytest.mark.slow
 def test_version_is_the_packages():
     import tomllib
 
@@ -168,6 +176,7 @@ def test_version_is_the_packages():
     assert out.returncode == 0 and out.stdout.strip() == f"shakeid {declared}"
 
 
+@pytest.mark.slow
 def test_paths_that_cannot_be_written_are_one_line_errors(table1_csv, tmp_path):
     """A report folder that is a file, a folder that cannot be made, a recording into a folder that does
     not exist: one line naming the path, exit 2, no traceback (they were FileExistsError and
@@ -183,6 +192,7 @@ def test_paths_that_cannot_be_written_are_one_line_errors(table1_csv, tmp_path):
     assert proc.returncode == 2 and "no folder" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
 
 
+@pytest.mark.slow
 def test_a_reader_that_goes_away_stops_nothing(tmp_path):
     """`shakeid campaign ... | head -3`: once the reader has gone, a write met a broken pipe, which ended a
     sweep as "DAQ error: BrokenPipeError" and left the campaign marked running. The command now finishes

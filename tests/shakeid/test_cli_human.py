@@ -51,6 +51,7 @@ def test_help_screen_shows_defaults_of_the_issue():
     assert "--f-start-hz HZ frequency the sweep starts at, Hz (required)" in out["sweep"]
 
 
+@pytest.mark.slow
 def test_recordings_prints_plain_words_not_reprs(tmp_path):
     path = tmp_path / "sweep.h5"
     sweep = {"f_start_hz": np.float64(1.0), "f_end_hz": np.float64(20.0), "duration_s": np.float64(60.0),
@@ -66,6 +67,7 @@ def test_recordings_prints_plain_words_not_reprs(tmp_path):
     assert re.search(r"started \d{4}-\d\d-\d\d \d\d:\d\d:\d\d UTC", p.stdout)
 
 
+@pytest.mark.slow
 def test_recordings_gives_identifys_verdict_not_only_the_signals(tmp_path):
     """`shakeid recordings` says "usable for identification" only where `shakeid identify` would identify:
     an aborted sweep and a file without the mass channel have clean signals, but identify refuses both."""
@@ -172,6 +174,7 @@ def test_a_wald_p_below_what_the_test_can_say_is_printed_as_a_bound():
     assert p_value_text(0.0) == p_value_text(1e-200) == p_value_text(9.9e-11) == "< 1e-10"
 
 
+@pytest.mark.slow
 def test_explain_on_a_short_record_prints_no_unreadable_shares(tmp_path):
     """The operator's case: a 10 s sweep (1-10 Hz, where candidates fitted on so little make the free run
     ~5x worse). Every candidate line's gap figure is a share within [-1, 1] or a "worse: gap xN" factor."""
@@ -193,6 +196,7 @@ def test_explain_on_a_short_record_prints_no_unreadable_shares(tmp_path):
     assert m and 0.9 <= float(m.group(3)) <= 10.5, p.stdout
 
 
+@pytest.mark.slow
 def test_nothing_of_the_operators_is_overwritten_or_sent_without_a_scheme(tmp_path):
     """The demo's --out folder may hold an operator's recording.h5: refused, not replaced (an earlier
     demo's own file is replaced). A sweep through the service refuses an --out that exists before it
@@ -236,6 +240,7 @@ def test_explain_warns_of_a_baseline_whose_identification_failed(tmp_path, capsy
     assert "warning" not in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_selection_the_placements_disagree_with_is_said_to_be_unsettled(make_run):
     """3.9 s cut from the middle of a sweep (7-10 Hz of it) carries no settled model: the fit keeps q2^2
     and q2^4, which most held-out placements leave out (P(kept) ~0.3), and drops terms most keep. The
@@ -255,6 +260,7 @@ def test_a_selection_the_placements_disagree_with_is_said_to_be_unsettled(make_r
     assert unsettled_terms(full) == [] and "unsettled" not in summary(full, "sweep.csv")
 
 
+@pytest.mark.slow
 def test_a_term_the_free_run_budget_dropped_is_named_as_such(make_run):
     """With a free-run budget the held-out placements rerun the selection rule, not the budget: a true term
     the budget of 4 drops (the weak q1*q2^2) has P(kept) 1.00, and the summary says the budget left it out

@@ -22,6 +22,7 @@ def analysis(make_run):
     return DiscrepancyAnalysis().fit(run.recording)
 
 
+@pytest.mark.slow
 def test_explain_report_has_its_own_index(analysis, tmp_path):
     out = write_explain_report(analysis, tmp_path / "explain")
     result = analysis.result()

@@ -13,6 +13,7 @@ from fmpy.validation import validate_fmu
 
 from identify.model import SparseModel
 from identify.simulate import choose_substeps, simulate
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 TABLE1 = {"q1_dot": {"q1": -3.7294, "q2": -971.0169, "q1*q2^2": 1.162e4, "q2^3": -2.5033e6, "zdd": -1.0243},

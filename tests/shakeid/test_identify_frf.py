@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 

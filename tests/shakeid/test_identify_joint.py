@@ -39,6 +39,7 @@ def files(tmp_path_factory):
     return out + [d / "c.csv"]
 
 
+@pytest.mark.slow
 def test_identify_two_h5_files_prints_one_joint_json_document(files):
     a, b = str(files[0]), str(files[1])
     proc = subprocess.run([SHAKEID, "identify", a, b, "--json", "--placements", "4"], capture_output=True,
@@ -94,6 +95,7 @@ def test_chunked_is_refused_for_several_files(files, capsys):
     assert "--chunked identifies one recording out of core" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_each_file_can_be_cut_to_its_own_samples(files, capsys):
     """FILE[START:STOP] cuts that file alone (--samples cuts every file alike): two files, the first cut to
     its second half, fitted jointly; the recording is named with its range, and the cut file's rows are

@@ -50,6 +50,7 @@ def test_a_recording_that_did_not_complete_is_refused_unless_accepted(tmp_path, 
     assert doc["data_quality"]["flags"] == []  # the data itself is clean
 
 
+@pytest.mark.slow
 def test_a_dead_output_channel_is_refused_with_the_reason_and_accepted_on_request(dead_csv, table1_run):
     n = table1_run.recording.n_samples
     k = int(0.4 * n)
@@ -82,6 +83,7 @@ def test_a_file_without_quality_flags_is_assessed_on_read(tmp_path, table1_run, 
     assert json.loads(capsys.readouterr().out)["data_quality"]["usable_for_identification"] is True
 
 
+@pytest.mark.slow
 def test_a_model_that_is_not_a_model_exits_1_while_the_default_fit_is_ok(table1_csv):
     good = subprocess.run([SHAKEID, "identify", str(table1_csv), "--json"], capture_output=True, text=True, timeout=300)
     assert good.returncode == 0 and json.loads(good.stdout)["status"] == "ok" and good.stderr == ""
@@ -97,6 +99,7 @@ def test_a_model_that_is_not_a_model_exits_1_while_the_default_fit_is_ok(table1_
     assert human.returncode == 1 and "MODEL FAILED: held-out free-run fit of the acceleration is -4" in human.stdout
 
 
+@pytest.mark.slow
 def test_the_job_worker_refuses_accepts_on_request_and_fails_a_non_model(tmp_path, table1_run, dead_csv):
     path = _h5(tmp_path / "f.h5", table1_run.recording, "fault", "PLC fault: watchdog")
     with pytest.raises(ShakeidError, match=r"f.h5: status is fault \(PLC fault: watchdog\), not complete \(set "
@@ -113,6 +116,7 @@ def test_the_job_worker_refuses_accepts_on_request_and_fails_a_non_model(tmp_pat
     assert not (tmp_path / "job4" / "model.json").exists()
 
 
+@pytest.mark.slow
 def test_explain_refuses_the_same_data_unless_accepted(tmp_path, table1_run, dead_csv, capsys):
     """The discrepancy analysis gets the same gate as identification, in the CLI and in a job."""
     assert main(["explain", str(dead_csv)]) == 2

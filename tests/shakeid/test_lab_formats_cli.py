@@ -11,6 +11,7 @@ import pytest
 from protocol.sweep import SineSweep
 
 from ..daq.lab_writers import write_csv_exact, write_mdf, write_tdms, write_uff
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 SHORT = SineSweep(1.0, 20.0, 25.0, 1.3)  # 25 s at 1024 Hz: identifies the Table 1 terms in ~1 s

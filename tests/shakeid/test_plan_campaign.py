@@ -4,6 +4,7 @@ predicted jump frequency with margin) and stays inside the limits: the PLC's che
 rig itself run through each proposed sweep (its end stops and accelerometers: the truth, not the
 planner's prediction) stays inside the travel and the accelerometer range, and its up-sweeps at the
 folding amplitudes jump inside the band. A model without a fold is refused in one line."""
+import pytest
 import json
 import subprocess
 import sys
@@ -18,6 +19,7 @@ from identify.frf.measured import measured_jump, sweep_envelope
 from protocol.sweep import SineSweep
 from sim.config import RigConfig
 from sim.synth import run_sweep
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 CFG = RigConfig()  # the simulated rig's limits, ranges and travel: what plan-campaign uses without --config

@@ -1,6 +1,7 @@
 """`shakeid sweep --config` (the DAQ without the service) predicts the sweep from the rig configuration's
 nominal parameters before anything is written to the PLC (daq/preflight.py through SweepRunner.preflight)."""
 from __future__ import annotations
+import pytest
 
 import dataclasses
 import subprocess
@@ -12,6 +13,7 @@ from daq.sweep import SineSweep
 from sim.config import load_config
 from sim.plc import PLCConfig
 from sim.server import SimulatedRig
+pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 

@@ -38,6 +38,7 @@ def figures(report_dir, tmp_path_factory):
         idrep.plt.close(fig)
 
 
+@pytest.mark.slow
 def test_report_files(report_dir):
     out, ident = report_dir
     for fig in FIGURES:

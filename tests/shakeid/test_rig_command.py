@@ -59,6 +59,7 @@ def test_estop_stops_a_running_table_and_reset_returns_to_idle(rig, tmp_path, ca
     assert "nothing to reset" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_a_fault_is_named_and_a_reset_that_does_not_take_is_said(tmp_path, capsys, monkeypatch):
     """A drive fault while the table is still ramping down (a 1000 s ramp: it never comes to rest
     here): status names the fault, reset reports that the PLC stayed in fault (exit 2)."""
@@ -79,6 +80,7 @@ def test_a_fault_is_named_and_a_reset_that_does_not_take_is_said(tmp_path, capsy
         rig.stop()
 
 
+@pytest.mark.slow
 def test_an_unreachable_plc_is_one_line_and_exit_2(tmp_path, capsys):
     cfg = _config(tmp_path, free_port())  # nothing listens there
     for action in ("status", "estop", "reset"):

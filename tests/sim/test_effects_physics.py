@@ -97,6 +97,7 @@ SMOOTH = {"effects": {"cubic_damping": 2.0}, "stiffness_drift": 0.15, "absorber_
     ({"end_stop_upper_mm": 3.5, "end_stop_lower_mm": 2.5}, 3e-5),
 ], ids=["cubic_damping+drift+absorber", "asymmetric+bouc_wen_n1", "asymmetric_negative+bouc_wen_n2",
         "free_play+upper_stop_only", "two_travels"])
+@pytest.mark.slow
 def test_physics_matches_independent_integration(fields, tol):
     """Each physics against the contract's force law integrated by DOP853 (rtol 1e-10), combined so one
     reference run checks several laws (a wrong one anywhere shows): the displacement within `tol` of its

@@ -68,6 +68,7 @@ def test_standard_sweep_never_touches_the_stops():
     np.testing.assert_array_equal(run.states, free.states)
 
 
+@pytest.mark.slow
 def test_long_slow_sweep_completes_against_the_stops():
     """The 300 s sweep that used to diverge: it completes, touches the stops, and its truth is the model with
     the stops (loadable as it is)."""
@@ -103,6 +104,7 @@ def _reference(rig: RigParameters, sweep: SineSweep, n: int, substeps: int = 8) 
     return model.rhs(res.states[1:], zdd[:, None])[:, 0] + zdd
 
 
+@pytest.mark.slow
 def test_plc_long_sweep_stays_finite_hits_the_stops_and_the_sensor_recovers():
     """The 300 s sweep on the PLC in 1 s steps: never a non-finite sample, the stops are hit, the mass
     accelerometer saturates at contact and follows the motion again right after (no stuck zeros)."""

@@ -38,6 +38,7 @@ def test_design_rig_uses_profile_geometry():
         RigParameters(effects={"magic": 1.0})
 
 
+@pytest.mark.slow
 def test_truth_integration_error_is_far_below_sensor_noise():
     """Smooth rig against a tight adaptive reference; sensor noise is 5e-3 of the signal."""
     rig = RigParameters.paper_table1()

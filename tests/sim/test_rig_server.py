@@ -101,6 +101,7 @@ def record(rig, seconds, inject=None):
     return frames, dec
 
 
+@pytest.mark.slow
 def test_sweep_over_modbus_and_stream_over_socket(rig):
     cli = Client(rig)
     cli.sweep(2.0, 8.0, 20.0, 1.0)
@@ -167,6 +168,7 @@ def test_emergency_stop_mid_sweep(rig):
     cli.stop_heartbeat()
 
 
+@pytest.mark.slow
 def test_injected_faults_are_observable(rig):
     frames, dec = record(rig, 0.5, inject={"drop_frames": 3, "corrupt_frames": 2})
     seq = np.array([f.seq for f in frames])
@@ -197,6 +199,7 @@ def test_injected_faults_are_observable(rig):
     assert not cli3.mb.read_holding_registers(20, count=2, device_id=1).isError()
 
 
+@pytest.mark.slow
 def test_streamed_sweep_identifies_the_rig():
     """Acceptance: a sweep commanded over Modbus, recorded from the stream, gives back the rig's model.
     The watchdog is not under test here: 10 s of rig time (1 s wall), so a stall of this process's threads
@@ -237,6 +240,7 @@ def _streamed_sweep(rig):
         assert abs(model.coefficient("q1_dot", term) / c - 1) < 0.03, term
 
 
+@pytest.mark.slow
 def test_shakeid_sim_command_serves_and_stops_on_sigterm():
     import signal
     import subprocess
@@ -340,6 +344,7 @@ def test_accelerometer_samples_as_can_frames():
     assert rows.size and np.array_equal(decoded[rows[0]:rows[0] + 64, 1:3], stream[first.timestamp_us])
 
 
+@pytest.mark.slow
 def test_sensor_faults_stuck_saturated_disconnected(rig):
     frames, _ = record(rig, 0.3, inject={"stuck": True})
     late = np.vstack([f.counts for f in frames[-5:]])
@@ -371,6 +376,7 @@ def test_plc_fault_mid_sweep_is_seen_by_the_client(rig):
     cli.stop_heartbeat()
 
 
+@pytest.mark.slow
 def test_can_across_processes_through_python_can_remote(tmp_path, can_relay):
     """`shakeid sim` in its own process sends CAN frames through a python-can-remote relay; a client in
     this process receives them with consecutive counters."""
@@ -405,43 +411,3 @@ def test_can_across_processes_through_python_can_remote(tmp_path, can_relay):
     counters = np.array([can_frames.decode(m.data)[0] for m in msgs])
     assert counters.size > 1000  # ~2048 per second of rig time
     assert np.all(np.diff(counters) % 65536 == 1)
-
-
-def test_free_port_draws_below_the_ephemeral_range():
-    """free_port's ports are ones the kernel never gives an outgoing connection (below
-    ip_local_port_range), so no client socket can take one between the check and a server's bind;
-    each is bindable when returned."""
-    import socket
-
-    from sim.server import PORT_RANGE, free_port
-    with open("/proc/sys/net/ipv4/ip_local_port_range") as f:
-        low = int(f.read().split()[0])
-    ports = [free_port() for _ in range(30)]
-    assert all(PORT_RANGE[0] <= p < low for p in ports), ports
-    assert len(set(ports)) > 20  # drawn at random, not one fixed port
-    for p in ports[:5]:
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", p))
-
-
-def test_free_ads_address_is_a_random_loopback_address_free_on_the_ads_port():
-    """ADS servers on one machine share port 48898, so each simulated rig's takes its own loopback
-    address: drawn at random over 127/8 (two test runs at once no longer both take 127.0.0.5), each
-    bindable when returned, and one where a server listens is not free (the check binds as
-    AdsTestServer does, with SO_REUSEADDR, which a listener still blocks)."""
-    import ipaddress
-    import socket
-
-    from pyads.testserver.testserver import ADS_PORT
-
-    from sim.server import _bindable
-    hosts = [free_ads_address() for _ in range(30)]
-    assert all(ipaddress.ip_address(h).is_loopback and not h.startswith("127.0.0.") for h in hosts), hosts
-    assert len(set(hosts)) > 20
-    with socket.socket() as listener:
-        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        listener.bind((hosts[0], ADS_PORT))
-        listener.listen()
-        assert not _bindable(hosts[0], ADS_PORT, reuse_address=True)  # the check free_ads_address makes
-    assert _bindable(hosts[0], ADS_PORT, reuse_address=True)  # and free again once the server is gone
-

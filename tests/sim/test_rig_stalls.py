@@ -8,6 +8,7 @@ way, so the fault would be an artefact of the simulation. With the demo's 2 s ri
 a 0.2 s wall-clock stall would be enough. Such a stall is the suspected, unproven cause of one CI failure
 of the streamed-sweep test in tests/sim/test_rig_server.py.
 """
+import pytest
 import threading
 import time
 
@@ -66,6 +67,7 @@ class BeatingClient:
         self.mb.close()
 
 
+@pytest.mark.slow
 def test_a_stall_of_the_simulator_and_its_client_is_not_a_silent_heartbeat():
     """The rig's loop blocked for 1.5 s of wall time (15 s of rig time, about twice the 8 s watchdog), the
     client's beat held until 0.2 s after it: the sweep goes on and ends DONE, and the rig time that was not

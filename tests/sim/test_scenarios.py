@@ -20,6 +20,7 @@ FIELDS = {"end_stop": ("end_stop_lower_mm", "end_stop_upper_mm"), "stiffness_dri
           "free_play": ("spring_free_play_mm",)}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("category, names", CASES, ids=[n[0] if n else c for c, n in CASES])
 def test_each_effect_is_drawn_sane_and_as_stated(category, names):
     """The scenario's truth is in the recording; the rig carries that effect and no other; the response
@@ -63,6 +64,7 @@ def test_each_effect_is_drawn_sane_and_as_stated(category, names):
             assert s.noise_fraction <= max(cap, 0.002)
 
 
+@pytest.mark.slow
 def test_draws_are_reproducible_and_seed_only_the_noise():
     a = make_scenario(np.random.default_rng(9), "two_effects", **SHORT)
     b = make_scenario(np.random.default_rng(9), "two_effects", **SHORT)
