@@ -126,7 +126,8 @@ def add_side_by_side(page: Page, doc: dict | None, figure: str | None, heading: 
     for line in doc["flags"]:
         page.paragraph(f"FLAGGED: {line}")
     if not doc["flags"]:
-        page.paragraph(f"The {doc['judged']} model's jumps agree with every sweep's within the sweep-rate bias and "
+        judged = doc["judged"] if doc["judged"].endswith("model") else f"{doc['judged']} model"
+        page.paragraph(f"The {judged}'s jumps agree with every sweep's within the sweep-rate bias and "
                        "the measurement's uncertainty.")
     page.table(["sweep", "table mm", "measured jump, Hz", "model", "fold, Hz", "sweep-rate bias, Hz", "miss, Hz",
                 "verdict"], jump_rows(doc),

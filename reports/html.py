@@ -89,7 +89,8 @@ def check_report_folder(out_dir, kind: str) -> Path:
     if not out.is_dir():
         return out
     held = report_kind(out)
-    names = [n for n in ("index.html", *(f for files in KINDS.values() for f in files)) if (out / n).exists()]
+    every = dict.fromkeys(("index.html", *(f for files in KINDS.values() for f in files)))  # each name once
+    names = [n for n in every if (out / n).exists()]
     if held in KINDS and held != kind:
         theirs = [n for n in names if n == "index.html" or n in KINDS[held]]
         raise ShakeidError(f"{out}: holds {_a(held)} report ({', '.join(theirs)}); {_a(kind)} report there would "
