@@ -340,6 +340,19 @@ def quality_lines(q: dict, reasons: list[str], max_flags: int = 10) -> list[str]
     return lines
 
 
+def _check_port_free(host: str, port: int) -> None:
+    """ShakeidError naming the port when something already listens there (bound as uvicorn binds it)."""
+    import socket
+
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((host, port))
+        except OSError as exc:
+            raise ShakeidError(f"cannot serve on {host}:{port}: {exc.strerror.lower()} (another shakeid serve?); "
+                               "stop it or give another --port") from None
+
+
 def cmd_serve(args) -> int:
     """The HTTP service (FastAPI under uvicorn); an embedded simulated rig when there is no --config."""
     import uvicorn
@@ -353,6 +366,7 @@ def cmd_serve(args) -> int:
     if args.controller:
         settings.controller = args.controller
     settings.resolve_stop(args.host, args.port)  # the child controller's stop listener: --port + 1 by default
+    _check_port_free(args.host, args.port)  # said before the banner and the token, not after them
     app = create_app(settings)  # prepares the data directory (and the generated token, if any)
     rig = f"rig of {args.config}" if args.config else f"embedded simulated rig at {settings.sim_speed:g}x"
     rig += f", rig controller at {settings.controller}" if settings.controller else ", rig controller as a child process"
