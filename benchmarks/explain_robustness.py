@@ -281,7 +281,9 @@ def main(argv=None) -> int:
     if args.seed is None:
         args.seed = int(np.random.SeedSequence().entropy % 2**32)
     cases = args.case if args.case else list(range(args.cases))
-    meta = {"command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]), "workers": args.workers,
+    # the command as run, with file arguments by name only: a result must not carry the machine's paths
+    meta = {"command": " ".join([Path(sys.argv[0]).name, *(Path(a).name if "/" in a else a for a in sys.argv[1:])]),
+            "workers": args.workers,
             "cpu_count": os.cpu_count(), "load_at_start": os.getloadavg(),
             "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     print(f"seed {args.seed} (rerun with --seed {args.seed}); {len(cases)} cases on {args.workers} processes, "
