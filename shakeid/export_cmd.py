@@ -10,13 +10,14 @@ from pathlib import Path
 
 from identify.errors import ShakeidError
 
+from .model_arg import add_model_arguments, read_model
+
 
 def add_export_parser(sub) -> None:
     from identify.export import FORMATS
 
     q = sub.add_parser("export", help="write a model as an FMU (FMI 2.0 co-simulation), C, Python or LaTeX")
-    q.add_argument("model", metavar="MODEL.json",
-                   help="the model: what `shakeid identify --json` prints, or a report's or the service's model.json")
+    add_model_arguments(q, "export")
     q.add_argument("--format", required=True, choices=tuple(FORMATS),
                    help="fmu: FMI 2.0 co-simulation FMU built by the C compiler ($CC, cc, gcc or clang); c: one "
                         "dependency-free C file (right-hand side and an RK4 step); python: a numpy module (rhs, "
@@ -24,15 +25,11 @@ def add_export_parser(sub) -> None:
     q.add_argument("--out", required=True, metavar="PATH",
                    help="the file to write: " + ", ".join(f"{s} for {f}" for f, (s, _) in FORMATS.items()))
     q.add_argument("--overwrite", action="store_true", help="replace PATH if it exists (default: refuse)")
-    q.add_argument("--accept-failed", action="store_true",
-                   help="export a model whose identification failed (its status in MODEL.json)")
     q.set_defaults(func=cmd_export)
 
 
 def cmd_export(args) -> int:
     from identify.export import FORMATS, export_model
-    from identify.model import SparseModel, read_document
-
     suffix = FORMATS[args.format][0]
     out = Path(args.out)
     if out.suffix.lower() != suffix:  # checked before reading anything: a mistyped --out costs nothing
@@ -42,14 +39,7 @@ def cmd_export(args) -> int:
         raise ShakeidError(f"{out} exists already; --overwrite replaces it")
     if not out.parent.is_dir():
         raise ShakeidError(f"{out}: no folder {out.parent} to write it in")
-    doc = read_document(args.model)
-    if doc.get("status") == "failed" and not args.accept_failed:
-        raise ShakeidError(f"{args.model}: its identification failed ({doc.get('reason') or 'no reason given'}); "
-                           "it is not a model of the rig (--accept-failed exports it anyway)")
-    try:
-        model = SparseModel.from_dict(doc)
-    except ShakeidError as exc:
-        raise ShakeidError(f"{args.model}: {exc}") from None
+    model = read_model(args, "export")
     export_model(model, args.format, out, title=f"shakeid model from {Path(args.model).name}")
     print(f"wrote {out} ({args.format}: {model.n_terms} terms of {', '.join(model.equations)})")
     return 0

@@ -13,6 +13,7 @@ from pathlib import Path
 from identify.errors import ShakeidError
 
 from .argtypes import positive
+from .model_arg import add_model_arguments, read_model
 
 #: The backbone reaches this much beyond the largest predicted response.
 BACKBONE_MARGIN = 1.1
@@ -20,33 +21,14 @@ BACKBONE_MARGIN = 1.1
 
 def add_frf_parser(sub) -> None:
     q = sub.add_parser("frf", help="predicted nonlinear frequency response of a model: branches, stability, jumps, backbone")
-    q.add_argument("model", metavar="MODEL.json",
-                   help="the model: what `shakeid identify --json` prints, or a report's or the service's model.json")
+    add_model_arguments(q, "use")
     q.add_argument("--amplitude-mm", type=positive, nargs="+", required=True, metavar="A",
                    help="table displacement amplitude(s), mm peak (z = A sin 2 pi f t)")
     q.add_argument("--band", type=positive, nargs=2, metavar=("F_LO", "F_HI"),
                    help="frequency band, Hz (default: 0.25-4 x the model's linear natural frequency)")
     q.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
     q.add_argument("--report", metavar="DIR", help="write frf.png, frf.json and index.html to DIR")
-    q.add_argument("--accept-failed", action="store_true",
-                   help="use a model whose identification failed (its status in MODEL.json)")
     q.set_defaults(func=cmd_frf)
-
-
-def _model(path: str, accept_failed: bool):
-    from identify.model import SparseModel, read_document
-
-    doc = read_document(path)
-    if doc.get("status") == "failed" and not accept_failed:
-        raise ShakeidError(f"{path}: its identification failed ({doc.get('reason') or 'no reason given'}); it is not "
-                           "a model of the rig (--accept-failed uses it anyway)")
-    try:
-        model = SparseModel.from_dict(doc)
-        from identify.frf.balance import check_model
-        check_model(model)
-    except ShakeidError as exc:
-        raise ShakeidError(f"{path}: {exc}") from None
-    return model
 
 
 def frf_document(model, amplitudes_mm, band_hz=None) -> dict:
@@ -70,7 +52,9 @@ def cmd_frf(args) -> int:
         raise ShakeidError(f"--band {args.band[0]:g} {args.band[1]:g}: F_LO must be below F_HI")
     if args.report:
         check_report_folder(args.report, "frf")  # before the work
-    model = _model(args.model, args.accept_failed)
+    from identify.frf.balance import check_model
+
+    model = read_model(args, "use", check_model)
     doc = frf_document(model, args.amplitude_mm, tuple(args.band) if args.band else None)
     doc["model_file"] = str(args.model)
     if args.report:

@@ -9,13 +9,13 @@ from pathlib import Path
 from identify.errors import ShakeidError
 
 from .argtypes import positive
+from .model_arg import add_model_arguments, read_model
 
 
 def add_plan_parser(sub) -> None:
     q = sub.add_parser("plan-campaign", help="propose a campaign (amplitudes, band) that brackets the model's "
                                              "predicted jumps inside the rig's limits")
-    q.add_argument("model", metavar="MODEL.json",
-                   help="the model: what `shakeid identify --json` prints, or a report's or the service's model.json")
+    add_model_arguments(q, "use")
     q.add_argument("--config", metavar="RIG.toml", help="the rig's limits, accelerometer range and end-stop travel "
                                                         "(default: the simulated rig's, examples/sim-rig.toml)")
     q.add_argument("--name", default="fold-bracket", help="the campaign's name (default: fold-bracket)")
@@ -25,8 +25,6 @@ def add_plan_parser(sub) -> None:
                    help="sweep rate, Hz/s (default: daq.plan.RATE_HZ_PER_S = 0.1)")
     q.add_argument("--out", metavar="PLAN.toml", help="write the plan for `shakeid campaign PLAN.toml` here")
     q.add_argument("--json", action="store_true", help="print the proposal as one JSON document")
-    q.add_argument("--accept-failed", action="store_true",
-                   help="use a model whose identification failed (its status in MODEL.json)")
     q.set_defaults(func=cmd_plan_campaign)
 
 
@@ -35,13 +33,13 @@ def cmd_plan_campaign(args) -> int:
     from daq.preflight import nominal_response
     from sim.config import RigConfig, load_config
 
-    from .frf_cmd import _model
+    from identify.frf.balance import check_model
 
     out = Path(args.out) if args.out else None
     if out is not None and out.exists():
         raise ShakeidError(f"{out}: exists; a plan is never overwritten (give another --out)")
     cfg = load_config(args.config) if args.config else RigConfig()
-    model = _model(args.model, args.accept_failed)
+    model = read_model(args, "use", check_model)
     rig = with_model(nominal_response(cfg), model, f"the model in {args.model}")
     proposal = propose_campaign(rig, cfg.limits, args.name, args.jump_amplitudes, args.rate or RATE_HZ_PER_S)
     if out is not None:
