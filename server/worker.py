@@ -87,17 +87,18 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
         data = check_identifiable(rec, _label(path, options), bool(options.get("accept_faulty")),
                                   f"set accept_faulty to {'identify' if kind == 'identify' else 'analyse'} it anyway")
         if kind == "identify":
+            from identify.frf.side_by_side import identification_document
             from identify.identifier import SparseIdentifier
             from reports.identification import write_report
 
             params = {k: options[k] for k in IDENTIFY_KEYS if options.get(k) is not None}
             if options.get("band_hz"):
                 params["band_hz"] = tuple(options["band_hz"])
-            ident = SparseIdentifier(**params)
-            result = {**ident.fit(rec).result(), **data}
+            ident = SparseIdentifier(**params).fit(rec)
+            result = identification_document(ident, [rec], data, [_label(path, options)])
             if result["status"] == "failed":  # no model.json: what was fitted is not a model of the rig
                 raise ShakeidError(f"{_label(path, options)}: identification failed: {result['reason']}")
-            result["frf"] = frf_beside(out, result, ident.model_, [rec], [_label(path, options)])
+            _write_json(out / FRF_FILE, result["frf"])
             write_report(ident, out / STAGING, result)
             _write_json(out / "model.json", result)
             return _adopt(kind, out)

@@ -104,10 +104,9 @@ def cmd_identify(args) -> int:
         raise ShakeidError(str(exc)) from None
     except IdentificationError as exc:  # what the data cannot give (no excited band, too short): name the file
         raise _naming(args.file, exc) from None
-    result = {**ident.result(), **data}
-    from identify.frf.side_by_side import for_identification  # predicted jumps vs the sweep's (docs/frf.md)
+    from identify.frf.side_by_side import identification_document  # with the predicted jumps (docs/frf.md)
 
-    result["frf"] = for_identification(result, ident.model_, [rec])
+    result = identification_document(ident, [rec], data)
     replaced = _write_report("identification", ident, args.report, result)
     if args.json:
         print(json.dumps(result))

@@ -15,6 +15,7 @@ def cmd_demo(args) -> int:
     from daq.sources import SerialSource
     from daq.recorder import read_h5_recording
     from daq.sweep import SweepRequest, SweepRunner
+    from identify.frf.side_by_side import identification_document
     from identify.identifier import SparseIdentifier
     from protocol.plc import Limits
     from sim.plc import PLCConfig
@@ -58,9 +59,10 @@ def cmd_demo(args) -> int:
     if result["status"] != "complete":
         raise ShakeidError(f"demo sweep ended {result['status']}: {result['reason']}")
     print(f"identifying {h5} ...", flush=True)
-    ident = SparseIdentifier().fit(read_h5_recording(h5))
-    write_report(ident, out / "report")
-    result = ident.result()
+    rec = read_h5_recording(h5)
+    ident = SparseIdentifier().fit(rec)
+    result = identification_document(ident, [rec])  # as `shakeid identify` delivers it: with the jumps
+    write_report(ident, out / "report", result)
     print(summary(result, str(h5)))
     print("\n".join(truth_lines(result["model"], truth, result["physical"]["design"]["cubic_stiffness_per_kg"])))
     print(f"report: {out / 'report' / 'index.html'}")

@@ -174,6 +174,17 @@ def for_identification(result: dict, model, recordings: list, names: list[str] |
     return _guarded(lambda: side_by_side({"model": model}, recordings, fit, names=names))
 
 
+def identification_document(ident, recordings: list, quality: dict | None = None,
+                            names: list[str] | None = None) -> dict:
+    """What an identification delivers (model.json, `shakeid identify --json`, the demo's report): the fitted
+    SparseIdentifier's result, the data's quality verdict (identify.quality.check_identifiable's), and the
+    predicted frequency response beside the measured sweeps. One sequence for the CLI, the demo and the
+    service's jobs."""
+    result = {**ident.result(), **(quality or {})}
+    result["frf"] = for_identification(result, ident.model_, recordings, names)
+    return result
+
+
 def for_explanation(result: dict, baseline, fixed, recordings: list, names: list[str] | None = None) -> dict:
     """The explain report's side-by-side: the baseline and, when an effect was added, the baseline with
     it (judged, by its held-out free-run fit)."""
