@@ -102,8 +102,21 @@ def _peak(x: np.ndarray) -> tuple[float, int]:
     return float(a[i]), i
 
 
-def _run(rig: RigResponse, sweep):
-    """(rate Hz, sample times s, states (n, 2), mass and table acceleration) of the sweep through the model."""
+@dataclass
+class _Run:
+    """The sweep through the model: prediction rate (Hz), sample times (s), states (n, 2), mass and table
+    acceleration (m/s^2), and whether the model ran away (left RUNAWAY_BOUND) before the sweep's end."""
+
+    rate_hz: float
+    t: np.ndarray
+    states: np.ndarray
+    mass: np.ndarray
+    zdd: np.ndarray
+    ran_away: bool
+
+
+def _run(rig: RigResponse, sweep) -> _Run:
+    """The sweep's table motion through the rig model (one RK4 step per prediction sample)."""
     f_top = max(sweep.f_start_hz, sweep.f_end_hz)
     rate = max(PREDICTION_SAMPLES_PER_PERIOD * f_top, MIN_PREDICTION_RATE_HZ)
     n = int(math.ceil(sweep.duration_s * rate)) + 1
@@ -114,32 +127,36 @@ def _run(rig: RigResponse, sweep):
     zdd = zdd_half[::2]
     states = res.states[:res.n_valid]
     mass = equation_rows(rig.model, states, zdd[:res.n_valid]) + zdd[:res.n_valid]
-    return rate, t_half[::2], states, mass, zdd, res.n_valid < n
+    return _Run(rate, t_half[::2], states, mass, zdd, res.n_valid < n)
+
+
+def _peaks(sweep, run: _Run, compute_s: float) -> Prediction:
+    """The run's peaks, each with the sweep frequency where it occurs."""
+    m_peak, m_i = _peak(run.mass) if run.mass.size else (0.0, 0)
+    q_peak, q_i = _peak(run.states[:, 1]) if run.mass.size else (0.0, 0)
+    z_peak, _ = _peak(run.zdd)
+    freq = lambda i: float(sweep.frequency_hz(run.t[min(i, len(run.t) - 1)]))  # noqa: E731
+    return Prediction(m_peak, freq(m_i), 1e3 * q_peak, freq(q_i), z_peak,
+                      freq(run.states.shape[0]) if run.ran_away else None, run.rate_hz, compute_s)
 
 
 def predict(rig: RigResponse, sweep) -> Prediction:
     """The sweep's predicted peaks (sweep: protocol's SineSweep: f_start_hz, f_end_hz, duration_s,
     amplitude_mm, kinematics(t), frequency_hz(t))."""
     start = time.perf_counter()
-    rate, t, states, mass, zdd, ran_away = _run(rig, sweep)
-    m_peak, m_i = _peak(mass) if mass.size else (0.0, 0)
-    q_peak, q_i = _peak(states[:, 1]) if mass.size else (0.0, 0)
-    z_peak, _ = _peak(zdd)
-    freq = lambda i: float(sweep.frequency_hz(t[min(i, len(t) - 1)]))  # noqa: E731
-    return Prediction(m_peak, freq(m_i), 1e3 * q_peak, freq(q_i), z_peak,
-                      freq(states.shape[0]) if ran_away else None, rate, time.perf_counter() - start)
+    run = _run(rig, sweep)
+    return _peaks(sweep, run, time.perf_counter() - start)
 
 
-def _first_over(rig: RigResponse, sweep, share: float) -> float | None:
-    """Sweep time (s) where the response first exceeds `share` of a limit (None: never)."""
-    rate, t, states, mass, zdd, ran_away = _run(rig, sweep)
+def _first_over(rig: RigResponse, run: _Run, share: float) -> float | None:
+    """Sweep time (s) where the run's response first exceeds `share` of a limit (None: never)."""
     lower, upper = rig.travel_mm
-    q_mm = 1e3 * states[:, 1]
-    over = ((np.abs(mass) > share * rig.mass_range_ms2) | (q_mm > share * upper) | (-q_mm > share * lower)
-            | (np.abs(zdd[:len(mass)]) > share * rig.table_range_ms2))
+    q_mm = 1e3 * run.states[:, 1]
+    over = ((np.abs(run.mass) > share * rig.mass_range_ms2) | (q_mm > share * upper) | (-q_mm > share * lower)
+            | (np.abs(run.zdd[:len(run.mass)]) > share * rig.table_range_ms2))
     if over.any():
-        return float(t[int(np.argmax(over))])
-    return float(t[len(mass)]) if ran_away else None
+        return float(run.t[int(np.argmax(over))])
+    return float(run.t[len(run.mass)]) if run.ran_away else None
 
 
 def _shares(rig: RigResponse, p: Prediction) -> dict:
@@ -166,8 +183,11 @@ class Verdict:
 
 def assess(rig: RigResponse, sweep, suggest: bool = True) -> Verdict:
     """Predict the sweep and judge it against the rig's limits: refuse above a limit (saying what would
-    pass when `suggest`), warn above WARN_SHARE of one."""
-    p = predict(rig, sweep)
+    pass when `suggest`), warn above WARN_SHARE of one. The sweep runs through the model once: its peaks,
+    where it first crosses a limit and where it first reaches WARN_SHARE (a refusal's band) are of that run."""
+    start = time.perf_counter()
+    run = _run(rig, sweep)
+    p = _peaks(sweep, run, time.perf_counter() - start)
     lower, upper = rig.travel_mm
     travel = min(lower, upper)
     shares = _shares(rig, p)
@@ -179,7 +199,7 @@ def assess(rig: RigResponse, sweep, suggest: bool = True) -> Verdict:
               "rate_hz": p.rate_hz, "compute_s": round(p.compute_s, 4), "warnings": []}
     problems = []
     if p.runaway_hz is not None or shares["travel"] > 1:
-        at = _first_over(rig, sweep, 1.0)
+        at = _first_over(rig, run, 1.0)
         f = float(sweep.frequency_hz(at)) if at is not None else p.travel_peak_hz
         peak = "runs away beyond it" if p.runaway_hz is not None else f"peaks at {p.travel_peak_mm:.3g} mm"
         problems.append(f"the mass would hit the end stops: predicted relative travel reaches the {travel:g} mm "
@@ -193,7 +213,7 @@ def assess(rig: RigResponse, sweep, suggest: bool = True) -> Verdict:
         problems.append(f"table acceleration {p.table_peak_ms2:.3g} m/s^2 is above the accelerometer's range "
                         f"{rig.table_range_ms2:.3g} m/s^2")
     if problems:
-        hint = _what_passes(rig, sweep) if suggest else ""
+        hint = _what_passes(rig, sweep, run) if suggest else ""
         return Verdict(f"{'; '.join(problems)}; predicted from {rig.source}{hint}", [], record)
     warnings = []
     if shares["mass"] > WARN_SHARE:
@@ -210,9 +230,9 @@ def assess(rig: RigResponse, sweep, suggest: bool = True) -> Verdict:
     return Verdict(None, warnings, record)
 
 
-def _what_passes(rig: RigResponse, sweep) -> str:
+def _what_passes(rig: RigResponse, sweep, run: _Run) -> str:
     """'; passes: ...' naming the largest amplitude and the band (same sweep rate) whose predicted peaks
-    stay below WARN_SHARE of every limit, or '' when neither is found."""
+    stay below WARN_SHARE of every limit, or '' when neither is found (run: the sweep's own run)."""
     options = []
     lo, hi = 0.0, sweep.amplitude_mm
     while hi - lo > AMPLITUDE_RESOLUTION * sweep.amplitude_mm:
@@ -221,7 +241,7 @@ def _what_passes(rig: RigResponse, sweep) -> str:
     amplitude = math.floor(lo * 100) / 100
     if amplitude > 0:
         options.append(f"amplitude {amplitude:g} mm or less")
-    at = _first_over(rig, sweep, WARN_SHARE)
+    at = _first_over(rig, run, WARN_SHARE)
     if at is not None:
         f0, f1 = sweep.f_start_hz, sweep.f_end_hz
         f_stop = float(sweep.frequency_hz(at))
