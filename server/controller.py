@@ -387,9 +387,10 @@ class RigController:
         sweep_state = {"complete": "completed"}.get(result["status"], "aborted")
         cat.update("sweeps", sweep_id, state=sweep_state, error=result["reason"] or None,
                    **({"progress": 1.0} if sweep_state == "completed" else {}))
-        rec = cat.get("recordings", rec_id) or {"info": {}}
-        info = {**rec["info"], **{k: v for k, v in result.items() if k != "path"}}
-        cat.update("recordings", rec_id, status=result["status"], info=info)
+        # the outcome's keys added to info in one statement (the web server sets its own keys meanwhile),
+        # then the status: whoever sees the recording complete finds its outcome there
+        cat.set_info(rec_id, **{k: v for k, v in result.items() if k != "path"})
+        cat.update("recordings", rec_id, status=result["status"])
         if sweep_state == "completed":  # the web server queues its identification (server/jobs.py)
             self.notify({"event": "recording_complete", "recording_id": rec_id})
 
