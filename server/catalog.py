@@ -15,7 +15,7 @@ import threading
 import time
 from pathlib import Path
 
-from .text import cleaned
+from .text import cleaned, finite
 
 ID_PATTERN = r"^[0-9a-f]{12}$"
 _ID = re.compile(ID_PATTERN)
@@ -122,14 +122,15 @@ class Catalog:
 
     def set_info(self, id: str, **keys) -> None:
         """Set top-level keys of a recording's `info` in one statement: the rig controller and the web
-        server both add to it, and a read-modify-write by one would undo what the other wrote meanwhile."""
+        server both add to it, and a read-modify-write by one would undo what the other wrote meanwhile.
+        Non-finite floats are stored as null (SQLite's json() refuses NaN: a job's summary would fail)."""
         if not all(k.isidentifier() for k in keys):  # the keys are the code's (job kinds), never a client's
             raise ValueError(f"info keys must be identifiers: {list(keys)}")
         paths = ", ".join(f"'$.{k}', json(?)" for k in keys)
         with self.lock:
             self.db.execute("UPDATE recordings SET info = json_set(CASE WHEN json_valid(info) AND json_type(info) = "
                             f"'object' THEN info ELSE '{{}}' END, {paths}) WHERE id = ?",
-                            (*(json.dumps(v) for v in keys.values()), id))
+                            (*(json.dumps(finite(v), allow_nan=False) for v in keys.values()), id))
 
     def delete(self, table: str, id: str) -> None:
         with self.lock:

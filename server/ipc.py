@@ -16,13 +16,14 @@ the web server's death). Addresses: `unix:/path/controller.sock` (default, in th
 from __future__ import annotations
 
 import json
-import math
 import socket
 import threading
 import time
 from pathlib import Path
 
 from identify.errors import ShakeidError
+
+from .text import finite
 
 #: longest wait for the controller's answer to an emergency stop, s (it answers in milliseconds from a
 #: real-time thread; past this the caller is told to use the hardware stop)
@@ -54,17 +55,6 @@ def parse_address(address: str) -> tuple[int, object]:
     raise ShakeidError(f"controller address {address!r}: expected unix:/path/to/socket or tcp:HOST:PORT")
 
 
-def _finite(obj):
-    """JSON has no NaN/inf: non-finite floats travel as None (the sender's data, never a crash)."""
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    return obj
-
-
 class Line:
     """A connected socket read and written as JSON lines (one writer at a time)."""
 
@@ -75,7 +65,7 @@ class Line:
         self.hello: dict = {}
 
     def send(self, obj) -> None:
-        data = json.dumps(_finite(obj), separators=(",", ":"), allow_nan=False).encode() + b"\n"
+        data = json.dumps(finite(obj), separators=(",", ":"), allow_nan=False).encode() + b"\n"
         with self.write_lock:
             self.sock.sendall(data)
 

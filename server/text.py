@@ -7,6 +7,7 @@ already stored is replaced by U+FFFD, so a listing never fails on text stored by
 """
 from __future__ import annotations
 
+import math
 import re
 
 #: control characters no field of the service takes (tab, newline and carriage return are text)
@@ -54,3 +55,15 @@ def cleaned(value):
     if isinstance(value, list):
         return [cleaned(v) for v in value]
     return value
+
+
+def finite(obj):
+    """JSON has no NaN/inf: non-finite floats as None, in JSON-like lists and dicts (the sender's data,
+    never a crash: the controller's link and the catalog's Catalog.set_info)."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [finite(v) for v in obj]
+    return obj

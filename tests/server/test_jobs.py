@@ -160,3 +160,18 @@ def test_no_owed_jobs_are_queued_without_auto_identification(tmp_path):
     finally:
         jobs.stop()
         cat.close()
+
+
+def test_info_keys_are_set_beside_the_others_and_a_non_finite_value_is_stored_as_null(tmp_path):
+    """Catalog.set_info (the rig controller's sweep outcome, the dispatcher's job summary): the keys it sets
+    are added, the others kept; a non-finite float (a fit's -inf percent) is null, never a failed write."""
+    cat = Catalog(tmp_path / "catalog.sqlite")
+    cat.insert("recordings", id="0000000000b1", created=time.time(), origin="sweep", filename="x.h5",
+               path=str(tmp_path / "x.h5"), status="running", sweep_id=None, info={"sweep": {"note": "kept"}})
+    cat.set_info("0000000000b1", status_reason=None, quality={"flags": 0})
+    cat.set_info("0000000000b1", identify={"fit_percent": float("-inf"), "gap": [1.0, float("nan")]},
+                 last_identify_job="0000000000j1")
+    assert cat.get("recordings", "0000000000b1")["info"] == {
+        "sweep": {"note": "kept"}, "status_reason": None, "quality": {"flags": 0},
+        "identify": {"fit_percent": None, "gap": [1.0, None]}, "last_identify_job": "0000000000j1"}
+    cat.close()
