@@ -226,7 +226,7 @@ def plan_prediction(response: RigResponse, limits: Limits, plan: CampaignPlan) -
     """Every sweep of the plan through the preflight's prediction (daq/preflight.py): the first refused one
     named with its prediction and what would pass ('sweep 3 of 6 (1.3 mm, up): ...') or None, and the
     warnings {sweep label: [...]}. Sweeps that break a limit are left to plan_violation; repeats are
-    predicted once."""
+    predicted once (what would pass is searched for a refused sweep only: assess's `suggest`)."""
     sweeps = plan.sweeps()
     seen: dict[tuple, Verdict] = {}
     warnings: dict[str, list[str]] = {}
@@ -235,9 +235,9 @@ def plan_prediction(response: RigResponse, limits: Limits, plan: CampaignPlan) -
             continue
         key = (s.f_start_hz, s.f_end_hz, s.duration_s, s.amplitude_mm)
         if key not in seen:
-            seen[key] = predicted_verdict(response, s.request(), suggest=False)
+            seen[key] = predicted_verdict(response, s.request())
         if seen[key].refusal:
-            return f"{s.label(len(sweeps))}: {predicted_verdict(response, s.request()).refusal}", warnings
+            return f"{s.label(len(sweeps))}: {seen[key].refusal}", warnings
         if seen[key].warnings:
             warnings[s.label(len(sweeps))] = seen[key].warnings
     return None, warnings

@@ -97,6 +97,7 @@ def test_the_example_campaign_passes_and_a_louder_one_is_refused_by_its_sweep():
     louder = dataclasses.replace(plan, amplitudes_mm=(0.4, 0.8, 1.2, 1.6))
     refusal, _ = plan_prediction(RESPONSE, RIG.limits, louder)
     assert refusal.startswith("sweep 7 of 8 (1.6 mm, up): the mass would hit the end stops")
+    assert "; passes: amplitude " in refusal  # the refused sweep's own suggestion, as a single sweep's
 
 
 def test_the_accelerometer_range_refuses_on_its_own():
