@@ -6,3 +6,7 @@
 serves it and the DAQ (daq/) speaks it; this package imports neither (numpy only), so a DAQ client
 never loads the simulator. Tables: docs/rig-protocols.md.
 """
+
+#: The wire protocols the PLC is reached by, a rig configuration's [plc] transport (the first is the default):
+#: `modbus` (the register map) and `ads` (the symbols). The DAQ has one backend per name (daq.plc.BACKENDS).
+PLC_TRANSPORTS = ("modbus", "ads")

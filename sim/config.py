@@ -27,6 +27,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from identify.errors import ShakeidError
+from protocol import PLC_TRANSPORTS
 from protocol.plc import Limits
 
 from .plc import PLCConfig
@@ -40,7 +41,7 @@ class ConfigError(ShakeidError):
 
 @dataclass
 class RigConfig:
-    plc: dict = field(default_factory=lambda: {"transport": "modbus", "host": "127.0.0.1", "port": 5020})
+    plc: dict = field(default_factory=lambda: {"transport": PLC_TRANSPORTS[0], "host": "127.0.0.1", "port": 5020})
     stream: dict = field(default_factory=lambda: {"url": "socket://127.0.0.1:5021",
                                                    "sensitivity_counts_per_ms2": 32767 / 50.0})
     can: dict = field(default_factory=dict)
@@ -96,8 +97,8 @@ def load_config(path) -> RigConfig:
     cfg.can = dict(_take(doc.get("can", {}), {"interface", "channel", "node"}, "can", path))
     if "plc" in doc:
         cfg.plc = dict(_take(doc["plc"], {"transport", "host", "port", "ams_net_id", "ams_port"}, "plc", path))
-        if cfg.plc.get("transport", "modbus") not in ("modbus", "ads"):
-            raise ConfigError(f"{path}: [plc] transport must be 'modbus' or 'ads'")
+        if cfg.plc.get("transport", PLC_TRANSPORTS[0]) not in PLC_TRANSPORTS:
+            raise ConfigError(f"{path}: [plc] transport must be one of {', '.join(PLC_TRANSPORTS)}")
     if "stream" in doc:
         cfg.stream.update(_take(doc["stream"], {"url", "sensitivity_counts_per_ms2"}, "stream", path))
     sampling = _take(doc.get("sampling", {}), {"fs_hz", "channels", "source"}, "sampling", path)

@@ -5,11 +5,13 @@ interface, and `from_config(section)`) and one line in BACKENDS.
 """
 from __future__ import annotations
 
+from protocol import PLC_TRANSPORTS
+
 from ..devices import PLC, DeviceError
 from .ads import AdsPLC
 from .modbus import ModbusPLC
 
-#: [plc] transport of a rig configuration -> the backend that speaks it
+#: [plc] transport of a rig configuration -> the backend that speaks it (one per protocol.PLC_TRANSPORTS)
 BACKENDS: dict[str, type[PLC]] = {
     "modbus": ModbusPLC,
     "ads": AdsPLC,
@@ -18,7 +20,7 @@ BACKENDS: dict[str, type[PLC]] = {
 
 def open_plc(section: dict) -> PLC:
     """The PLC backend a rig configuration's [plc] section names (`transport`, default "modbus"), connected."""
-    transport = section.get("transport", "modbus")
+    transport = section.get("transport", PLC_TRANSPORTS[0])
     if transport not in BACKENDS:
         raise DeviceError(f"[plc] transport {transport!r} is not one the DAQ speaks: {', '.join(BACKENDS)}")
     return BACKENDS[transport].from_config(section)

@@ -8,6 +8,7 @@ import pytest
 
 from daq.devices import DeviceError
 from daq.plc import BACKENDS, open_plc
+from protocol import PLC_TRANSPORTS
 from protocol.plc import Command, Limits, State
 from sim.plc import PLCConfig
 from sim.server import SimulatedRig, free_ads_address
@@ -41,6 +42,7 @@ def _sections(rig):
 @pytest.mark.parametrize("transport", ["modbus", "ads"])
 def test_each_backend_opens_from_its_section_and_reads_status_and_limits(rig, transport):
     assert set(BACKENDS) == {"modbus", "ads"}
+    assert tuple(BACKENDS) == PLC_TRANSPORTS  # a backend for every transport a rig configuration may name
     plc = open_plc(_sections(rig)[transport])
     try:
         assert isinstance(plc, BACKENDS[transport])

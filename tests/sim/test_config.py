@@ -18,7 +18,7 @@ def test_shipped_examples_load():
 
 @pytest.mark.parametrize("text,message", [
     ("[limits]\nmax_strok_mm = 3\n", "unknown key.*max_strok_mm"),
-    ("[plc]\ntransport = 'profibus'\n", "transport"),
+    ("[plc]\ntransport = 'profibus'\n", "transport must be one of modbus, ads"),
     ("[rig.effects]\nwarp = 1.0\n", "unknown effect"),
     ("[sampling\nfs_hz = 1\n", "not valid TOML"),
     ("[sim]\nspeed = -1\n", "positive"),
