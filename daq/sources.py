@@ -7,13 +7,14 @@
 `read()` returns the blocks received since the last call, each with the sample index of its first row;
 a lost or corrupted frame shows as a jump of the index (the recorder lists it as a gap, never splices).
 `stats` counts frames received, frames lost (from sequence numbers) and frames rejected as corrupt, so a
-recording can say how clean its link was. A sensor with another format is one more class like these.
+recording can say how clean its link was. A sensor with another format is one more class like these
+(with `from_config(section, fs_hz)`) and one line in SOURCES.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from protocol import can_frames
+from protocol import ACCELEROMETER_SOURCES, can_frames
 from protocol.frames import FrameDecoder
 
 from .devices import DeviceError
@@ -56,6 +57,11 @@ class SerialSource(AccelerometerSource):
         self.decoder = FrameDecoder()
         self._last_seq: int | None = None
         self._crc_seen = 0
+
+    @classmethod
+    def from_config(cls, section: dict, fs_hz: float) -> SerialSource:
+        """[stream] url."""
+        return cls(section["url"], fs_hz)
 
     def read(self) -> list[tuple[int, np.ndarray]]:
         try:
@@ -101,6 +107,13 @@ class CanSource(AccelerometerSource):
         self._can_error = can.CanError
         self._next: int | None = None  # sample index the next frame should carry
 
+    @classmethod
+    def from_config(cls, section: dict, fs_hz: float) -> CanSource:
+        """[can] interface, channel, node (default 0)."""
+        if not section.get("interface"):
+            raise DeviceError("[sampling] source = \"can\" needs a [can] section with interface and channel")
+        return cls(section["interface"], section.get("channel"), fs_hz, int(section.get("node", 0)))
+
     def read(self) -> list[tuple[int, np.ndarray]]:
         rows, blocks = [], []
         first = None
@@ -139,10 +152,15 @@ class CanSource(AccelerometerSource):
         self.bus.shutdown()
 
 
-def open_source(stream: dict, can: dict, fs_hz: float, kind: str = "stream") -> AccelerometerSource:
-    """The accelerometer source a rig configuration names ([sampling] source = "stream" | "can")."""
-    if kind == "can":
-        if not can.get("interface"):
-            raise DeviceError("[sampling] source = \"can\" needs a [can] section with interface and channel")
-        return CanSource(can["interface"], can.get("channel"), fs_hz, int(can.get("node", 0)))
-    return SerialSource(stream["url"], fs_hz)
+#: [sampling] source of a rig configuration -> the class that reads it (one per protocol.ACCELEROMETER_SOURCES)
+SOURCES: dict[str, type[AccelerometerSource]] = {
+    "stream": SerialSource,
+    "can": CanSource,
+}
+
+
+def open_source(stream: dict, can: dict, fs_hz: float, kind: str = ACCELEROMETER_SOURCES[0]) -> AccelerometerSource:
+    """The accelerometer source a rig configuration names ([sampling] source), opened from its own section."""
+    if kind not in SOURCES:
+        raise DeviceError(f"[sampling] source {kind!r} is not one the DAQ reads: {', '.join(SOURCES)}")
+    return SOURCES[kind].from_config({"stream": stream, "can": can}[kind], fs_hz)

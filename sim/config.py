@@ -27,7 +27,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from identify.errors import ShakeidError
-from protocol import PLC_TRANSPORTS
+from protocol import ACCELEROMETER_SOURCES, PLC_TRANSPORTS
 from protocol.plc import Limits
 
 from .plc import PLCConfig
@@ -47,7 +47,7 @@ class RigConfig:
     can: dict = field(default_factory=dict)
     fs_hz: float = 2048.0
     channels: tuple[str, ...] = ("table_acc", "mass_acc")
-    accelerometers: str = "stream"  # [sampling] source
+    accelerometers: str = ACCELEROMETER_SOURCES[0]  # [sampling] source
     limits: Limits = field(default_factory=Limits)
     rig: RigParameters = field(default_factory=RigParameters.paper_table1)
     sensor_noise_ms2: float = 0.02
@@ -102,9 +102,10 @@ def load_config(path) -> RigConfig:
     if "stream" in doc:
         cfg.stream.update(_take(doc["stream"], {"url", "sensitivity_counts_per_ms2"}, "stream", path))
     sampling = _take(doc.get("sampling", {}), {"fs_hz", "channels", "source"}, "sampling", path)
-    cfg.accelerometers = sampling.get("source", "stream")
-    if cfg.accelerometers not in ("stream", "can") or (cfg.accelerometers == "can" and not cfg.can.get("interface")):
-        raise ConfigError(f"{path}: [sampling] source must be 'stream' or 'can' (which needs [can] interface)")
+    cfg.accelerometers = sampling.get("source", cfg.accelerometers)
+    if cfg.accelerometers not in ACCELEROMETER_SOURCES or (cfg.accelerometers == "can" and not cfg.can.get("interface")):
+        raise ConfigError(f"{path}: [sampling] source must be one of {', '.join(ACCELEROMETER_SOURCES)} "
+                          "(can needs [can] interface)")
     cfg.fs_hz = float(sampling.get("fs_hz", cfg.fs_hz))
     cfg.channels = tuple(sampling.get("channels", cfg.channels))
     limits = _take(doc.get("limits", {}), {f.name for f in fields(Limits)}, "limits", path)

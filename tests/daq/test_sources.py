@@ -125,6 +125,29 @@ def test_missing_can_bus_is_a_clear_error():
         CanSource("nosuchinterface", "x", 2048.0)
 
 
+def test_each_configured_source_opens_from_its_own_section():
+    """The registry (daq.sources.SOURCES) has a class for every [sampling] source a rig configuration may
+    name; each opens from its own section (pyserial's loop:// and python-can's virtual bus: real links in
+    this process); an unknown source and a CAN source without an interface are refused by name."""
+    from daq.devices import DeviceError
+    from daq.sources import SOURCES, open_source
+    from protocol import ACCELEROMETER_SOURCES
+
+    assert tuple(SOURCES) == ACCELEROMETER_SOURCES
+    serial = open_source({"url": "loop://"}, {}, 2048.0)
+    can = open_source({"url": "unused"}, {"interface": "virtual", "channel": "src-registry", "node": 3}, 1000.0, "can")
+    try:
+        assert type(serial) is SerialSource and serial.url == "loop://" and serial.fs_hz == 2048.0
+        assert type(can) is CanSource and can.url == "CAN virtual src-registry node 3" and can.fs_hz == 1000.0
+    finally:
+        serial.close()
+        can.close()
+    with pytest.raises(DeviceError, match=r"\[sampling\] source 'usb' is not one the DAQ reads: stream, can"):
+        open_source({"url": "loop://"}, {}, 2048.0, "usb")
+    with pytest.raises(DeviceError, match=r"needs a \[can\] section with interface"):
+        open_source({"url": "loop://"}, {}, 2048.0, "can")
+
+
 @pytest.mark.slow
 def test_shakeid_sweep_over_can_across_processes(tmp_path, can_relay):
     """Three real processes on loopback: a python-can-remote relay, `shakeid sim` sending the samples as
