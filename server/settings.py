@@ -56,6 +56,16 @@ def token_role(tokens: dict[str, str], token: str) -> str | None:
     return next((r for t, r in tokens.items() if hmac.compare_digest(t.encode(), token.encode())), None)
 
 
+def token_refusal(found: str | None, needed: str) -> tuple[int, str] | None:
+    """(status, detail) refusing a token of role `found` (None: no or an unknown token, 401) where `needed`
+    or above is required (403), or None when it may: one wording for both ports (auth.py, stoplistener.py)."""
+    if found is None:
+        return 401, "a valid bearer token is needed (Authorization: Bearer <token>)"
+    if ROLES.index(found) < ROLES.index(needed):
+        return 403, f"this needs the {needed} role; the token is {found}"
+    return None
+
+
 class SettingsError(ShakeidError):
     """The service's configuration is unusable (named)."""
 

@@ -23,7 +23,7 @@ from urllib.parse import urlsplit
 
 from daq.realtime import ESTOP_PRIORITY, make_realtime
 
-from .settings import ROLES, token_role
+from .settings import token_refusal, token_role
 
 #: the one path served (the web server's route of the same name does the same)
 ESTOP_PATH = "/api/rig/estop"
@@ -33,7 +33,6 @@ CLIENT_TIMEOUT_S = 5.0
 MAX_BODY_BYTES = 64 * 1024
 #: how long a browser may keep a preflight's answer, s
 PREFLIGHT_MAX_AGE_S = 600
-UNAUTHORIZED = "a valid bearer token is needed (Authorization: Bearer <token>)"
 
 
 def not_delivered(reason) -> str:
@@ -128,10 +127,10 @@ class StopHandler(http.server.BaseHTTPRequestHandler):
             return self._answer(404, {"detail": f"only POST {ESTOP_PATH} is served on this port"})
         scheme, _, token = self.headers.get("Authorization", "").partition(" ")
         role = token_role(self.server.tokens, token.strip()) if scheme.lower() == "bearer" else None
-        if role is None:
-            return self._answer(401, {"detail": UNAUTHORIZED}, {"WWW-Authenticate": "Bearer"})
-        if ROLES.index(role) < ROLES.index("operator"):
-            return self._answer(403, {"detail": f"this needs the operator role; the token is {role}"})
+        refused = token_refusal(role, "operator")  # the web server's route's check and words
+        if refused:
+            status, detail = refused
+            return self._answer(status, {"detail": detail}, {"WWW-Authenticate": "Bearer"} if status == 401 else None)
         answer = self.server.estop()
         if answer.get("ok"):
             return self._answer(200, answer["result"])
