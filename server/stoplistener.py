@@ -91,7 +91,7 @@ class StopHandler(http.server.BaseHTTPRequestHandler):
         self.wfile.write(data)
 
     def _drain_body(self) -> bool:
-        """Read (and drop) the request body; False (answered 413/400) if it is too large or unreadable."""
+        """Read (and drop) the request body; False (answered 411/413) if it is chunked or too large."""
         if self.headers.get("Transfer-Encoding", "").lower() == "chunked":
             self.close_connection = True
             self._answer(411, {"detail": "send the stop without a body, or with a Content-Length"})
@@ -155,7 +155,6 @@ class StopListener(http.server.ThreadingHTTPServer):
         self.address_family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self.tokens, self.estop = tokens, estop
         super().__init__((host, port), StopHandler)
-        self._thread: threading.Thread | None = None
 
     @property
     def port(self) -> int:
@@ -166,8 +165,7 @@ class StopListener(http.server.ThreadingHTTPServer):
             make_realtime(ESTOP_PRIORITY)  # the accepting thread too: a connection is taken at once
             self.serve_forever(poll_interval=0.5)
 
-        self._thread = threading.Thread(target=serve, name="stop-listener", daemon=True)
-        self._thread.start()
+        threading.Thread(target=serve, name="stop-listener", daemon=True).start()  # ends with stop()'s shutdown
         return self
 
     def stop(self) -> None:
