@@ -22,9 +22,10 @@ import time
 
 from daq.campaign import Campaign, CampaignControl, PlanError, parse_plan, plan_violation, run_campaign
 from daq.devices import DeviceError
+from daq.sweep import SweepRefused
 
 from .catalog import new_id
-from .preflight import check_sweep, rig_response
+from .preflight import predicted_body
 
 #: why a campaign a dead or stopped controller was running is paused after the restart
 RESTARTED = ("the rig controller stopped during the campaign (restart or crash); the table was stopped; "
@@ -176,17 +177,15 @@ class CampaignService:
                 + (f"; {campaign.plan.note}" if campaign.plan.note else ""))
         from .controller import Refused  # here: the controller module imports this one
 
-        body = {**planned.body(note), "campaign": info}
-        # predicted again right before it starts: a sweep of this campaign may have given a newer model
-        verdict = check_sweep(rig_response(self.catalog, self.ctl.settings.rig), self.ctl.settings.rig, body)
-        if verdict is not None and verdict.refusal:
-            return {"status": "refused", "reason": f"sweep refused: {verdict.refusal}"}
-        if verdict is not None:
-            body["preflight"] = verdict.record  # kept in the sweep's request, as a single sweep's
         try:
+            # predicted again right before it starts (a sweep of this campaign may have given a newer model),
+            # the prediction kept in the sweep's request as a single sweep's
+            body = predicted_body(self.catalog, self.ctl.settings.rig, {**planned.body(note), "campaign": info})
             started = self.ctl.launch_sweep(body, act["operator"], after_end, held=control.held)
         except Refused as exc:
             return {"status": "refused", "reason": exc.detail}
+        except SweepRefused as exc:
+            return {"status": "refused", "reason": str(exc)}
         except DeviceError as exc:
             return {"status": "refused", "reason": f"rig not reachable: {exc}"}
         if started is None:  # control.held() said no at the last moment: nothing was started

@@ -200,12 +200,15 @@ LEFT JOIN jobs je ON je.id = (SELECT id FROM jobs WHERE recording_id = r.id AND 
 WHERE {where} ORDER BY r.created DESC LIMIT ? OFFSET ?
 """
 RECORDINGS_COUNT = "SELECT COUNT(*) FROM recordings r LEFT JOIN sweeps s ON s.id = r.sweep_id WHERE {where}"
-#: the rig history's points: recordings with their latest identification's result folder (one statement)
+#: the rig history's points: recordings with their latest identification's result folder (one statement);
+#: last_identify_job is set when that job completed (JobQueue._done)
 IDENTIFIED = """
 SELECT r.*, j.result_dir AS result_dir FROM recordings r
 JOIN jobs j ON j.id = json_extract(r.info, '$.last_identify_job')
-WHERE r.archived IS NULL AND j.result_dir IS NOT NULL ORDER BY r.created DESC LIMIT ?
+WHERE r.archived IS NULL AND j.result_dir IS NOT NULL {only} ORDER BY r.created DESC LIMIT ?
 """
+#: IDENTIFIED's restriction to the service's own rig's complete sweeps (the preflight's model: server/preflight.py)
+RIG_SWEEPS = "AND r.origin = 'sweep' AND r.status = 'complete'"
 #: the recordings of a campaign: every sweep it started (aborted ones too), from its `sweeps` JSON
 CAMPAIGN_RECORDINGS = ("r.id IN (SELECT json_extract(c.value, '$.recording_id') FROM campaigns, "
                        "json_each(campaigns.sweeps) AS c WHERE campaigns.id = ?)")
@@ -276,10 +279,11 @@ class NamedQueries:
         return ([("identify", rec_id, {}) for rec_id in single]
                 + [("identify_joint", ids[0], {"recording_ids": ids, "campaign_id": cid}) for cid, ids in joint])
 
-    def identified(self, limit: int = 200) -> list[tuple[dict, str]]:
-        """The newest `limit` recordings (not archived) with an identification, and its result folder."""
+    def identified(self, limit: int = 200, rig_sweeps: bool = False) -> list[tuple[dict, str]]:
+        """The newest `limit` recordings (not archived) with an identification, and its result folder;
+        rig_sweeps: only complete sweeps of the service's rig (no uploads)."""
         with self.catalog.lock:
-            rows = self.catalog.db.execute(IDENTIFIED, (limit,)).fetchall()
+            rows = self.catalog.db.execute(IDENTIFIED.format(only=RIG_SWEEPS if rig_sweeps else ""), (limit,)).fetchall()
         recs = [self.catalog._row("recordings", r) for r in rows]
         return [(rec, rec.pop("result_dir")) for rec in recs]
 

@@ -10,38 +10,53 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import functools
 import json
 from pathlib import Path
 
-from daq.preflight import RigResponse, Verdict, nominal_response
-from daq.sweep import SweepRequest, limit_violation, predicted_verdict
+from daq.campaign import PlanError, parse_plan, plan_prediction
+from daq.preflight import RigResponse, nominal_response
+from daq.sweep import SweepRefused, SweepRequest, limit_violation, predicted_verdict
 from identify.errors import ModelError
 from identify.model import SparseModel
+from protocol.plc import Limits
 from sim.config import RigConfig
 
 #: recordings looked at (newest first) for a delivered model before the nominal parameters are used
 MODEL_LOOKBACK = 20
 
 
+def rig_limits(rig: RigConfig | None) -> Limits:
+    """The PLC's limits of the service's rig (the embedded simulated rig's when there is no configuration)."""
+    return (rig or RigConfig()).limits
+
+
 def rig_response(catalog, rig: RigConfig | None) -> RigResponse:
-    """The rig's response model: its latest identified model, else its nominal parameters."""
+    """The rig's response model: its latest identified model, else its nominal parameters. One catalog
+    statement (NamedQueries.identified); each model.json is read once per process (_delivered_model)."""
     nominal = nominal_response(rig or RigConfig())
-    where = ("origin = 'sweep' AND status = 'complete' AND archived IS NULL "
-             "AND json_extract(info, '$.last_identify_job') IS NOT NULL")
-    for rec in catalog.list("recordings", where, limit=MODEL_LOOKBACK):
-        job = catalog.get("jobs", rec["info"]["last_identify_job"])
-        if not job or job.get("state") != "completed" or not job.get("result_dir"):
+    for rec, result_dir in catalog.queries.identified(MODEL_LOOKBACK, rig_sweeps=True):
+        model = _delivered_model(result_dir)
+        if model is None:
             continue
+        when = datetime.datetime.fromtimestamp(rec["created"], datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
         try:
-            doc = json.loads((Path(job["result_dir"]) / "model.json").read_text())
-            if doc.get("status") == "failed":
-                continue
-            when = datetime.datetime.fromtimestamp(rec["created"], datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-            return dataclasses.replace(nominal, model=SparseModel.from_dict(doc),
+            return dataclasses.replace(nominal, model=model,
                                        source=f"the model identified from recording {rec['id']} ({when})")
-        except (OSError, ValueError, ModelError):
-            continue  # being written, removed, or not a base-excited rig model: the next one
+        except ModelError:
+            continue  # not a base-excited rig model: the next one
     return nominal
+
+
+@functools.lru_cache(maxsize=4 * MODEL_LOOKBACK)
+def _delivered_model(result_dir: str) -> SparseModel | None:
+    """The model a completed identification delivered in its result folder, or None (none delivered, or
+    not a model). A completed job's folder never changes: read and parsed once, not at every sweep."""
+    try:
+        doc = json.loads((Path(result_dir) / "model.json").read_text())
+        return None if doc.get("status") == "failed" else SparseModel.from_dict(doc)
+    except (OSError, ValueError, ModelError):
+        return None
 
 
 def request_of(body: dict) -> SweepRequest:
@@ -49,11 +64,25 @@ def request_of(body: dict) -> SweepRequest:
                         float(body["amplitude_mm"]), float(body.get("settle_s", 2.0)))
 
 
-def check_sweep(response: RigResponse, rig: RigConfig | None, body: dict, suggest: bool = True) -> Verdict | None:
-    """The prediction's verdict on one sweep body, or None when the sweep breaks a PLC limit (the rig
-    controller's check names it; nothing is predicted for a sweep that cannot run)."""
+def predicted_body(catalog, rig: RigConfig | None, body: dict) -> dict:
+    """The sweep body with the prediction's record (and its warnings) under "preflight"; SweepRefused
+    ("sweep refused: ...") when the prediction refuses it. A sweep that breaks a PLC limit is returned
+    as it is: the rig controller's check names the limit, nothing is predicted for it."""
     req = request_of(body)
-    if limit_violation((rig or RigConfig()).limits, req):
-        return None
-    return predicted_verdict(response, req, suggest)
+    if limit_violation(rig_limits(rig), req):
+        return body
+    verdict = predicted_verdict(rig_response(catalog, rig), req)
+    if verdict.refusal:
+        raise SweepRefused(f"sweep refused: {verdict.refusal}")
+    return {**body, "preflight": verdict.record}
 
+
+def plan_refusal(catalog, rig: RigConfig | None, plan: dict) -> tuple[str | None, dict]:
+    """Every sweep of a campaign plan predicted (daq.campaign.plan_prediction): the first refused one named,
+    or None, and the warnings by sweep; (None, {}) for a plan the controller refuses anyway (it names the
+    key or the limit)."""
+    try:
+        parsed = parse_plan(plan)
+    except PlanError:
+        return None, {}
+    return plan_prediction(rig_response(catalog, rig), rig_limits(rig), parsed)

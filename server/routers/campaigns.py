@@ -7,13 +7,10 @@ from fastapi import APIRouter, Depends, HTTPException, Query
 from fastapi.concurrency import run_in_threadpool
 from pydantic import Field
 
-from daq.campaign import PlanError, parse_plan, plan_prediction
-from sim.config import RigConfig
-
 from .. import schemas
 from ..catalog import Catalog
 from ..deps import ERRORS, Id, Services, operator, services, viewer
-from ..preflight import rig_response
+from ..preflight import plan_refusal
 
 router = APIRouter(tags=["campaigns"])
 CAMPAIGN_ERRORS = {**ERRORS, 404: {"model": schemas.Problem}, 409: {"model": schemas.Problem},
@@ -25,17 +22,6 @@ class CampaignAccepted(schemas.Accepted):
                                                      "daq.preflight.WARN_SHARE of a limit, by sweep")
 
 
-def preflight(svc: Services, plan: dict):
-    """Every sweep of the plan predicted with this rig's latest model (daq/preflight.py); (None, {}) for a
-    plan the controller refuses anyway (it names the key or the limit)."""
-    try:
-        parsed = parse_plan(plan)
-    except PlanError:
-        return None, {}
-    limits = (svc.settings.rig or RigConfig()).limits
-    return plan_prediction(rig_response(svc.catalog, svc.settings.rig), limits, parsed)
-
-
 @router.post("/api/campaigns", status_code=202, response_model=CampaignAccepted,
              responses={**CAMPAIGN_ERRORS, 422: {"model": schemas.Problem}})
 async def start_campaign(body: schemas.CampaignIn, who: str = operator, svc: Services = Depends(services)):
@@ -45,7 +31,7 @@ async def start_campaign(body: schemas.CampaignIn, who: str = operator, svc: Ser
     PLC is in emergency stop or fault. Each sweep is predicted again right before it starts (a newer model
     may be known by then): a refusal there pauses the campaign."""
     plan = body.model_dump()
-    refusal, warnings = await run_in_threadpool(preflight, svc, plan)
+    refusal, warnings = await run_in_threadpool(plan_refusal, svc.catalog, svc.settings.rig, plan)
     if refusal:
         raise HTTPException(422, f"campaign refused: {refusal}")
     started = await svc.controller("start_campaign", plan=plan, operator=who)

@@ -14,11 +14,14 @@ from fastapi.responses import FileResponse, JSONResponse
 from pydantic import Field
 
 from daq.campaign import NAME_PATTERN
+from daq.plan import propose_campaign, with_model
 from identify.errors import ShakeidError
+from identify.model import SparseModel
 from reports.frf_overlay import OVERLAY_FIGURE as OVERLAY  # drawn by the worker, served from its report
 
 from .. import schemas
 from ..deps import ERRORS, Id, Services, services, viewer
+from ..preflight import rig_limits, rig_response
 from ..worker import FRF_FILE
 from .campaigns import latest_joint_jobs
 from .results import latest_result
@@ -86,18 +89,11 @@ async def propose(body: ProposalIn, svc: Services = Depends(services)):
     Nothing moves. A proposal costs seconds: when it is not ready within PROPOSAL_WAIT_S the answer is 202
     (`detail`: ask again), and the same request later answers from the finished one. 422 when the model
     predicts no jump within what the rig takes."""
-    from identify.model import SparseModel
-    from sim.config import RigConfig
-
-    from daq.plan import with_model
-
-    from ..preflight import rig_response
-
     rig = rig_response(svc.catalog, svc.settings.rig)
     if body.recording_id:
         doc = json.loads(latest_result(svc, body.recording_id, "identify", "model.json").read_text())
         rig = with_model(rig, SparseModel.from_dict(doc), f"the model identified from recording {body.recording_id}")
-    limits = (svc.settings.rig or RigConfig()).limits
+    limits = rig_limits(svc.settings.rig)
     key = json.dumps([rig.model.to_dict(), rig.source, rig.mass_range_ms2, rig.table_range_ms2, list(rig.travel_mm),
                       dataclasses.asdict(limits), body.jump_amplitudes], sort_keys=True)
     fut = _PROPOSALS.get(key)
@@ -117,8 +113,6 @@ async def propose(body: ProposalIn, svc: Services = Depends(services)):
 
 def _propose(rig, limits, jump_amplitudes: int):
     """The proposal, or the refusal's message (kept like a proposal: the same request is refused at once)."""
-    from daq.plan import propose_campaign
-
     try:
         return propose_campaign(rig, limits, "proposal", jump_amplitudes)
     except ShakeidError as exc:

@@ -5,9 +5,11 @@ from fastapi import APIRouter, Depends, HTTPException, Query
 from fastapi.concurrency import run_in_threadpool
 from pydantic import Field
 
+from daq.sweep import SweepRefused
+
 from .. import schemas
 from ..deps import ERRORS, Id, Services, operator, services, viewer
-from ..preflight import check_sweep, rig_response
+from ..preflight import predicted_body
 
 router = APIRouter(tags=["sweeps"])
 
@@ -16,12 +18,6 @@ class SweepAccepted(schemas.Accepted):
     preflight: dict | None = Field(None, description="the predicted peaks of the sweep (mass acceleration, relative "
                                                      "travel, each with its frequency and limit) and the warnings "
                                                      "above daq.preflight.WARN_SHARE of a limit")
-
-
-def preflight(svc: Services, body: dict, suggest: bool = True):
-    """The door's prediction (daq/preflight.py) with this rig's latest model; None for a sweep that breaks a
-    PLC limit (the controller names the limit)."""
-    return check_sweep(rig_response(svc.catalog, svc.settings.rig), svc.settings.rig, body, suggest)
 
 
 @router.post("/api/sweeps", status_code=202, response_model=SweepAccepted,
@@ -33,12 +29,10 @@ async def start_sweep(body: schemas.SweepIn, who: str = operator, svc: Services 
     frequency and what would pass), 409 while another runs or while the PLC is in emergency stop or fault
     (with the reason), 503 when the rig cannot be reached. The prediction (and its warnings above
     WARN_SHARE of a limit) is kept in the sweep's request and answered here."""
-    sweep = body.model_dump()
-    verdict = await run_in_threadpool(preflight, svc, sweep)  # ~0.2 s for 300 s: off the event loop
-    if verdict is not None and verdict.refusal:
-        raise HTTPException(422, f"sweep refused: {verdict.refusal}")
-    if verdict is not None:
-        sweep["preflight"] = verdict.record
+    try:  # ~0.2 s for 300 s: off the event loop
+        sweep = await run_in_threadpool(predicted_body, svc.catalog, svc.settings.rig, body.model_dump())
+    except SweepRefused as exc:
+        raise HTTPException(422, str(exc)) from None
     started = await svc.controller("start_sweep", body=sweep, operator=who)
     return {"id": started["id"], "state": started["state"], "preflight": sweep.get("preflight")}
 
