@@ -105,6 +105,11 @@ class RigParameters:
         return tuple(both if v is None else float(v) for v in (self.end_stop_lower_mm, self.end_stop_upper_mm))
 
     @property
+    def natural_frequency_hz(self) -> float:
+        """The linear natural frequency sqrt(k / m) / 2 pi (Hz): where a drawn sweep and effect are placed."""
+        return math.sqrt(self.stiffness_n_per_m / self.mass_kg) / (2 * math.pi)
+
+    @property
     def end_stops(self) -> bool:
         """True when the rail has an end stop on at least one side (a finite travel)."""
         return any(math.isfinite(v) for v in self.travels_mm)

@@ -133,7 +133,7 @@ class Scenario:
         """One line: category, effects with their relative force, rig and sweep."""
         eff = ",".join(f"{n}({self.magnitudes.get(n, {}).get('relative_force', 0) * 100:.1f}%)"
                        for n in self.truth_effects) or "-"
-        fn = math.sqrt(self.rig.stiffness_n_per_m / self.rig.mass_kg) / (2 * math.pi)
+        fn = self.rig.natural_frequency_hz
         noise = max(self.table_sensor.noise_fraction, self.mass_sensor.noise_fraction)
         extra = "".join(f" {k}" for k in self.nuisances)
         return (f"{self.category:14s} {eff:44s} fn={fn:4.1f}Hz Z={self.sweep.amplitude_mm:.2f}mm "
@@ -264,7 +264,8 @@ def _draw(rng, category, names, duration_s=None, fs_hz=None, wide=False) -> Scen
             mags[name] = {"alpha": fields_["hysteresis_alpha"], "z_max_m": z_max, "relative_force": r}
         elif name == "second_mode":
             ma = rng.uniform(0.02, 0.06) * m
-            fa = min(rng.uniform(1.3, 2.2), 0.85 * sweep.f_end_hz / _fn(rig)) * _fn(rig)
+            fn = rig.natural_frequency_hz
+            fa = min(rng.uniform(1.3, 2.2), 0.85 * sweep.f_end_hz / fn) * fn
             ka = ma * (2 * math.pi * fa) ** 2
             ca = 2 * rng.uniform(0.02, 0.08) * math.sqrt(ka * ma)
             fields_.update(absorber_mass_kg=ma, absorber_stiffness_n_per_m=ka, absorber_damping_ns_per_m=ca)
@@ -281,19 +282,19 @@ def _draw(rng, category, names, duration_s=None, fs_hz=None, wide=False) -> Scen
             d = rng.uniform(0.3e-3, 2e-3)
             channel = str(rng.choice(["table", "mass"]))
             (mass if channel == "mass" else table).delay_s = d
-            mags[name] = {"delay_s": d, "channel": channel, "relative_force": 2 * math.pi * _fn(rig) * d}
+            mags[name] = {"delay_s": d, "channel": channel, "relative_force": 2 * math.pi * rig.natural_frequency_hz * d}
         elif name == "bias_drift":
             b = rng.choice([-1, 1]) * rng.uniform(0.01, 0.05)
             channel = str(rng.choice(["table", "mass"]))
             (mass if channel == "mass" else table).bias_drift_ms2 = b
-            mags[name] = {"bias_drift_ms2": b, "channel": channel, "relative_force": abs(b) / (2 * math.pi * _fn(rig) * V)}
+            mags[name] = {"bias_drift_ms2": b, "channel": channel, "relative_force": abs(b) / (2 * math.pi * rig.natural_frequency_hz * V)}
         else:
             raise ValueError(f"unknown effect {name!r}")
         if name in effects:
             mags[name] = {"value": effects[name], "relative_force": r}
     rig = dataclasses.replace(rig, effects=effects, **fields_)
     sc = Scenario(category, list(names), rig, sweep, fs, table, mass, magnitudes=mags,
-                  pilot={"Q_m": Q, "V_ms": V, "Fs_n": Fs, "fn_hz": _fn(rig)},
+                  pilot={"Q_m": Q, "V_ms": V, "Fs_n": Fs, "fn_hz": rig.natural_frequency_hz},
                   nuisances=wide_draws.nuisances(table, mass))
     quiet = Accelerometer(noise_fraction=0.0)
     check = run_sweep(rig, sweep, fs, sc.settle_s, quiet, quiet, None)  # the physics sc.run() will run
@@ -316,10 +317,6 @@ def _detectable(sc: Scenario) -> Scenario:
             for sensor in (sc.table_sensor, sc.mass_sensor):
                 sensor.noise_fraction = min(sensor.noise_fraction, max(cap, MIN_NOISE))
     return sc
-
-
-def _fn(rig) -> float:
-    return math.sqrt(rig.stiffness_n_per_m / rig.mass_kg) / (2 * math.pi)
 
 
 # -- scoring (the contract's rules; benchmarks/explain_robustness.py) ------------------------------------

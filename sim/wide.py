@@ -49,7 +49,7 @@ def draw_base(rng: np.random.Generator, duration_s: float | None = None, fs_hz: 
     rig = RigParameters(mass_kg=design.mass_kg * s[0], damping_ns_per_m=design.damping_ns_per_m * s[1],
                         stiffness_n_per_m=design.stiffness_n_per_m * s[2],
                         cubic_stiffness_n_per_m3=design.cubic_stiffness_n_per_m3 * s[3])
-    fn = math.sqrt(rig.stiffness_n_per_m / rig.mass_kg) / (2 * math.pi)
+    fn = rig.natural_frequency_hz
     f_lo = rng.uniform(F_LOW_HZ, max(F_LOW_HZ, F_LOW_PER_FN * fn))
     f_hi = rng.uniform(min(F_HIGH_PER_FN * fn, F_HIGH_HZ), F_HIGH_HZ)
     duration = rng.uniform(*DURATION_S) if duration_s is None else float(duration_s)
