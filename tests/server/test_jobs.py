@@ -150,13 +150,15 @@ def test_no_owed_jobs_are_queued_without_auto_identification(tmp_path):
     cat.insert("recordings", id="0000000000b1", created=time.time(), origin="sweep", filename="x.h5",
                path=str(tmp_path / "x.h5"), status="complete", sweep_id=None, info={})
     jobs = JobQueue(cat, tmp_path / "results", workers=1, auto_identify=False)
+    jobs.recording_completed()  # the controller's event, before the dispatcher's first look at the queue
+    # a job of a recording not in the catalog: failed by the dispatcher's first turn, which would have queued
+    # what is owed before it (so its end, not a wait of some length, says the turn is over)
+    marker = jobs.submit("identify", "0000000000ff")
     jobs.start()
-    jobs.recording_completed()
-    jobs.wake()
     try:
         assert cat.queries.owed_jobs() == [("identify", "0000000000b1", {})]  # owed, yet not queued
-        wait_for(lambda: not jobs._wake.is_set(), what="the dispatcher's turn")
-        assert cat.count("jobs") == 0
+        wait_for(lambda: cat.get("jobs", marker["id"])["state"] == "failed", what="the dispatcher's first turn")
+        assert [j["id"] for j in cat.list("jobs")] == [marker["id"]]
     finally:
         jobs.stop()
         cat.close()
