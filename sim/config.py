@@ -65,10 +65,10 @@ class RigConfig:
                 **({"moving_mass_kg": self.moving_mass_kg} if self.moving_mass_kg else {})}
 
     def plc_config(self) -> PLCConfig:
-        sensor = Accelerometer(noise_fraction=0.0, noise_ms2=self.sensor_noise_ms2, bias_ms2=self.sensor_bias_ms2)
-        return PLCConfig(rig=self.rig, limits=self.limits, fs_hz=self.fs_hz, table_sensor=sensor,
-                         mass_sensor=Accelerometer(noise_fraction=0.0, noise_ms2=self.sensor_noise_ms2,
-                                                   bias_ms2=self.sensor_bias_ms2))
+        """The simulated PLC of this configuration; its two accelerometers alike ([sensors]), one object each."""
+        def sensor():
+            return Accelerometer(noise_fraction=0.0, noise_ms2=self.sensor_noise_ms2, bias_ms2=self.sensor_bias_ms2)
+        return PLCConfig(rig=self.rig, limits=self.limits, fs_hz=self.fs_hz, table_sensor=sensor(), mass_sensor=sensor())
 
 
 def _take(section: dict, allowed: set[str], where: str, path) -> dict:
