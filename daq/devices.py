@@ -11,7 +11,7 @@ import contextlib
 import logging
 
 from identify.errors import ShakeidError
-from protocol.plc import PLCStatus
+from protocol.plc import SETPOINT_NAMES, PLCStatus
 
 
 class DeviceError(ShakeidError):
@@ -19,12 +19,17 @@ class DeviceError(ShakeidError):
 
 
 class PLC:
-    """Interface: what a sweep needs from the table's controller. A backend also has
-    `from_config(section)`, which opens it from a rig configuration's [plc] section."""
+    """Interface: what a sweep needs from the table's controller. A backend writes the setpoints
+    (`write_setpoints`) and has `from_config(section)`, which opens it from a rig configuration's [plc] section."""
 
     @classmethod
     def from_config(cls, section: dict) -> PLC: ...
-    def configure(self, f_start_hz: float, f_end_hz: float, duration_s: float, amplitude_mm: float) -> None: ...
+    def write_setpoints(self, values: dict[str, float]) -> None: ...
+
+    def configure(self, f_start_hz: float, f_end_hz: float, duration_s: float, amplitude_mm: float) -> None:
+        """Write a sweep's setpoints, by their protocol names (protocol.plc.SETPOINT_NAMES)."""
+        self.write_setpoints(dict(zip(SETPOINT_NAMES, (f_start_hz, f_end_hz, duration_s, amplitude_mm), strict=True)))
+
     def command(self, code: int) -> None: ...
     def heartbeat(self, value: int) -> None: ...
     def status(self) -> PLCStatus: ...

@@ -39,9 +39,7 @@ class AdsPLC(PLC):
         except Exception as exc:
             raise DeviceError(f"PLC link lost: {exc}") from None
 
-    def configure(self, f_start_hz, f_end_hz, duration_s, amplitude_mm):
-        values = {"f_start_hz": f_start_hz, "f_end_hz": f_end_hz, "duration_s": duration_s,
-                  "amplitude_mm": amplitude_mm}
+    def write_setpoints(self, values):
         for s in SETPOINT_SYMBOLS:
             self._rw(self._write, s, float(values[s.field]))
 

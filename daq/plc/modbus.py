@@ -34,9 +34,7 @@ class ModbusPLC(PLC):
             raise DeviceError(f"PLC answered with an error: {r}")
         return r
 
-    def configure(self, f_start_hz, f_end_hz, duration_s, amplitude_mm):
-        values = {"f_start_hz": f_start_hz, "f_end_hz": f_end_hz, "duration_s": duration_s,
-                  "amplitude_mm": amplitude_mm}
+    def write_setpoints(self, values):
         self._call(self.client.write_registers, SETPOINTS.address, SETPOINTS.encode(values))
 
     def command(self, code):
