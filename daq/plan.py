@@ -48,9 +48,13 @@ RATE_HZ_PER_S = 0.1
 STEP_DOWN = 0.95
 #: amplitudes are proposed to 0.01 mm, the band to 0.1 Hz
 AMPLITUDE_STEP_MM, FREQUENCY_STEP_HZ = 0.01, 0.1
+#: the proposed campaign's name when none is given (`shakeid plan-campaign --name`, the service's proposal)
+PROPOSAL_NAME = "fold-bracket"
+#: amplitudes with a predicted jump: the default and the range offered (CLI --jump-amplitudes, the service)
+JUMP_AMPLITUDES, JUMP_AMPLITUDES_RANGE = 2, (1, 5)
 
 
-def propose_campaign(response: RigResponse, limits, name: str = "fold-bracket", jump_amplitudes: int = 2,
+def propose_campaign(response: RigResponse, limits, name: str = PROPOSAL_NAME, jump_amplitudes: int = JUMP_AMPLITUDES,
                      rate_hz_per_s: float = RATE_HZ_PER_S) -> dict:
     """The proposal for the rig of `response` (its model, accelerometer ranges and travel) under the
     PLC's `limits` (protocol.plc.Limits); ShakeidError saying why when the model predicts no jump within

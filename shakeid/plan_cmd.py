@@ -18,9 +18,13 @@ def add_plan_parser(sub) -> None:
     add_model_arguments(q, "use")
     q.add_argument("--config", metavar="RIG.toml", help="the rig's limits, accelerometer range and end-stop travel "
                                                         "(default: the simulated rig's, examples/sim-rig.toml)")
-    q.add_argument("--name", default="fold-bracket", help="the campaign's name (default: fold-bracket)")
-    q.add_argument("--jump-amplitudes", type=int, default=2, choices=range(1, 6), metavar="N",
-                   help="amplitudes with a predicted jump, 1-5 (default 2; one more below the onset)")
+    from daq.plan import JUMP_AMPLITUDES, JUMP_AMPLITUDES_RANGE, PROPOSAL_NAME
+
+    low, high = JUMP_AMPLITUDES_RANGE
+    q.add_argument("--name", default=PROPOSAL_NAME, help=f"the campaign's name (default: {PROPOSAL_NAME})")
+    q.add_argument("--jump-amplitudes", type=int, default=JUMP_AMPLITUDES, choices=range(low, high + 1),
+                   metavar="N", help=f"amplitudes with a predicted jump, {low}-{high} (default {JUMP_AMPLITUDES}; "
+                                     "one more below the onset)")
     q.add_argument("--rate", type=positive, default=None, metavar="HZ_PER_S",
                    help="sweep rate, Hz/s (default: daq.plan.RATE_HZ_PER_S = 0.1)")
     q.add_argument("--out", metavar="PLAN.toml", help="write the plan for `shakeid campaign PLAN.toml` here")

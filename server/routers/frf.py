@@ -14,7 +14,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from pydantic import Field
 
 from daq.campaign import NAME_PATTERN
-from daq.plan import propose_campaign, with_model
+from daq.plan import JUMP_AMPLITUDES, JUMP_AMPLITUDES_RANGE, PROPOSAL_NAME, propose_campaign, with_model
 from identify.errors import ShakeidError
 from identify.model import SparseModel
 from reports.frf_overlay import OVERLAY_FIGURE as OVERLAY  # drawn by the worker, served from its report
@@ -77,8 +77,9 @@ class ProposalIn(schemas.Strict):
     """What to propose a campaign from: a recording's latest identified model (default: the rig's latest,
     as the preflight predicts with, or its nominal parameters)."""
     recording_id: str | None = Field(None, pattern=r"^[0-9a-f]{12}$", description="whose model (default: the rig's latest)")
-    name: str = Field("fold-bracket", pattern=NAME_PATTERN, description="the proposed campaign's name")
-    jump_amplitudes: int = Field(2, ge=1, le=5, description="amplitudes with a predicted jump (one more below its onset)")
+    name: str = Field(PROPOSAL_NAME, pattern=NAME_PATTERN, description="the proposed campaign's name")
+    jump_amplitudes: int = Field(JUMP_AMPLITUDES, ge=JUMP_AMPLITUDES_RANGE[0], le=JUMP_AMPLITUDES_RANGE[1],
+                                 description="amplitudes with a predicted jump (one more below its onset)")
 
 
 @router.post("/api/campaigns/proposal", responses={202: {"model": schemas.Problem}, 422: {"model": schemas.Problem}})

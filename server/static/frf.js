@@ -73,7 +73,8 @@ async function showCampaign(id) {
 // -- the campaign builder's proposal: amplitudes and band from the rig model's predicted folds (daq.plan)
 $("c-propose").onclick = async () => {
   try {
-    const ask = () => api("POST", "/api/campaigns/proposal", {name: $("c-name").value.trim() || "fold-bracket"});
+    const name = $("c-name").value.trim();  // none: the service's default (daq.plan.PROPOSAL_NAME)
+    const ask = () => api("POST", "/api/campaigns/proposal", name ? {name} : {});
     let p = await ask();
     if (!p.plan) say(p.detail);  // 202: computing (seconds); the same request answers once it is done
     while (!p.plan) { await new Promise(r => setTimeout(r, 2000)); p = await ask(); }
