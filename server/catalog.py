@@ -283,7 +283,8 @@ class NamedQueries:
         """The newest `limit` recordings (not archived) with an identification, and its result folder;
         rig_sweeps: only complete sweeps of the service's rig (no uploads)."""
         with self.catalog.lock:
-            rows = self.catalog.db.execute(IDENTIFIED.format(only=RIG_SWEEPS if rig_sweeps else ""), (limit,)).fetchall()
+            only = RIG_SWEEPS if rig_sweeps else ""
+            rows = self.catalog.db.execute(IDENTIFIED.format(only=only), (limit,)).fetchall()
         recs = [self.catalog._row("recordings", r) for r in rows]
         return [(rec, rec.pop("result_dir")) for rec in recs]
 
