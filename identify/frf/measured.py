@@ -38,7 +38,9 @@ EDGE_CYCLES = 3
 def cycle_envelope(q2: np.ndarray, zdd: np.ndarray, fs_hz: float) -> dict:
     """Per table cycle (boundaries where the table acceleration's analytic phase passes a multiple of
     2 pi): mid time (s, from the first sample), frequency (Hz, 1 / the cycle's length), the response's
-    and the table's amplitude (mm; its acceleration's RMS x sqrt 2 / w^2)."""
+    and the table's amplitude (mm; its acceleration's RMS x sqrt 2 / w^2). In double precision whatever
+    the states' dtype: a float32 phase unwrapped over 1e6 rows keeps ~1e-3 rad of thousands of radians."""
+    q2, zdd = np.asarray(q2, np.float64), np.asarray(zdd, np.float64)
     # zero-padded to a fast FFT length: a record's length can be a large prime's multiple (994,878 rows =
     # 2 x 171 x 2909: ~1 s of CPU against 0.1 s); the padding touches only the last cycles, which
     # EDGE_CYCLES leaves out anyway
@@ -60,16 +62,18 @@ def cycle_envelope(q2: np.ndarray, zdd: np.ndarray, fs_hz: float) -> dict:
     return {"t_s": np.array(t), "frequency_hz": np.array(f), "response_mm": np.array(resp), "table_mm": np.array(table)}
 
 
-def sweep_envelope(rec) -> dict:
+def sweep_envelope(rec, sig=None) -> dict:
     """The recording's per-cycle envelope (cycle_envelope) from the chain's relative displacement and
     band-limited table acceleration (identify.chain), plus the sweep's direction ("up" | "down") and
-    rate (Hz/s) and the table amplitude (mm, median over the cycles)."""
+    rate (Hz/s) and the table amplitude (mm, median over the cycles). `sig`: the recording's chain states
+    when they are at hand (an identification's: the chain is not run twice on one record), else the
+    chain is run here."""
     if rec.layout != "base":
         raise IdentificationError(f"{rec.source}: a measured frequency response needs the base layout (table "
                                   "and mass accelerations)")
-    sig = reconstruct_states(rec, dtype=np.float64)
+    sig = reconstruct_states(rec, dtype=np.float64) if sig is None else sig
     rows = sig.valid
-    env = cycle_envelope(np.asarray(sig.q2[rows]), np.asarray(sig.input[rows]), rec.fs_hz)
+    env = cycle_envelope(sig.q2[rows], sig.input[rows], rec.fs_hz)
     env["t_s"] = env["t_s"] + rows.start / rec.fs_hz
     table = np.median(env["table_mm"])
     keep = (env["frequency_hz"] > 0) & (np.abs(env["table_mm"] - table) < STEADY_TABLE * table)

@@ -33,12 +33,12 @@ ENVELOPE_DIGITS = 6
 
 
 def side_by_side(models: dict, recordings: list, fit_percent: float | None = None, judged: str | None = None,
-                 names: list[str] | None = None) -> dict:
+                 names: list[str] | None = None, signals: list | None = None) -> dict:
     """`models`: {label: SparseModel} (the identified model; the explain report's baseline and fixed
     model); `recordings`: base-layout sweep recordings; `fit_percent`: the judged model's held-out
     time-domain fit (None: it failed its validation, so there is nothing to flag); `judged`: the label
     whose misses are flagged (default: the first); `names`: what to call each recording (default: its
-    source)."""
+    source); `signals`: each recording's chain states when already reconstructed (None: run the chain)."""
     judged = judged or next(iter(models))
     doc = {"status": "ok", "reason": None, "models": list(models), "judged": judged, "amplitudes": [],
            "jumps": [], "flagged": False, "flags": [], "skipped": []}
@@ -48,8 +48,9 @@ def side_by_side(models: dict, recordings: list, fit_percent: float | None = Non
     except ShakeidError as exc:
         return {**doc, "status": "not_applicable", "reason": str(exc)}
     envs = []
-    for rec, name in zip(recordings, names or [str(r.source) for r in recordings]):
-        env, why = _sweep(rec, name)
+    for rec, name, sig in zip(recordings, names or [str(r.source) for r in recordings],
+                              signals or [None] * len(recordings)):
+        env, why = _sweep(rec, name, sig)
         if env is None:
             doc["skipped"].append({"source": name, "reason": why})
         else:
@@ -66,10 +67,10 @@ def side_by_side(models: dict, recordings: list, fit_percent: float | None = Non
     return _finite(doc)
 
 
-def _sweep(rec, name: str):
+def _sweep(rec, name: str, sig=None):
     """(the recording's envelope, None) or (None, why it is not a sweep to compare with)."""
     try:
-        env = sweep_envelope(rec)
+        env = sweep_envelope(rec, sig)
     except ShakeidError as exc:
         return None, str(exc).replace(str(rec.source), name)
     f, t = env["frequency_hz"], env["t_s"]
@@ -165,13 +166,14 @@ def _finite(obj):
     return obj
 
 
-def for_identification(result: dict, model, recordings: list, names: list[str] | None = None) -> dict:
+def for_identification(result: dict, model, recordings: list, names: list[str] | None = None,
+                       signals: list | None = None) -> dict:
     """The side-by-side an identification's document carries (its "frf"): the model is judged (flagged)
     only when it passed its time-domain validation. Whatever goes wrong is recorded, never raised: the
     identification it rides on stands without it."""
     heldout = ((result.get("validation") or {}).get("heldout") or {}).get("q1_dot") or {}
     fit = heldout.get("fit_percent") if result.get("status") != "failed" else None
-    return _guarded(lambda: side_by_side({"model": model}, recordings, fit, names=names))
+    return _guarded(lambda: side_by_side({"model": model}, recordings, fit, names=names, signals=signals))
 
 
 def identification_document(ident, recordings: list, quality: dict | None = None,
@@ -179,9 +181,13 @@ def identification_document(ident, recordings: list, quality: dict | None = None
     """What an identification delivers (model.json, `shakeid identify --json`, the demo's report): the fitted
     SparseIdentifier's result, the data's quality verdict (identify.quality.check_identifiable's), and the
     predicted frequency response beside the measured sweeps. One sequence for the CLI, the demo and the
-    service's jobs."""
+    service's jobs. The sweep is read from the identification's own chain states when it fitted exactly
+    `recordings` in memory (the chain is the CLI's largest cost beside the fit: not run twice)."""
     result = {**ident.result(), **(quality or {})}
-    result["frf"] = for_identification(result, ident.model_, recordings, names)
+    own = (len(recordings) == 1 and getattr(ident, "recording_", None) is recordings[0]
+           and ident.sources_[0].in_core)
+    result["frf"] = for_identification(result, ident.model_, recordings, names,
+                                       [ident.states_] if own else None)
     return result
 
 

@@ -84,3 +84,35 @@ def test_what_cannot_be_compared_is_said_not_raised():
                                    "model": {"q1_dot": {"q2": -100.0, "u": 1.0}, "q2_dot": {"q1": 1.0}}})
     doc = for_identification({"status": "ok"}, force, [noise])
     assert doc["status"] == "not_applicable" and "base-excited" in doc["reason"]
+
+
+@pytest.mark.slow
+def test_an_identification_reads_its_sweep_from_its_own_chain(sweeps, monkeypatch):
+    """identification_document reads the sweep from the identification's chain states (float32), not from
+    a second chain over the record: the chain runs once, and the envelope and the judged jump are the
+    float64 chain's within float32's rounding (1e-5 of themselves; the jump within a tenth of its
+    uncertainty)."""
+    import identify.frf.measured as measured
+    from identify.frf.side_by_side import identification_document
+    from identify.identifier import SparseIdentifier
+
+    up = sweeps[0]
+    ident = SparseIdentifier().fit(up)
+    calls = []
+    real = measured.reconstruct_states
+    monkeypatch.setattr(measured, "reconstruct_states", lambda *a, **k: calls.append(a) or real(*a, **k))
+    own = identification_document(ident, [up])["frf"]
+    assert calls == []  # no second chain
+    fresh = for_identification(ident.result(), ident.model_, [up])
+    assert len(calls) == 1
+    assert own["status"] == fresh["status"] == "ok", (own, fresh)
+    a, b = own["amplitudes"][0], fresh["amplitudes"][0]
+    assert a["amplitude_mm"] == pytest.approx(b["amplitude_mm"], rel=1e-5)
+    ma, mb = a["measured"][0], b["measured"][0]
+    assert len(ma["response_mm"]) == len(mb["response_mm"])
+    assert np.allclose(ma["response_mm"], mb["response_mm"], rtol=1e-5)
+    assert np.allclose(ma["frequency_hz"], mb["frequency_hz"], rtol=1e-5)
+    (ja,), (jb,) = own["jumps"], fresh["jumps"]
+    assert ja["measured_hz"] is not None
+    assert abs(ja["measured_hz"] - jb["measured_hz"]) <= 0.1 * jb["uncertainty_hz"]
+    assert ja["predicted"]["model"]["agrees"] == jb["predicted"]["model"]["agrees"]
