@@ -23,9 +23,9 @@ import numpy as np
 from identify.errors import ShakeidError
 from identify.frf import frequency_response, natural_frequency_hz
 
-from .campaign import parse_plan
+from .campaign import parse_plan, plan_violation
 from .preflight import WARN_SHARE, RigResponse
-from .sweep import SweepRequest, limit_violation, predicted_verdict
+from .sweep import predicted_verdict
 
 #: amplitudes scanned for the onset and the largest amplitude, geometric, as shares of the stroke limit
 SCAN_SHARES = np.geomspace(0.02, 1.0, 7)
@@ -138,24 +138,37 @@ def _fit_to_preflight(response, limits, name, amplitudes, state, rate):
         plan = {"name": name, "amplitudes_mm": amps, "directions": ["up", "down"], "repeats": 1,
                 "rest_between_s": 5.0, "note": "proposed from the model's predicted folds (shakeid plan-campaign)",
                 "sweep": {"f_start_hz": f_lo, "f_end_hz": f_hi, "duration_s": round(duration, 1), "settle_s": 2.0}}
-        problem = None
-        for p in picked:
-            req = SweepRequest(f_lo, f_hi, plan["sweep"]["duration_s"], p["amplitude_mm"], 2.0)
-            problem = limit_violation(limits, req)
-            verdict = None if problem else predicted_verdict(response, req, suggest=False)
-            if verdict is not None:
-                p["preflight"] = verdict.record
-                problem = verdict.refusal or ("; ".join(verdict.warnings) or None)
-            if problem:
-                break
+        problem = _preflight(response, limits, plan, picked)
         if problem is None:
-            parse_plan(plan)  # the plan as the campaign reads it: refused here, not at the rig
             return plan, picked, notes
         notes.append(f"{amplitudes[-1]:.3g} mm stepped down: {problem}")
         amplitudes = amplitudes[:-1] + [amplitudes[-1] * STEP_DOWN]
         if amplitudes[-1] <= amplitudes[0]:
             break
     raise ShakeidError(f"no proposal passes the rig's limits and the preflight: {notes[-1] if notes else ''}")
+
+
+def _preflight(response, limits, plan: dict, picked: list[dict]) -> str | None:
+    """The first of the plan's sweeps (up and down: each direction has its own peaks, a softening rig's
+    larger on the way down) that breaks a PLC limit or that the preflight refuses or warns about, named; None
+    when all pass. Each picked amplitude keeps the prediction of its sweep that travels furthest."""
+    parsed = parse_plan(plan)  # the plan as the campaign reads it: refused here, not at the rig
+    problem = plan_violation(limits, parsed)
+    if problem:
+        return problem
+    sweeps = parsed.sweeps()
+    records: dict[float, dict] = {}
+    for s in sweeps:
+        verdict = predicted_verdict(response, s.request(), suggest=False)
+        problem = verdict.refusal or ("; ".join(verdict.warnings) or None)
+        if problem:
+            return f"{s.label(len(sweeps))}: {problem}"
+        best = records.get(s.amplitude_mm)
+        if best is None or verdict.record["travel_peak_mm"] > best["travel_peak_mm"]:
+            records[s.amplitude_mm] = verdict.record
+    for p in picked:
+        p["preflight"] = records[p["amplitude_mm"]]
+    return None
 
 
 def _band(picked: list[dict], limits) -> tuple[float, float]:
