@@ -3,9 +3,13 @@ the discrepancy suite (sim/scenarios.py): a gain error, a delay, a drifting bias
 nuisances: mains hum and an N-bit converter ranged to the record."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
+
+#: The fault and nuisance fields; their defaults are a healthy, ideal sensor. The hum's frequency and phase
+#: belong to hum_fraction.
+FAULT_FIELDS = ("gain", "delay_s", "bias_drift_ms2", "hum_fraction", "adc_bits")
 
 
 @dataclass
@@ -53,8 +57,8 @@ class Accelerometer:
     def faults(self) -> dict:
         """The fault and nuisance fields that differ from a healthy, ideal sensor (for a recording's truth);
         the hum's frequency and phase are listed with its fraction."""
-        healthy = {"gain": 1.0, "delay_s": 0.0, "bias_drift_ms2": 0.0, "hum_fraction": 0.0, "adc_bits": 0}
-        out = {k: getattr(self, k) for k, v in healthy.items() if getattr(self, k) != v}
+        healthy = {f.name: f.default for f in fields(self)}
+        out = {k: getattr(self, k) for k in FAULT_FIELDS if getattr(self, k) != healthy[k]}
         if self.hum_fraction:
             out.update(hum_hz=self.hum_hz, hum_phase_rad=self.hum_phase_rad)
         return out
