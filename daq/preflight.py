@@ -31,6 +31,7 @@ from identify.errors import ModelError
 from identify.model import SparseModel
 from identify.quality import clip_level
 from identify.simulate import equation_rows, simulate
+from protocol.plc import RIG_STATE_BOUND
 
 #: share of a limit (accelerometer range, end-stop travel) above which a predicted peak is warned about
 #: (the sweep runs; the warning is kept in its record): the margin for a model that is off by a few percent
@@ -43,8 +44,8 @@ PREDICTION_SAMPLES_PER_PERIOD = 16
 #: the lowest prediction rate (Hz): slow sweeps still resolve the rig's own resonance (a few Hz, its upper
 #: branch up to ~12 Hz on the Table 1 rig)
 MIN_PREDICTION_RATE_HZ = 256.0
-#: rig state bound of the prediction (m, m/s), as the rig simulator's: beyond it the model has run away
-RUNAWAY_BOUND = 10.0
+#: rig state bound of the prediction (m, m/s), the rig simulator's: beyond it the model has run away
+RUNAWAY_BOUND = RIG_STATE_BOUND
 #: the amplitude search of a refusal's suggestion stops within this share of the asked amplitude
 AMPLITUDE_RESOLUTION = 0.02
 

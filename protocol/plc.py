@@ -39,13 +39,18 @@ class Fault(enum.IntEnum):
     WATCHDOG = 6      # heartbeat stopped changing during a sweep
     INJECTED = 7      # drive fault injected for tests
     NOT_READY = 8     # START while not IDLE/DONE
-    SIMULATION = 9    # simulated rig only: its response left the simulable range (sim.plc.BOUND, or not finite)
+    SIMULATION = 9    # simulated rig only: its response left the simulable range (RIG_STATE_BOUND, or not finite)
 
 
 #: the shortest sweep, s: a sweep is at least one period at the lowest frequency the rig runs at (Limits.f_min_hz
 #: 0.2 Hz: 5 s would refuse short test sweeps; 1 s is 100 PLC cycles). Shorter durations were accepted and
 #: then read as 0 by the PLC's float32 setpoint (1e-300 s), which faulted the rig and needed a reset.
 MIN_SWEEP_DURATION_S = 1.0
+
+#: Bound on the rig state (m, m/s): far beyond any physical motion of the mass between its end stops. The
+#: simulated rig faults (Fault.SIMULATION) when its response leaves it; the DAQ's preflight says a model
+#: that leaves it ran away (daq.preflight.RUNAWAY_BOUND).
+RIG_STATE_BOUND = 10.0
 
 #: The sweep setpoints the PLC holds, in register / symbol order.
 SETPOINT_NAMES = ("f_start_hz", "f_end_hz", "duration_s", "amplitude_mm")

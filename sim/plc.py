@@ -18,15 +18,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from identify.simulate import simulate
-from protocol.plc import SETPOINT_NAMES, Command, Fault, Limits, State
+from protocol.plc import RIG_STATE_BOUND, SETPOINT_NAMES, Command, Fault, Limits, State
 from protocol.sweep import SineSweep, smoothstep
 
 from .rig import RigParameters
 from .sensors import Accelerometer
-
-
-#: Bound on the rig state (m, m/s): far beyond any physical motion of the mass between its end stops.
-BOUND = 10.0
 
 
 @dataclass
@@ -147,7 +143,7 @@ class RigPLC:
         zdd_fine = self._table(t_fine)[2]
         zdd = zdd_fine[2 * S::2 * S]
         res = simulate(self.physics, 1 / fs, self.x, inputs_fine=zdd_fine[:, None], substeps=S, n_samples=n + 1,
-                       bound=BOUND)
+                       bound=RIG_STATE_BOUND)
         states = res.states[1:res.n_valid]
         mass = self.physics.rhs(states, zdd[:len(states), None])[:, 0] + zdd[:len(states)]
         finite = np.isfinite(mass)
@@ -172,7 +168,7 @@ class RigPLC:
         if self.fault != Fault.SIMULATION:
             self.state, self.fault = State.FAULT, Fault.SIMULATION
             self.fault_message = (f"rig response left the simulable range at t = {t:.4f} s (|q| or |q'| above "
-                                  f"{BOUND:g} or not finite): table stopped, mass state reset to rest")
+                                  f"{RIG_STATE_BOUND:g} or not finite): table stopped, mass state reset to rest")
 
     # -- internals ----------------------------------------------------------------------------------
     def _start(self) -> None:
