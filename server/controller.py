@@ -45,7 +45,7 @@ from .catalog import Catalog, new_id
 from .ipc import Line, parse_address
 from .rig import RigBusy, RigService
 from .settings import Settings
-from .stoplistener import StopListener
+from .stoplistener import StopListener, open_listener
 
 #: why a sweep ended when its web server died (session ended or its process gone, whichever is seen first)
 WEB_SERVER_GONE = "the web server went away during the sweep; the rig controller stopped the table"
@@ -110,23 +110,11 @@ class RigController:
         tmp.chmod(0o600)
         os.replace(tmp, path)  # written last: a client that reads the key finds the socket listening
         threading.Thread(target=self._accept, name="controller-accept", daemon=True).start()
-        self._start_stop_listener()
+        self.stop_listener = open_listener(self.settings.stop_host, self.settings.stop_port, self.settings.tokens,
+                                           lambda: self.handle({"op": "estop"}))
         if self.parent_pid:
             threading.Thread(target=self._watch_parent, name="controller-parent", daemon=True).start()
         return self
-
-    def _start_stop_listener(self) -> None:
-        """The HTTP stop on its own port; a port that cannot be had is said, not fatal (the web server's
-        route stays, and /api/health then names no stop_url)."""
-        host, port = self.settings.stop_host, self.settings.stop_port
-        if not port:
-            return
-        try:
-            self.stop_listener = StopListener(host, port, self.settings.tokens,
-                                              lambda: self.handle({"op": "estop"})).start()
-        except OSError as exc:
-            print(f"shakeid controller: no stop listener on {host}:{port} ({exc}); the emergency stop is served "
-                  "by the web server's port only", flush=True)
 
     def stop(self, reason: str) -> None:
         self.stop_reason = reason

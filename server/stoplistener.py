@@ -171,3 +171,16 @@ class StopListener(http.server.ThreadingHTTPServer):
     def stop(self) -> None:
         self.shutdown()
         self.server_close()
+
+
+def open_listener(host: str, port: int, tokens: dict[str, str], estop) -> StopListener | None:
+    """The rig controller's stop listener on host:port, serving; None for port 0 (none) or a port that
+    cannot be had (said, not fatal: the web server's route stays, and /api/health then names no stop_url)."""
+    if not port:
+        return None
+    try:
+        return StopListener(host, port, tokens, estop).start()
+    except OSError as exc:
+        print(f"shakeid controller: no stop listener on {host}:{port} ({exc}); the emergency stop is served "
+              "by the web server's port only", flush=True)
+        return None
