@@ -55,6 +55,18 @@ class Services:
             raise HTTPException(404, f"no recording {rec_id}")
         return rec
 
+    def stop_origin(self, host_header: str | None) -> str | None:
+        """http://HOST:PORT of the rig controller's stop listener as the caller reaches it (the host it asked
+        this server by, the port the controller reported), or None when there is none (or no usable Host):
+        /api/health's stop_url and the dashboard's CSP (server/security.py)."""
+        port = self.link.stop_port if self.link is not None and self.link.attached.is_set() else None
+        if not port or not host_header:
+            return None
+        host = host_header.rsplit(":", 1)[0] if not host_header.endswith("]") else host_header
+        if not host or not all(c.isalnum() or c in ".-[]:" for c in host):
+            return None
+        return f"http://{host}:{port}"
+
     async def controller(self, op: str, **params):
         """One request to the rig controller, off the event loop; its refusals keep their status."""
         try:

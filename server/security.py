@@ -12,8 +12,6 @@ import hashlib
 
 from reports.html import STYLE
 
-from .routers.rig import stop_origin
-
 #: the reports' one inline style, allowed by its hash: a report the dashboard opens from memory (a blob:
 #: page, which keeps the dashboard's policy) keeps its layout, and no other inline style is allowed
 REPORT_STYLE = "'sha256-" + base64.b64encode(hashlib.sha256(STYLE.encode()).digest()).decode() + "'"
@@ -36,10 +34,10 @@ def _stop(scope: dict) -> str:
     """ ' http://HOST:PORT' of the stop listener as this request's host reaches it, or '' (none, or not a
     shakeid app: the middleware alone)."""
     svc = getattr(getattr(scope.get("app"), "state", None), "services", None)
-    if svc is None or svc.link is None:
+    if svc is None:
         return ""
     host = next((v.decode("latin-1") for k, v in scope.get("headers", []) if k == b"host"), None)
-    origin = stop_origin(svc, host)
+    origin = svc.stop_origin(host)
     return " " + origin if origin else ""
 
 

@@ -18,23 +18,11 @@ RIG_STATUS_MAX_AGE_S = 0.1
 router = APIRouter()
 
 
-def stop_origin(svc: Services, host_header: str | None) -> str | None:
-    """http://HOST:PORT of the rig controller's stop listener as the caller reaches it (the host it asked
-    this server by, the port the controller reported), or None when there is none (or no usable Host)."""
-    port = svc.link.stop_port if svc.link.attached.is_set() else None
-    if not port or not host_header:
-        return None
-    host = host_header.rsplit(":", 1)[0] if not host_header.endswith("]") else host_header
-    if not host or not all(c.isalnum() or c in ".-[]:" for c in host):
-        return None
-    return f"http://{host}:{port}"
-
-
 @router.get("/api/health", response_model=schemas.Health, tags=["service"])
 def health(request: Request, svc: Services = Depends(services)):
     """Liveness, without a token (for supervisors and compose health checks); stop_url: where the
     emergency stop is served apart from the viewers (the rig controller's stop listener), if anywhere."""
-    origin = stop_origin(svc, request.headers.get("host"))
+    origin = svc.stop_origin(request.headers.get("host"))
     return {"status": "ok", "version": software_version(), "rig_simulated": svc.settings.rig is None,
             "controller": "attached" if svc.link.attached.is_set() else "unreachable",
             "jobs_queued": svc.catalog.count("jobs", "state = 'queued'"),
