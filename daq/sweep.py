@@ -40,11 +40,15 @@ class SweepRequest:
     operator: str = ""
     note: str = ""
 
+    def sine(self) -> SineSweep:
+        """The table's motion this request asks for (ValueError for a sweep that is not one)."""
+        return SineSweep(self.f_start_hz, self.f_end_hz, self.duration_s, self.amplitude_mm)
+
 
 def limit_violation(limits: Limits, req: SweepRequest) -> str | None:
     """The message naming the first violated limit (the PLC's own check), or None for a safe sweep."""
     try:
-        sweep = SineSweep(req.f_start_hz, req.f_end_hz, req.duration_s, req.amplitude_mm)
+        sweep = req.sine()
     except ValueError as exc:
         return str(exc)
     fault, message = limits.check(sweep)
@@ -55,7 +59,7 @@ def predicted_verdict(response: RigResponse, req: SweepRequest, suggest: bool = 
     """The preflight's prediction of the sweep from the rig's model (daq/preflight.py): refused when the
     mass accelerometer would clip or the mass hit the end stops, warned near either. One path for the
     service's door, campaigns and `shakeid sweep/campaign --config`."""
-    return assess(response, SineSweep(req.f_start_hz, req.f_end_hz, req.duration_s, req.amplitude_mm), suggest)
+    return assess(response, req.sine(), suggest)
 
 
 def _ended_by(exc: BaseException) -> tuple[str, str]:
