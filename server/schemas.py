@@ -9,6 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, Stri
 from daq.campaign import MAX_SWEEPS, NAME_PATTERN
 from identify import params
 
+from .catalog import ID_PATTERN
 from .uploads import FILENAME_WORDS
 
 SweepState = Literal["queued", "running", "completed", "aborted", "failed"]
@@ -128,7 +129,7 @@ IdentifyIn = create_model("IdentifyIn", __base__=ReadOptions, __doc__="The optio
 class JointIdentifyIn(IdentifyIn):
     """Several recordings fitted as one model (`shakeid identify A.h5 B.h5 ...`, identify.joint); the
     options apply to every recording."""
-    recording_ids: list[Annotated[str, Field(pattern=r"^[0-9a-f]{12}$")]] = Field(
+    recording_ids: list[Annotated[str, Field(pattern=ID_PATTERN)]] = Field(
         min_length=2, max_length=500, description="the recordings, in the order the result lists them")
 
 

@@ -20,6 +20,7 @@ from identify.model import SparseModel
 from reports.frf_overlay import OVERLAY_FIGURE as OVERLAY  # drawn by the worker, served from its report
 
 from .. import schemas
+from ..catalog import ID_PATTERN
 from ..deps import ERRORS, Id, Services, services, viewer
 from ..preflight import rig_limits, rig_response
 from ..worker import FRF_FILE
@@ -76,7 +77,7 @@ def _campaign_file(svc: Services, campaign_id: str, name: str) -> FsPath:
 class ProposalIn(schemas.Strict):
     """What to propose a campaign from: a recording's latest identified model (default: the rig's latest,
     as the preflight predicts with, or its nominal parameters)."""
-    recording_id: str | None = Field(None, pattern=r"^[0-9a-f]{12}$", description="whose model (default: the rig's latest)")
+    recording_id: str | None = Field(None, pattern=ID_PATTERN, description="whose model (default: the rig's latest)")
     name: str = Field(PROPOSAL_NAME, pattern=NAME_PATTERN, description="the proposed campaign's name")
     jump_amplitudes: int = Field(JUMP_AMPLITUDES, ge=JUMP_AMPLITUDES_RANGE[0], le=JUMP_AMPLITUDES_RANGE[1],
                                  description="amplitudes with a predicted jump (one more below its onset)")
