@@ -64,9 +64,15 @@ def test_the_documented_register_map_is_the_code_s():
     assert documented == code
 
 
-def test_every_ads_symbol_is_documented_once_in_the_table():
+def test_every_ads_symbol_is_documented_once_with_its_type():
     names = [s.name for s in ads.SYMBOLS]
     assert len(names) == len(set(names)) == 18
     text = DOC.read_text()
     assert all(f"`{n}`" in text for n in names), [n for n in names if f"`{n}`" not in text]
     assert {s.field for s in ads.LIMIT_SYMBOLS} == {f.name for f in fields(Limits)}
+    # and with its type: docs/rig-protocols.md lists the symbols in groups, each followed by "(REAL" or "(UINT"
+    section = text.split("## ADS")[1].split("\n## ")[0]
+    documented = {}
+    for group in re.finditer(r"((?:`MAIN\.\w+`[,\s]*)+)\((REAL|UINT)\b", section):
+        documented |= dict.fromkeys(re.findall(r"`(MAIN\.\w+)`", group[1]), group[2])
+    assert documented == {s.name: s.type for s in ads.SYMBOLS}
