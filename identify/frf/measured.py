@@ -35,12 +35,13 @@ STEADY_TABLE = 0.1
 EDGE_CYCLES = 3
 
 
-def cycle_envelope(q2: np.ndarray, zdd: np.ndarray, fs_hz: float) -> dict:
-    """Per table cycle (boundaries where the table acceleration's analytic phase passes a multiple of
-    2 pi): mid time (s, from the first sample), frequency (Hz, 1 / the cycle's length), the response's
-    and the table's amplitude (mm; its acceleration's RMS x sqrt 2 / w^2). In double precision whatever
-    the states' dtype: a float32 phase unwrapped over 1e6 rows keeps ~1e-3 rad of thousands of radians."""
-    q2, zdd = np.asarray(q2, np.float64), np.asarray(zdd, np.float64)
+def table_cycles(zdd: np.ndarray, fs_hz: float) -> dict:
+    """The table's cycles (boundaries where its acceleration's analytic phase passes a multiple of 2 pi):
+    "edges" (rows), and per cycle its mid time (s, from the first sample), frequency (Hz, 1 / the cycle's
+    length) and the table's amplitude (mm; its acceleration's RMS x sqrt 2 / w^2). In double precision
+    whatever the states' dtype: a float32 phase unwrapped over 1e6 rows keeps ~1e-3 rad of thousands of
+    radians. A model's run over the same table acceleration has the same cycles (model_sweep_jump)."""
+    zdd = np.asarray(zdd, np.float64)
     # zero-padded to a fast FFT length: a record's length can be a large prime's multiple (994,878 rows =
     # 2 x 171 x 2909: ~1 s of CPU against 0.1 s); the padding touches only the last cycles, which
     # EDGE_CYCLES leaves out anyway
@@ -50,16 +51,23 @@ def cycle_envelope(q2: np.ndarray, zdd: np.ndarray, fs_hz: float) -> dict:
     edges = edges[EDGE_CYCLES:-EDGE_CYCLES] if edges.size > 2 * EDGE_CYCLES + 2 else edges
     if edges.size < 3:
         raise IdentificationError("the recording holds fewer than 3 cycles of the table: no sweep to read")
-    t, f, resp, table = [], [], [], []
-    for a, b in zip(edges[:-1], edges[1:]):
-        freq = fs_hz * (phase[b] - phase[a]) / (2 * np.pi) / (b - a)
-        t.append(0.5 * (a + b) / fs_hz)
-        f.append(freq)
-        resp.append(0.5 * np.ptp(q2[a:b]) * 1e3)
-        # the table's amplitude from the cycle's RMS (x sqrt 2: it is a sine), not its peak-to-peak: noise
-        # raises a peak-to-peak by ~2-3 noise std (0.2-0.5 % at 0.5 % noise), an RMS only by its variance
-        table.append(np.sqrt(2.0 * np.mean(np.square(zdd[a:b]))) / (2 * np.pi * freq) ** 2 * 1e3)
-    return {"t_s": np.array(t), "frequency_hz": np.array(f), "response_mm": np.array(resp), "table_mm": np.array(table)}
+    a, b = edges[:-1], edges[1:]
+    freq = fs_hz * (phase[b] - phase[a]) / (2 * np.pi) / (b - a)
+    # the table's amplitude from the cycle's RMS (x sqrt 2: it is a sine), not its peak-to-peak: noise
+    # raises a peak-to-peak by ~2-3 noise std (0.2-0.5 % at 0.5 % noise), an RMS only by its variance
+    mean_square = np.add.reduceat(np.square(zdd[a[0]:b[-1]]), a - a[0]) / (b - a)
+    return {"edges": edges, "t_s": 0.5 * (a + b) / fs_hz, "frequency_hz": freq,
+            "table_mm": np.sqrt(2.0 * mean_square) / (2 * np.pi * freq) ** 2 * 1e3}
+
+
+def cycle_envelope(q2: np.ndarray, zdd: np.ndarray | None, fs_hz: float, cycles: dict | None = None) -> dict:
+    """Per table cycle (table_cycles of zdd, or `cycles` already read from it): mid time (s), frequency
+    (Hz), the response's amplitude (mm, half its peak-to-peak) and the table's (mm)."""
+    c = table_cycles(zdd, fs_hz) if cycles is None else cycles
+    a = c["edges"][:-1]
+    q2 = np.asarray(q2[a[0]:c["edges"][-1]], np.float64)
+    resp = 0.5 * (np.maximum.reduceat(q2, a - a[0]) - np.minimum.reduceat(q2, a - a[0])) * 1e3
+    return {"t_s": c["t_s"], "frequency_hz": c["frequency_hz"], "response_mm": resp, "table_mm": c["table_mm"]}
 
 
 def sweep_envelope(rec, sig=None) -> dict:
@@ -73,14 +81,15 @@ def sweep_envelope(rec, sig=None) -> dict:
                                   "and mass accelerations)")
     sig = reconstruct_states(rec, dtype=np.float64) if sig is None else sig
     rows = sig.valid
-    env = cycle_envelope(sig.q2[rows], sig.input[rows], rec.fs_hz)
+    cycles = table_cycles(sig.input[rows], rec.fs_hz)
+    env = cycle_envelope(sig.q2[rows], None, rec.fs_hz, cycles)
     env["t_s"] = env["t_s"] + rows.start / rec.fs_hz
     table = np.median(env["table_mm"])
     keep = (env["frequency_hz"] > 0) & (np.abs(env["table_mm"] - table) < STEADY_TABLE * table)
     env = {k: v[keep] for k, v in env.items()}
     rate = float(np.polyfit(env["t_s"], env["frequency_hz"], 1)[0])
     env.update(direction="up" if rate > 0 else "down", rate_hz_per_s=rate,
-               amplitude_mm=float(np.median(env["table_mm"])), signals=sig)
+               amplitude_mm=float(np.median(env["table_mm"])), signals=sig, cycles=cycles)
     return env
 
 
@@ -122,7 +131,7 @@ def model_sweep_jump(model, env: dict) -> dict | None:
     res = simulate(model, 1.0 / sig.fs_hz, x0, u[:, None], state_scale=scale)
     if res.diverged:
         return None
-    sim_env = cycle_envelope(res.states[:, 1], u, sig.fs_hz)
+    sim_env = cycle_envelope(res.states[:, 1], u, sig.fs_hz, env["cycles"])  # the same table cycles
     sim_env["direction"] = env["direction"]
     jump = measured_jump(sim_env)
     if jump is not None:
