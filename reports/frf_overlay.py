@@ -58,10 +58,9 @@ def _panel(ax, entry: dict, doc: dict) -> None:
         for f in r["folds"]:
             ax.plot(f["frequency_hz"], f["amplitude_mm"], "o", mfc="none", mec=colour, ms=7)
         ax.plot([], [], "-", color=colour, label=f"predicted: {label}")
-        for j in doc["jumps"]:
+        for j in _jumps(entry, doc):
             p = j["predicted"][label]
-            if abs(j["amplitude_mm"] - entry["amplitude_mm"]) < 0.05 * entry["amplitude_mm"] and p["fold_hz"] \
-                    and p["bias_hz"] is not None:
+            if p["fold_hz"] and p["bias_hz"] is not None:
                 ax.axvspan(*sorted((p["fold_hz"], p["fold_hz"] + p["bias_hz"])), color=colour, alpha=0.12, lw=0)
     limit = (next(iter(entry["predicted"].values())).get("validity") or {}).get("damping_negative_above_mm")
     if limit and limit < 1.5 * max(max(b["amplitude_mm"]) for r in entry["predicted"].values() for b in r["branches"]):
@@ -84,6 +83,12 @@ def _panel(ax, entry: dict, doc: dict) -> None:
     ax.set_xlabel("excitation frequency f, Hz")
     ax.set_ylabel("response (half peak-to-peak q2), mm")
     ax.grid(alpha=0.3)
+
+
+def _jumps(entry: dict, doc: dict) -> list[dict]:
+    """The judged jumps of the panel's own sweeps (side_by_side grouped them: its entry lists them)."""
+    own = {(m["source"], m["direction"], m["amplitude_mm"]) for m in entry["measured"]}
+    return [j for j in doc["jumps"] if (j["source"], j["direction"], j["amplitude_mm"]) in own]
 
 
 def _sorted(f, a):
