@@ -13,14 +13,20 @@ QUOTED = re.compile(r"`([A-Z][A-Z0-9_]+)` \(= ([^)]+)\)")
 def _constants() -> dict[str, list]:
     """Module-level NAME = literal assignments in the packages, by name (a name may be in several modules)."""
     found: dict[str, list] = {}
+    aliases: list[tuple[str, str]] = []  # NAME = OTHER_NAME (e.g. RUNAWAY_BOUND = RIG_STATE_BOUND)
     for package in ("identify", "protocol", "sim", "daq", "reports", "server", "shakeid"):
         for path in (ROOT / package).rglob("*.py"):
             for node in ast.parse(path.read_text()).body:
                 if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
+                    if isinstance(node.value, ast.Name):
+                        aliases.append((node.targets[0].id, node.value.id))
+                        continue
                     try:
                         found.setdefault(node.targets[0].id, []).append(ast.literal_eval(node.value))
                     except ValueError:
                         pass
+    for name, other in aliases:
+        found.setdefault(name, []).extend(found.get(other, []))
     return found
 
 
