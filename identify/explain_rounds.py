@@ -8,8 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import admissibility
-from .candidates import all_candidates
-from .effects import CATALOG, Candidate
+from .effects import CATALOG, Candidate, Effect
 from .shooting import bootstrap_prob, trimmed_total
 from .structure import Fitter, Structure
 
@@ -34,6 +33,18 @@ def closed_shares(gap_before: float, gap_after: float) -> dict:
     1 - (1 - gap_closed)^2 (what min_gap_closed is compared with)."""
     r = gap_after / gap_before if gap_before > 0 else 1.0
     return {"gap_closed": float(1 - r), "gap_share_closed": float(1 - r * r)}
+
+
+def all_candidates(fitter: Fitter, cur: Structure, catalog: dict) -> list[Candidate]:
+    """Every effect of `catalog` ({name: Effect, or None for the registered one}) fitted on top of `cur`,
+    those that apply (each effect proposes its own: identify.effects)."""
+    out = []
+    for name, effect in catalog.items():
+        effect: Effect = effect if effect is not None else CATALOG[name]
+        c = effect.propose(fitter, cur)
+        if c is not None:
+            out.append(c)
+    return out
 
 
 def coefficients(c: Candidate) -> dict:
@@ -102,11 +113,8 @@ class Rounds:
         conf = (1 - best.p_value) * min(p_runner, best.p_beats_current)
         closed = best.gap_share_closed
         sur = list(best.same_as) + [c.name for c in others if c.gap_share_closed >= SURROGATE_SHARE * closed]
-        st = best.structure
-        coef = {t: st.coefficients.get(t, 0.0) for t in best.terms}
-        coef.update(best.extra)
         return {"name": best.name, "kind": best.kind, "terms": best.terms,
-                "coefficients": coef, "confidence": float(conf),
+                "coefficients": coefficients(best), "confidence": float(conf),
                 "gap_after": self._gap(best.err), **closed_shares(self._gap(err), self._gap(best.err)),
                 "surrogate_for": sur, "p_value": best.p_value, "p_beats_runner_up": float(p_runner),
                 "p_beats_previous": best.p_beats_current, "runner_up": runner.name if runner else None}

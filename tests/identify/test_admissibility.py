@@ -58,7 +58,7 @@ def test_wald_test_of_a_one_sided_stop_counts_its_free_coefficients():
     statistic is chi-square with 2 degrees of freedom, not 4 (a p-value 4-8x too large near 1e-3)."""
     from scipy import stats
 
-    from identify.candidates import wald_p
+    from identify.effects import wald_p
     from identify.structure import Fit
 
     terms = ("q1", "q2") + STOP
