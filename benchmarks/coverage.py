@@ -6,8 +6,8 @@ Each case: a rig (the paper's Table 1 model, or the design rig with a random pre
 a 1-20 Hz sweep of random amplitude, accelerometer noise log-uniform 0.2-5 % (`--noise`) on both channels. Every
 kept q1_dot term is a trial (a spurious term's truth is 0); prints the share of trials whose truth lies
 within 1, 2 and 3 standard errors (Gaussian: 68 / 95 / 99.7 %), per term and overall, for the
-identifier as shipped (chain bias in closed form, identify.corrected; standard errors the larger of the
-block sandwich and the noise's linearised share, identify.noise_spread) and, side by side, for the block
+identifier as shipped (chain bias in closed form, identify.chain.bias_correction; standard errors the larger of the
+block sandwich and the noise's linearised share, identify.trust.noise_spread) and, side by side, for the block
 sandwich alone (no chain-bias correction), and the training-blocks-only sandwich the identifier reported
 before (issue 11).
 """
@@ -18,9 +18,9 @@ import time
 
 import numpy as np
 
-from identify.gram import sandwich_covariance
+from identify.regression.gram import sandwich_covariance
 from identify.identifier import SparseIdentifier, holdout_blocks
-from identify.optimizers.base import least_squares
+from identify.regression.optimizers.base import least_squares
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep

@@ -42,7 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from identify.explain import DiscrepancyAnalysis  # noqa: E402
+from identify.explain.workflow import DiscrepancyAnalysis  # noqa: E402
 from sim.scenarios import (MEASUREMENT, OUT_OF_CATALOG, PHYSICS, SURROGATE_GROUPS, make_scenario,  # noqa: E402
                            result_effects, score, spurious_measurement_names)
 

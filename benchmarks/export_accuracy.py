@@ -28,7 +28,7 @@ from fmpy import extract, read_model_description, simulate_fmu  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
 from identify.export import export_model  # noqa: E402
-from identify.simulate import choose_substeps, simulate  # noqa: E402
+from identify.simulation.simulate import choose_substeps, simulate  # noqa: E402
 from sim.rig import RigParameters  # noqa: E402
 
 DT_S, N, F_HZ = 1e-3, 5001, 5.0

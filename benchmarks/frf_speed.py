@@ -7,7 +7,7 @@ machine's load average (wall time on a shared machine is the load's, CPU time is
 import os
 import time
 
-from identify.frf import frequency_response
+from identify import frequency_response
 from sim.rig import RigParameters
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 sys.path.append(str(Path(__file__).resolve().parents[1]))  # appended: a PYTHONPATH checkout comes first
 
-from identify.band import excited_band  # noqa: E402
+from identify.chain.band import excited_band  # noqa: E402
 from identify.errors import IdentificationError  # noqa: E402
 from identify.identifier import SparseIdentifier  # noqa: E402
 from sim.rig import RigParameters  # noqa: E402

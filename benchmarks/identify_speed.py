@@ -30,7 +30,7 @@ For each record length n, timed in rounds (anchor, then each call once per round
 Targets (issue 30): fit <= 1.5x the anchor, fit with validation <= 2.5x, idle and with one busy process;
 the CLI's user CPU with default threads within 1.3x of one thread under load. Each figure is given as
 wall time and as the process's CPU time. Every timed call starts with shakeid's twiddle cache empty
-(identify.spectral), so a repeat of the same record pays what a user's first call on a new recording
+(identify.chain.spectral), so a repeat of the same record pays what a user's first call on a new recording
 does; scipy's own FFT plan cache, which cannot be cleared, is warm for the anchor and the calls alike.
 
 Then free-run simulation of a 60 s sweep against scipy solve_ivp (RK45, rtol 1e-8) at equal accuracy:
@@ -55,14 +55,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import speedkit  # noqa: E402
 
-from identify.chain import reconstruct_states  # noqa: E402
+from identify.chain.states import reconstruct_states  # noqa: E402
 from identify.identifier import SparseIdentifier  # noqa: E402
-from identify.library import Library  # noqa: E402
+from identify.regression.library import Library  # noqa: E402
 from identify.model import SparseModel  # noqa: E402
-from identify.simulate import simulate  # noqa: E402
-from identify.spectral import _cached_twiddles  # noqa: E402
+from identify.simulation.simulate import simulate  # noqa: E402
+from identify.chain.spectral import _cached_twiddles  # noqa: E402
 from identify.threads import one_blas_thread  # noqa: E402
-from identify.uncertainty import N_PLACEMENTS  # noqa: E402
+from identify.trust.uncertainty import N_PLACEMENTS  # noqa: E402
 from sim.rig import RigParameters  # noqa: E402
 from protocol.sweep import SineSweep  # noqa: E402
 from sim.synth import run_sweep  # noqa: E402
@@ -113,12 +113,12 @@ def anchor(rec, lib, X, U) -> dict:
 @one_blas_thread  # parts timed alone run as they run inside the fit (identify.threads)
 def chain_transforms(rec, sig) -> dict:
     """The chain's transforms alone, each (wall, cpu) seconds: 2 forward (qdd and the input, each without
-    its mean: identify.chain.by_mean_alone) and 4 inverse (q1, q2, q1_dot, input) rffts, zero-padded as
-    the chain pads (identify.chain.padded_length), limited to the band's bins and in the precision the
-    chain does them (identify.spectral, identify.chain.STATE_DTYPE), and the two Welch spectra of the band
-    estimate (16384-sample segments, transformed in single precision as identify.band.excited_band does)."""
-    from identify.chain import STATE_DTYPE, band_gain, padded_length
-    from identify.spectral import lowband_irfft, lowband_rfft, welch_psd
+    its mean: identify.chain.states.by_mean_alone) and 4 inverse (q1, q2, q1_dot, input) rffts, zero-padded as
+    the chain pads (identify.chain.states.padded_length), limited to the band's bins and in the precision the
+    chain does them (identify.chain.spectral, identify.chain.states.STATE_DTYPE), and the two Welch spectra of the band
+    estimate (16384-sample segments, transformed in single precision as identify.chain.band.excited_band does)."""
+    from identify.chain.states import STATE_DTYPE, band_gain, padded_length
+    from identify.chain.spectral import lowband_irfft, lowband_rfft, welch_psd
 
     n = rec.n_samples
     m = padded_length(n, rec.fs_hz, sig.band_hz)
@@ -171,12 +171,12 @@ def validation_parts(n: int, repeat: int, seed: int) -> dict:
     """What the free-run validation of the fitted (training-only) model spends, CPU seconds, best of
     `repeat`: validate() as a whole, and its parts done alone: the input on the RK4 half-step grid (from
     the chain's spectrum, StateSignals.input_fine; what a run in steps of `stride` samples reads), the
-    compiled RK4 run on it (with the steps validate takes, identify.simulate.choose_step; and in steps of
+    compiled RK4 run on it (with the steps validate takes, identify.simulation.simulate.choose_step; and in steps of
     one sample, for comparison), the simulated displacement through the chain's band with its two
     derivatives (one forward and three inverse single-precision transforms, as validate does them), and
     the fit metrics of the seven pairs (validation.heldout_and_all_metrics)."""
-    from identify.simulate import choose_step
-    from identify.validation import _runs, _runs_of, fit_metrics, heldout_and_all_metrics, validate
+    from identify.simulation.simulate import choose_step
+    from identify.simulation.validation import _runs, _runs_of, fit_metrics, heldout_and_all_metrics, validate
 
     rec, _ = sweep_recording(n, seed)
     ident = SparseIdentifier(validate=False, bias_replicates=0, placements=0).fit(rec)
@@ -210,18 +210,18 @@ def validation_parts(n: int, repeat: int, seed: int) -> dict:
 
 @one_blas_thread  # parts timed alone run as they run inside the fit (identify.threads)
 def uncertainty_parts(n: int, repeat: int, seed: int) -> dict:
-    """What the uncertainty step (identify.uncertainty.assess, as SparseIdentifier runs it) spends on the
+    """What the uncertainty step (identify.trust.uncertainty.assess, as SparseIdentifier runs it) spends on the
     default fit, CPU seconds, best of `repeat`, its parts done alone: the all-rows refits with their
     block-robust covariances, the noise floors (read from the band search's Welch spectra, whose cost is
     the chain's: the figure is the reading alone), the closed-form chain bias as a whole
     (analytic_chain_bias: floors, corrected sums and the noise's share of the variance), the noise's
-    share alone (identify.noise_spread), and the inclusion probabilities (24 held-out placements: ADMM
+    share alone (identify.trust.noise_spread), and the inclusion probabilities (24 held-out placements: ADMM
     paths and the selection rule) with, of them, the ADMM paths alone."""
-    from identify import uncertainty as unc
-    from identify.chain_noise import BandLimitedNoise
-    from identify.corrected import term_exponents
+    from identify.trust import uncertainty as unc
+    from identify.noise.chain_noise import BandLimitedNoise
+    from identify.chain.bias_correction import term_exponents
     from identify.identifier import effective_samples, holdout_blocks
-    from identify.noise_spread import noise_variance
+    from identify.trust.noise_spread import noise_variance
 
     rec, _ = sweep_recording(n, seed)
     ident = SparseIdentifier(validate=False, bias_replicates=0, placements=0).fit(rec)
@@ -259,7 +259,7 @@ def padding_lever(n: int, repeat: int, seed: int) -> dict:
     """What the chain's zero padding costs: the chain as it is (PAD_PERIODS periods of f_lo, at most the
     record's length) against the previous rule (always the record's length, 2n in all), CPU time and how
     far the states move (max |difference| / peak on valid rows)."""
-    import identify.chain as chain
+    import identify.chain.states as chain
 
     rec, _ = sweep_recording(n, seed)
     t_cut, cut = best_of(lambda: reconstruct_states(rec), repeat)

@@ -16,7 +16,7 @@ import dataclasses
 
 import numpy as np
 
-from identify.identifier import SparseIdentifier
+from identify import SparseIdentifier
 from identify.joint import CHANGE_FLOOR, CHANGE_RATIO, Z_CHANGE
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer

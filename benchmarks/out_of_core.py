@@ -12,7 +12,7 @@ Written in the DAQ's HDF5 layout (/entry/data/{time, table_acc, mass_acc}, float
 status complete). Each figure is one fresh process (`shakeid identify FILE --json`, via shakeid.cli.main,
 stdout discarded, imports done before the clock starts), so its peak RSS (VmHWM) is that run's alone:
 
-- in core: the default identification (chain bias in closed form, identify.corrected);
+- in core: the default identification (chain bias in closed form, identify.chain.bias_correction);
 - out of core: --chunked (2^20-sample chunks), one process: the same fit sequence (identify.fitting),
   the same closed-form chain bias and standard errors;
 - read: h5py reading both channels of the file in 2^20-row blocks, nothing else.

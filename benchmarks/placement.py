@@ -14,7 +14,7 @@ import argparse
 
 import numpy as np
 
-from identify.identifier import SparseIdentifier
+from identify import SparseIdentifier
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep

@@ -132,7 +132,7 @@ def main(argv=None) -> int:
             subprocess.run([SHAKEID, "identify", str(path), "--json"], capture_output=True, check=True)
             cli = time.perf_counter() - t0
             from daq.recorder import read_h5_recording
-            from identify.identifier import SparseIdentifier
+            from identify import SparseIdentifier
 
             t0 = time.perf_counter()
             SparseIdentifier().fit(read_h5_recording(path))

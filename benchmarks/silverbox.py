@@ -6,8 +6,8 @@ Scoring as in the data set's README: free-run simulation from each test set's in
 only set the initial state (here: least-squares fit of (y', y) at the test set's start on those 50
 samples); score 1000 * RMSE(y[50:], y_sim[50:]) in mV. Without --json a table with the published figures
 is printed. Variants run side by side: the default identification; a budget of 7 terms chosen by
-equation error (backward elimination) then refit on the free-run error (identify.refine); the same
-budget chosen by free-run error on the estimation data (identify.budget); the same with the winner refit on
+equation error (backward elimination) then refit on the free-run error (identify.simulation.refine); the same
+budget chosen by free-run error on the estimation data (identify.selection.budget); the same with the winner refit on
 all estimation rows (budget_refit="all"); the default with the free-run refit. Nothing but the estimation
 range is used to choose terms or fit coefficients.
 
@@ -32,8 +32,8 @@ from scipy.optimize import least_squares
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from identify.identifier import SparseIdentifier  # noqa: E402
-from identify.recording import read_recording  # noqa: E402
-from identify.simulate import fine_grid_input, simulate  # noqa: E402
+from identify.data.recording import read_recording  # noqa: E402
+from identify.simulation.simulate import fine_grid_input, simulate  # noqa: E402
 
 FS_HZ = 1e7 / 2**14
 ESTIMATION = (40650, 105712)

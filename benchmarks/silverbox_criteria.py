@@ -6,9 +6,9 @@
     python benchmarks/silverbox_criteria.py --part output-error  # the budget on the output's error alone
     python benchmarks/silverbox_criteria.py --part second-record  # the distribution's second record
 
-The free-run budget (identify.budget) keeps {1, q1, q2, q2^2, q2^3, u} + q1^3; + q1*q2^2 instead scores
+The free-run budget (identify.selection.budget) keeps {1, q1, q2, q2^2, q2^3, u} + q1^3; + q1*q2^2 instead scores
 better on the arrowhead test set, which extrapolates beyond the estimation amplitudes. Here each rival is
-refit on its free-run error (identify.refine) over estimation rows only and scored by several
+refit on its free-run error (identify.simulation.refine) over estimation rows only and scored by several
 estimation-only criteria (free-run error = sum over q2, q1 of MSE / variance, FreeRunError) and, for
 the record only, on the test sets (benchmarks/silverbox.py's score, mV). Nothing from the test ranges
 enters any fit or criterion. One JSON line per result. Figures: docs/identification.md (issue 11).
@@ -27,14 +27,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import silverbox as bench  # noqa: E402
-from identify.budget import choose_budget  # noqa: E402
-from identify.gram import BlockGram  # noqa: E402
+from identify.selection.budget import choose_budget  # noqa: E402
+from identify.regression.gram import BlockGram  # noqa: E402
 from identify.identifier import SparseIdentifier, holdout_blocks  # noqa: E402
 from identify.model import SparseModel  # noqa: E402
-from identify.optimizers.base import least_squares  # noqa: E402
-from identify.recording import read_recording  # noqa: E402
-from identify.refine import FreeRunError, refine_free_run  # noqa: E402
-from identify.simulate import simulate  # noqa: E402
+from identify.regression.optimizers.base import least_squares  # noqa: E402
+from identify.data.recording import read_recording  # noqa: E402
+from identify.simulation.refine import FreeRunError, refine_free_run  # noqa: E402
+from identify.simulation.simulate import simulate  # noqa: E402
 
 CORE = ["1", "q1", "q2", "q2^3", "u"]
 SETS = {"chosen": CORE + ["q2^2", "q1^3"], "hand-picked": CORE + ["q2^2", "q1*q2^2"],
@@ -159,9 +159,9 @@ def part_second_record(st: Setup, emit) -> None:
     """The distribution's second record (data/silverbox/Schroeder80mV.mat, higher output peaks, no test set
     in it) in two roles: ranking the budget's 8 refit candidates (each refit on the estimation range's fit
     rows, as the budget refits them) by their free-run error on it, and as further estimation data (the
-    rivals refit on the pooled free-run error of both records' fit rows, identify.refine)."""
-    from identify.chain import reconstruct_states
-    from identify.refine import free_run_error
+    rivals refit on the pooled free-run error of both records' fit rows, identify.simulation.refine)."""
+    from identify.chain.states import reconstruct_states
+    from identify.simulation.refine import free_run_error
 
     second = read_recording(bench.SECOND_RECORD, "force", "V1", "V2", fs_hz=bench.FS_HZ)
     sig2 = reconstruct_states(second, st.sig.band_hz)

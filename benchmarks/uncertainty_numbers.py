@@ -32,8 +32,8 @@ KEYS = ("coef", "se", "bias", "noise_share", "p_in")
 
 
 def dump(path: str) -> None:
-    import identify.uncertainty as unc
-    from identify.identifier import SparseIdentifier
+    import identify.trust.uncertainty as unc
+    from identify import SparseIdentifier
     from identify_speed import sweep_recording
     from sim.rig import RigParameters
     from sim.sensors import Accelerometer

@@ -1,5 +1,5 @@
 """The DAQ's HDF5 recordings (daq.recorder) as a chunk source for out-of-core identification
-(identify.chunked, identify.out_of_core): rows are read on demand, never the whole file.
+(identify.chain.chunked, identify.out_of_core): rows are read on demand, never the whole file.
 
 The source is picklable (path, channels, row range): a Dask worker that unpickles it opens the file
 itself, so every worker must see the file at the same path (as `shakeid batch`). The open file handle

@@ -17,7 +17,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from identify.recording import Recording
+from identify.data.recording import Recording
 
 #: Rows written at a time.
 BLOCK_ROWS = 1 << 20

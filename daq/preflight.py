@@ -1,7 +1,7 @@
 """Preflight that predicts: the mass acceleration and relative travel a sweep will cause, from the rig's
 model, before the table moves (issue 31 item 5).
 
-The sweep's table motion (the sweep's own analytic z'') drives the rig model (identify.simulate's RK4 kernel,
+The sweep's table motion (the sweep's own analytic z'') drives the rig model (identify.simulation.simulate's RK4 kernel,
 the rig's smooth model: q1 = q', q2 = q = x - z) at PREDICTION_SAMPLES_PER_PERIOD samples per period of the
 sweep's top frequency, one RK4 step per sample; peaks are refined by a parabola through the three samples
 around the largest. Against the same model run as the rig simulator runs it (2048 Hz, RK4 steps of
@@ -29,8 +29,8 @@ import numpy as np
 
 from identify.errors import ModelError
 from identify.model import SparseModel
-from identify.quality import clip_level
-from identify.simulate import equation_rows, simulate
+from identify.data.quality import clip_level
+from identify.simulation.simulate import equation_rows, simulate
 from protocol.plc import RIG_STATE_BOUND
 
 #: share of a limit (accelerometer range, end-stop travel) above which a predicted peak is warned about

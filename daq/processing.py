@@ -5,7 +5,7 @@
 writes /entry/processed (NXdata) next to the raw data, never touching it:
 
     relative_acc   (m/s^2)  q'' = mass_acc - table_acc, band-limited
-    relative_vel   (m/s)    q'  by band-limited FFT integration (identify.chain, the identification's
+    relative_vel   (m/s)    q'  by band-limited FFT integration (identify.chain.states, the identification's
     relative_disp  (m)      q   own measurement chain, so what an operator plots is what is fitted)
     valid          (1/0)    0 where a segment's edge taper and guard make the integrals unreliable
     @band_hz, @segments
@@ -19,9 +19,9 @@ from __future__ import annotations
 import h5py
 import numpy as np
 
-from identify.chain import reconstruct_states
+from identify.chain.states import reconstruct_states
 from identify.errors import IdentificationError, RecordingError
-from identify.recording import Recording
+from identify.data.recording import Recording
 
 from .recorder import DEFAULT_CHANNELS, describe, segments
 
@@ -64,7 +64,7 @@ def add_processed(path, input: str = DEFAULT_CHANNELS[0], output: str = DEFAULT_
             del e["processed.tmp"]  # left by a crash during an earlier run
         g = e.create_group("processed.tmp")
         g.attrs.update(NX_class="NXdata", signal="relative_disp", axes="time", input=input, output=output,
-                       method="band-limited FFT integration of mass_acc - table_acc (identify.chain)",
+                       method="band-limited FFT integration of mass_acc - table_acc (identify.chain.states)",
                        band_hz=np.array(bands[0]), segments=len(bands))
         g["time"] = h5py.SoftLink("/entry/data/time")
         for name, units in SIGNALS:

@@ -11,7 +11,7 @@
     /entry/quality        @usable_for_identification @reasons (JSON) @final (written at close, else at
                           the last flush) @mass_table_rms_ratio @clipped_share @rms @pair @thresholds;
                           flags: channel, kind (clipped | dead | stuck | nonfinite | ratio), first_row,
-                          rows, samples, t_start_s, t_end_s, value (identify/quality.py says what each is)
+                          rows, samples, t_start_s, t_end_s, value (identify/data/quality.py says what each is)
 
 Why this layout and this HDF5 mode (shared/notes, 12 SIGKILLs per mode): the default file format plus
 a `flush()` at least every second leaves a file that any HDF5 reader opens after a SIGKILL, with every
@@ -32,8 +32,8 @@ import h5py
 import numpy as np
 
 from identify.errors import RecordingError
-from identify.quality import QualityMonitor, clip_level, verdict, with_status
-from identify.recording import LAYOUTS, Recording, check_file
+from identify.data.quality import QualityMonitor, clip_level, verdict, with_status
+from identify.data.recording import LAYOUTS, Recording, check_file
 
 #: The channels a sweep records, and the (input, output) pair identification reads from a recording
 #: unless told otherwise: the table's and the mass's accelerometers (the base layout's names).
@@ -76,7 +76,7 @@ class Recorder:
     channels : names in stream order; units : per channel; fs_hz : sample rate; sensors : optional
     {channel: {"sensitivity": counts per unit, "position": "table"}}; sweep / rig_config : metadata;
     min_free_bytes : disk space to keep free, checked at every flush (DiskFull below it). Quality flags
-    (identify/quality.py) are computed while recording and written at every flush and at close; their
+    (identify/data/quality.py) are computed while recording and written at every flush and at close; their
     verdict is for pair = (input, output) channels (default table_acc, mass_acc, else the first two)."""
 
     def __init__(self, path, channels=DEFAULT_CHANNELS, fs_hz: float = 2048.0, operator: str = "",

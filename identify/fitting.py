@@ -4,7 +4,7 @@
     bias, standard errors, inclusion probabilities -> (free-run refinement) -> validation -> verdict
 
 Internally there is always a list of recordings, each a *normal-equations source*
-(identify.sources.NormalEquationsSource): its chain's states (or, out of core, their summary), its
+(identify.regression.sources.NormalEquationsSource): its chain's states (or, out of core, their summary), its
 per-block normal equations on given block edges, what the chain bias and the noise's share of the
 variance need of it, and its free-run validation. In core (sources.RecordingEquations) and out of core
 (out_of_core.ChunkedEquations) differ only in how they produce those; the decisions made from them are
@@ -20,18 +20,18 @@ import time
 
 import numpy as np
 
-from . import uncertainty as unc
-from .budget import choose_budget
-from .chain import StateSignals
+from .trust import uncertainty as unc
+from .selection.budget import choose_budget
+from .chain.states import StateSignals
 from .errors import IdentificationError
-from .gram import BlockGram
+from .regression.gram import BlockGram
 from .model import SparseModel
-from .optimizers import ADMMLasso, STLSQ
-from .optimizers.base import least_squares
-from .refine import refine_free_run
-from .selection import heldout_supports, select
-from .sources import state_gram
-from .validation import fit_verdict, pooled_validation
+from .regression.optimizers import ADMMLasso, STLSQ
+from .regression.optimizers.base import least_squares
+from .simulation.refine import refine_free_run
+from .selection.pareto import heldout_supports, select
+from .regression.sources import state_gram
+from .simulation.validation import fit_verdict, pooled_validation
 
 N_BLOCKS = 50
 STATES = ("q1", "q2")
@@ -137,7 +137,7 @@ def fit_sources(ident, sources: list, timings: dict) -> list:
     train, coefs = fit_pass(ident, n_eff, gram, held, timings)
     # The terms are those of the true displacement: when the selected force has an even part (an
     # asymmetric spring) it rectifies into a displacement below the band the chain cannot see; the
-    # source finds it (identify.inband) and the pass runs again on q2 + offset. An odd force needs none.
+    # source finds it (identify.chain.inband) and the pass runs again on q2 + offset. An odd force needs none.
     t0 = time.perf_counter()
     ident.offset_ = {"carried": False, "passes": 0}
     training = SparseModel(coefs, STATES, (input_name,))
@@ -145,7 +145,7 @@ def fit_sources(ident, sources: list, timings: dict) -> list:
     if even and len(sources) > 1:
         raise IdentificationError(
             "the joint fit has a force with an even part (" + ", ".join(training.equations["q1_dot"]) + "): its "
-            "displacement below the band is carried per record (identify.inband), which joint identification "
+            "displacement below the band is carried per record (identify.chain.inband), which joint identification "
             "does not do; identify the recordings one by one")
     if even:
         sources[0], gram, ident.offset_ = sources[0].carry_offset(lib, blocks[0][0], ~held)
@@ -159,7 +159,7 @@ def fit_sources(ident, sources: list, timings: dict) -> list:
     t0 = time.perf_counter()
     # the selection-time fit (training blocks only) is what the held-out validation scores; the
     # reported coefficients are the kept terms refit on all rows, less the chain's bias
-    # (identify.uncertainty, docs/identification.md section 5)
+    # (identify.trust.uncertainty, docs/identification.md section 5)
     ident.training_model_ = SparseModel(coefs, STATES, (input_name,))
     reported, ident.standard_errors_, ident.uncertainty_ = trust(ident, sources, blocks, gram, held, n_eff)
     timings["refit_uncertainty"] = time.perf_counter() - t0
@@ -186,7 +186,7 @@ def fit_sources(ident, sources: list, timings: dict) -> list:
 
 def _budget_by_free_run(ident, sig, train, held, coefs: dict, timings: dict) -> dict:
     """With budget="free-run", the first equation's max_terms terms chosen by free-run error
-    (identify.budget); sets budget_ (None otherwise) and returns the coefficients by equation.
+    (identify.selection.budget); sets budget_ (None otherwise) and returns the coefficients by equation.
     sig: the StateSignals, or a list of them for several recordings (heldout_rows_ then spans them all)."""
     ident.budget_ = None
     sel = ident.selections_["q1_dot"]
@@ -225,7 +225,7 @@ def _free_run_choice(ident, sig, timings: dict) -> SparseModel:
 
 
 def trust(ident, sources: list, blocks: list, gram: BlockGram, held, n_eff: float) -> tuple[dict, dict, dict]:
-    """Reported coefficients, standard errors and inclusion probabilities (identify.uncertainty), the
+    """Reported coefficients, standard errors and inclusion probabilities (identify.trust.uncertainty), the
     chain bias from the sources (closed form where every source can give it, SIMEX in core otherwise)."""
     names, eqs = ident.library_.names, list(ident.selections_)
     sups = {e: s.support for e, s in enumerate(ident.selections_.values())}

@@ -5,11 +5,11 @@
     ident.model_            # SparseModel: {"q1_dot": {"q1": -3.73, ...}, "q2_dot": {"q1": 1.0}}
     ident.result()          # the JSON document `shakeid identify --json` prints
 
-Steps: states from the measurement chain (identify.chain) -> library matrix over the valid samples ->
+Steps: states from the measurement chain (identify.chain.states) -> library matrix over the valid samples ->
 per-block normal equations -> sparse path on the training blocks (ADMM-LASSO or STLSQ) -> selection and
 least-squares refit per equation -> standard errors -> free-run validation on the held-out blocks. This
 class holds the parameters, decides once whether it was given one recording or several, and hands the
-recordings to the one fit sequence (identify.fitting) as normal-equations sources (identify.sources);
+recordings to the one fit sequence (identify.fitting) as normal-equations sources (identify.regression.sources);
 several recordings add the consistency check across them (identify.joint).
 
 Held-out samples: by default 20 % of the record in 10 blocks spread evenly over it, so a sweep's every
@@ -24,16 +24,16 @@ import time
 import numpy as np
 
 from . import joint, params
-from . import uncertainty as unc
+from .trust import uncertainty as unc
 from .errors import IdentificationError
 from .fitting import (effective_samples, fit_sources, holdout_blocks, make_optimizer, per_record,  # noqa: F401
                       placement_supports, select_supports)
-from .effects import expand_terms
-from .library import Library
+from .explain.effects import expand_terms
+from .regression.library import Library
 from .physical import RigConstants, physical_parameters
-from .recording import Recording
-from .selection import DEFAULT_TOLERANCE
-from .sources import RecordingEquations, state_gram
+from .data.recording import Recording
+from .selection.pareto import DEFAULT_TOLERANCE
+from .regression.sources import RecordingEquations, state_gram
 from .threads import one_blas_thread
 
 N_REPORTED = 10  # budget candidates listed in the result
@@ -44,7 +44,7 @@ class SparseIdentifier:
 
     degree : highest monomial degree of the library (4 as in the paper).
     extra_terms : further library terms, e.g. ("sign(q1)", "q1*|q1|"), or a plain effect by its name
-        (identify.effects: "coulomb_friction" stands for sign(q1)).
+        (identify.explain.effects: "coulomb_friction" stands for sign(q1)).
     method : "admm" (LASSO path) or "stlsq".
     n_lambdas, lambda_eps : path length and lambda_min / lambda_max (ADMM).
     threshold, normalize_threshold : STLSQ threshold (None: a path) and whether it applies to
@@ -52,27 +52,27 @@ class SparseIdentifier:
     selection, tolerance : rule ("heldout", "paper", "bic") and its tolerance (None: the rule's default).
     max_terms : optional budget of terms per equation (least costly terms eliminated beyond it).
     budget : how the budget's terms are chosen: "equation-error" (default; backward elimination by the
-        one-step acceleration error, identify.selection) or "free-run" (q1_dot's terms by the free-run
-        error of candidates refit on it, estimation data only, identify.budget; the kept terms come
+        one-step acceleration error, identify.selection.pareto) or "free-run" (q1_dot's terms by the free-run
+        error of candidates refit on it, estimation data only, identify.selection.budget; the kept terms come
         with their free-run refit coefficients, as with refine="free-run"; slower: minutes on Silverbox).
     budget_refit : rows of the free-run budget winner's final refit: "fit" (default; the validation's
         held-out rows stay unseen) or "all" (fit and held-out rows, once the terms are chosen on the
         fit rows and ranked on the held-out ones; more data for the coefficients, but the validation
         figures are then no longer out-of-sample: result()["validation"]["heldout_fitted"] says so).
     refine : None, or "free-run" to refit the kept coefficients on the free-run simulation error of the
-        fit samples (identify.refine); standard errors are then those of the equation-error fit.
+        fit samples (identify.simulation.refine); standard errors are then those of the equation-error fit.
     holdout_fraction : share of samples held out in interleaved blocks; holdout_samples : hold out
         the first N samples instead (paper).
-    band_hz, harmonics, taper_s : measurement-chain settings (identify.chain.reconstruct_states).
+    band_hz, harmonics, taper_s : measurement-chain settings (identify.chain.states.reconstruct_states).
     rig : RigConstants for physical parameters (base-excited layout only).
     validate : run the free-run validation.
     bias_method : how the measurement chain's bias is estimated: "auto" (default; in closed form by the
         corrected score when every kept term is a monomial of the states and input and no offset is
-        carried, identify.corrected; SIMEX otherwise) or "simex" (always SIMEX, the Monte Carlo).
+        carried, identify.chain.bias_correction; SIMEX otherwise) or "simex" (always SIMEX, the Monte Carlo).
     bias_replicates : SIMEX replicates, when SIMEX runs (None: by the record's length, 64 up to 250 000
         samples down to 16 from 1e6, uncertainty.replicates_for); 0: no chain-bias correction at all,
         coefficients then ignore it; placements : random held-out placements for the inclusion
-        probabilities (0: none). identify.uncertainty.
+        probabilities (0: none). identify.trust.uncertainty.
     mass_kg : moving mass for the physical parameters (rig= overrides it; None: the recording's, else
         the paper's rig, said to be assumed).
     Ranges and choices of the user-settable ones: identify.params.PARAMS (checked at fit).

@@ -5,7 +5,7 @@ at several amplitudes, repeats over weeks).
     ident.result()["recordings"]   # per recording: band, held-out free-run fit, its own status
 
 What is summed, what stays per recording:
-- the measurement chain runs per recording (identify.chain: its own excited band, tapers, valid rows);
+- the measurement chain runs per recording (identify.chain.states: its own excited band, tapers, valid rows);
 - each recording gets its own held-out blocks (identifier.holdout_blocks: the same share, spread over
   its own sweep, so every recording's resonance feeds both fit and validation);
 - the per-block normal equations of all recordings are stacked into one BlockGram (gram.concatenate):
@@ -32,12 +32,12 @@ change every recording disagrees with it; the largest z says which terms moved.
 
 budget="free-run" and refine="free-run" run on the summed normal equations too, their free-run errors
 pooled over the recordings, each simulated from its own start on its own fit (or held-out) rows
-(identify.refine.PooledFreeRunError): a second recording at other amplitudes is more data for what the
+(identify.simulation.refine.PooledFreeRunError): a second recording at other amplitudes is more data for what the
 free run extrapolates (Silverbox with its zip's second record, docs/identification.md).
 
 Refused for several recordings (IdentificationError): holdout_samples (the paper's split of one
 record) and a force with an even part (its displacement below the band is carried per record,
-identify.inband).
+identify.chain.inband).
 """
 from __future__ import annotations
 
@@ -46,12 +46,12 @@ import time
 
 import numpy as np
 
-from . import uncertainty as unc
+from .trust import uncertainty as unc
 from .errors import IdentificationError
 from .fitting import effective_samples, make_optimizer, select_supports
-from .gram import BlockGram
+from .regression.gram import BlockGram
 from .model import SparseModel
-from .validation import SIGNALS, model_verdict
+from .simulation.validation import SIGNALS, model_verdict
 
 #: |own - joint| / own SE of a q1_dot coefficient above which a recording's rig differs (with the practical
 #: condition below). One rig, 54 recordings at 0.5-5 % noise: at most 4.7 (benchmarks/joint_change.py).

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ModelError
-from .library import evaluate_terms
-from .terms import FeatureSpace
+from .regression.library import evaluate_terms
+from .regression.terms import FeatureSpace
 
 MODEL_FORMAT = "shakeid.model/1"
 
@@ -27,7 +27,7 @@ class SparseModel:
     states, inputs : signal names; default the base-excited rig (q1 = relative velocity,
         q2 = relative displacement, zdd = table acceleration).
     standard_errors : optional, same shape as `equations`.
-    travel : {state: end-stop travel in m} for the terms `stop(q2)`, `q1*contact(q2)` (identify.terms);
+    travel : {state: end-stop travel in m} for the terms `stop(q2)`, `q1*contact(q2)` (identify.regression.terms);
         JSON "travel", written only when set, so models without end stops keep their JSON.
     """
 

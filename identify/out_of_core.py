@@ -4,7 +4,7 @@
     ident = ChunkedIdentifier(chunk_samples=2**20).fit_source(src)
     ident.result()                                  # the document SparseIdentifier.result() gives
 
-Steps, each with memory bounded by the chunk (identify.chunked):
+Steps, each with memory bounded by the chunk (identify.chain.chunked):
 1. one scan of the record: the band, the detrending, the valid rows (ChunkedChain.scan);
 2. the held-out blocks of the in-core identifier (identifier.holdout_blocks: 50 blocks over the valid
    rows, 20 % held out, interleaved); each chunk's states from the chunked chain, its library Grams
@@ -13,9 +13,9 @@ Steps, each with memory bounded by the chunk (identify.chunked):
    Dask workers (shakeid.cli passes a client's map);
 3. from the summed BlockGram on: the one fit sequence (identify.fitting): path, selection, all-rows
    refit, the chain's bias in closed form, standard errors and inclusion probabilities, the same code
-   as in core on the same normal equations. The closed-form bias (identify.corrected) reads the noise
+   as in core on the same normal equations. The closed-form bias (identify.chain.bias_correction) reads the noise
    floors from the scan's spectra and the noise covariance from the band, and its raw moments from the
-   Gram: no pass over the record. The noise's share of the variance (identify.noise_spread) needs the
+   Gram: no pass over the record. The noise's share of the variance (identify.trust.noise_spread) needs the
    score's transforms: one more pass, chunk by chunk, each chunk's rows paired with an overlap of
    NOISE_OVERLAP (the chain's overlap) on each side (ChunkedNoise.score_pieces);
 4. validation: free run on held-out windows (below), each started from the measured state.
@@ -24,7 +24,7 @@ What is not done out of core, and why (also in result()["out_of_core"]):
 - SIMEX (bias_method="simex", or kept terms that are not monomials of the states and input, sign(q1),
   |q1|, ...): its replicates would read and transform the whole record once each; the coefficients of
   such a fit are reported without the chain-bias correction, and uncertainty.chain_bias_skipped says so.
-- the displacement below the band for even forces (identify.inband.carry_offset): it solves for a slow
+- the displacement below the band for even forces (identify.chain.inband.carry_offset): it solves for a slow
   displacement over the whole record. When the selected force has an even part the result says so.
 - budget="free-run" and refine="free-run": both simulate the whole fit rows repeatedly; refused.
 
@@ -32,9 +32,9 @@ Validation by free run on windows: a free run over 1e8 samples costs as much as 
 and, started once, scores mostly how a phase error accumulates over hours. Instead, from each held-out
 block a window of up to VALIDATION_WINDOW_S seconds (plus a guard at each end) is simulated from the
 measured state at its start; the simulated states pass through the band on the window (as in
-identify.validation.free_run), the guard (taper + LIVE_EDGE_PERIODS periods of f_lo, the chain's own
-guard for a live edge) is dropped, and the fit metrics are those of identify.validation over all
-windows' scored rows together; the verdict is identify.validation.fit_verdict's.
+identify.simulation.validation.free_run), the guard (taper + LIVE_EDGE_PERIODS periods of f_lo, the chain's own
+guard for a live edge) is dropped, and the fit metrics are those of identify.simulation.validation over all
+windows' scored rows together; the verdict is identify.simulation.validation.fit_verdict's.
 """
 from __future__ import annotations
 
@@ -45,19 +45,19 @@ from collections import Counter
 
 import numpy as np
 
-from .chain_noise import BandLimitedNoise
-from .chunked import CHUNK_SAMPLES, ChunkedChain, chunk_ranges
+from .noise.chain_noise import BandLimitedNoise
+from .chain.chunked import CHUNK_SAMPLES, ChunkedChain, chunk_ranges
 from .errors import IdentificationError
 from .fitting import fit_sources
-from .gram import BlockGram
+from .regression.gram import BlockGram
 from .identifier import SparseIdentifier
-from .inband import has_even_force
-from .effects import expand_terms
-from .library import Library
+from .chain.inband import has_even_force
+from .explain.effects import expand_terms
+from .regression.library import Library
 from .model import SparseModel
 from .threads import one_blas_thread
-from .uncertainty import floors_read, noise_floors
-from .validation import first_equation, fit_metrics, free_run
+from .trust.uncertainty import floors_read, noise_floors
+from .simulation.validation import first_equation, fit_metrics, free_run
 
 #: Scored length of each held-out validation window (s); the 10 held-out blocks of a 13-hour record
 #: give 10 minutes of free run in all.
@@ -89,7 +89,7 @@ def _serial_map(fn, jobs):
 
 
 class ChunkedEquations:
-    """A record read in chunks as the fit sequence's source (identify.sources.NormalEquationsSource):
+    """A record read in chunks as the fit sequence's source (identify.regression.sources.NormalEquationsSource):
     the chunked chain's Grams (chunk_gram, over map_chunks), its noise read chunk by chunk, and the free
     run on held-out windows."""
 
@@ -190,7 +190,7 @@ class ChunkedEquations:
         return out
 
     def validate(self, model: SparseModel, edges, held):
-        """identify.validation.validate's document, over the held-out windows (module doc); no run to
+        """identify.simulation.validation.validate's document, over the held-out windows (module doc); no run to
         pool (one record out of core)."""
         names = ("q1_dot", "q1", "q2")
         measured, simulated = {k: [] for k in names}, {k: [] for k in names}
@@ -238,7 +238,7 @@ class ChunkedIdentifier(SparseIdentifier):
 
     @one_blas_thread  # as SparseIdentifier.fit (identify.threads)
     def fit_source(self, source, progress=None, map_chunks=None) -> "ChunkedIdentifier":
-        """Identify the record of a chunk source (identify.chunked). progress(stage, done, total) after
+        """Identify the record of a chunk source (identify.chain.chunked). progress(stage, done, total) after
         each chunk; map_chunks(fn, jobs) -> iterable of fn(*job) results, any order (default: in turn)."""
         if self.refine is not None or (self.budget == "free-run" and self.max_terms is not None):
             raise IdentificationError("free-run budgets and refinement simulate the whole record repeatedly: "

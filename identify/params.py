@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import IdentificationError
-from .uncertainty import N_PLACEMENTS, N_REPLICATES
+from .trust.uncertainty import N_PLACEMENTS, N_REPLICATES
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,7 @@
 
 numpy's OpenBLAS starts one thread per core (2 here). The identification's BLAS work is many small
 products: BlockGram.from_library's ~120 GEMMs of 8192 x 18 per million samples, Welch's per-segment
-lines (identify.spectral.welch_psd), the noise's share, the path's small solves. A second thread costs
+lines (identify.chain.spectral.welch_psd), the noise's share, the path's small solves. A second thread costs
 more in hand-over than it saves, and on a loaded machine (the service's job workers, `shakeid batch`,
 Dask workers beside each other, other users) the threads oversubscribe the cores and spin. Measured at
 1e6 samples (docs/identification.md, "Threads"): welch_psd of two channels alone 0.056 s CPU with one

@@ -21,7 +21,7 @@ from typing import Literal
 from fastapi import APIRouter, Depends, HTTPException, Path, Query
 from fastapi.responses import FileResponse, HTMLResponse
 
-from identify.quality import with_status
+from identify.data.quality import with_status
 
 from .catalog import ID_PATTERN
 from .deps import ERRORS, Id, Services, operator, services, viewer

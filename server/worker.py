@@ -81,7 +81,7 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
         return _run_joint(list(path), options, out)
     try:
         rec = read(path, options)
-        from identify.quality import check_identifiable
+        from identify.data.quality import check_identifiable
 
         # data that cannot carry a model is refused, as by the CLI (the job fails, saying why)
         data = check_identifiable(rec, _label(path, options), bool(options.get("accept_faulty")),
@@ -103,7 +103,7 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
             _write_json(out / "model.json", result)
             return _adopt(kind, out)
         if kind == "explain":
-            from identify.explain import DiscrepancyAnalysis
+            from identify.explain.workflow import DiscrepancyAnalysis
             from reports.explain import write_explain_report
 
             from identify.frf.side_by_side import for_explanation
@@ -163,7 +163,7 @@ def _run_joint(paths: list, options: dict, out: Path) -> dict:
     verdict (its `recordings` section says which recording one model does not explain); model.json only
     for a model that passed, as for one recording; a failed joint model fails the job with the reason."""
     from identify.identifier import SparseIdentifier
-    from identify.quality import check_identifiable
+    from identify.data.quality import check_identifiable
 
     try:
         recs = []

@@ -46,7 +46,7 @@ def identify_file(args: argparse.Namespace, path: str) -> dict:
 
     Returns {"result": identify JSON + computed_on} or {"refused": message, "computed_on": ...}: the
     operator's errors come back as data (never as an exception to unpickle on the other side)."""
-    from identify.quality import check_identifiable
+    from identify.data.quality import check_identifiable
 
     where = worker_name()
     one = copy.copy(args)

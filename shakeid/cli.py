@@ -58,7 +58,7 @@ def _add_identify_options(p: argparse.ArgumentParser) -> None:
 
 def _identifier(args):
     from identify.identifier import SparseIdentifier
-    from identify.library import Library
+    from identify.regression.library import Library
 
     Library(degree=args.degree, extra_terms=args.extra_terms)  # unknown terms are refused here, by name
     return SparseIdentifier(**estimator_kwargs(args), band_hz=tuple(args.band) if args.band else None)
@@ -79,8 +79,8 @@ def _read(args):
 
 def cmd_identify(args) -> int:
     """Exit 0 with a model; 2 for data that cannot carry one (refused before fitting, unless
-    --accept-faulty); 1 when the fitted model fails its validation (identify/validation.py)."""
-    from identify.quality import check_identifiable
+    --accept-faulty); 1 when the fitted model fails its validation (identify/simulation/validation.py)."""
+    from identify.data.quality import check_identifiable
 
     if len(args.files) > 1:
         from .joint_cmd import cmd_identify_joint
@@ -124,8 +124,8 @@ def cmd_identify(args) -> int:
 
 
 def cmd_explain(args) -> int:
-    from identify.explain import DiscrepancyAnalysis
-    from identify.quality import check_identifiable
+    from identify.explain.workflow import DiscrepancyAnalysis
+    from identify.data.quality import check_identifiable
 
     args.file, args.samples = file_and_samples(args.file, getattr(args, "samples", None))
     baseline = _baseline(args.model) if args.model else None
@@ -271,7 +271,7 @@ def _synthesize(args):
 
 
 def cmd_simulate(args) -> int:
-    from identify.recording import write_csv
+    from identify.data.recording import write_csv
 
     out = Path(args.out)
     truth = out.with_suffix(".truth.json")

@@ -34,7 +34,7 @@ def _refuse_twice(names: list, cuts: list) -> None:
 
 def cmd_identify_joint(args, make_identifier, read) -> int:
     """`args.files` (two or more); make_identifier(args), read(args) as the single-file command's."""
-    from identify.quality import check_identifiable
+    from identify.data.quality import check_identifiable
 
     if args.report:
         raise ShakeidError("--report takes one recording; identify several without it (or one by one)")

@@ -278,10 +278,10 @@ def cmd_recordings(args) -> int:
 
 def identification_reasons(info: dict) -> list[str]:
     """Why `shakeid identify` would refuse a recording, from daq.recorder.describe(): its status
-    (identify.quality.status_problem), a missing channel of the pair it reads by default, and the
+    (identify.data.quality.status_problem), a missing channel of the pair it reads by default, and the
     recorder's quality verdict; empty when it would identify it."""
     from daq.recorder import DEFAULT_CHANNELS
-    from identify.quality import status_problem
+    from identify.data.quality import status_problem
 
     status = status_problem(info.get("status") or "unknown", info.get("status_reason"))
     missing = [c for c in DEFAULT_CHANNELS if c not in info.get("channels", [])]

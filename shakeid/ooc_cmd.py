@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 from identify.errors import RecordingError, ShakeidError
-from identify.recording import H5_SUFFIXES
+from identify.data.recording import H5_SUFFIXES
 
 #: Above this many samples an HDF5 recording is identified out of core: 2^24 (2.3 h at 2048 Hz). In core,
 #: 1e7 samples peaked at 2.1 GB RSS (2.3 GB with SIMEX; benchmarks/out_of_core.py), so 2^24 needs ~3.5 GB;

@@ -1,8 +1,8 @@
 """The rig's physics beyond the textbook Duffing terms, as SparseModel equations (used by sim/rig.py).
 
 The ground truth of the discrepancy suite is described here on the simulator's own terms, not taken
-from identify/effects.py (the catalog the suite judges): a force F on the mass enters as -F/m in
-dq1/dt. Everything is a sum of products of features (identify.terms), so the compiled RK4 kernel runs
+from identify/explain/effects.py (the catalog the suite judges): a force F on the mass enters as -F/m in
+dq1/dt. Everything is a sum of products of features (identify.regression.terms), so the compiled RK4 kernel runs
 it; physics that is not a term of (q1, q2) gets extra states or an extra input:
 
 - cubic_damping            F = c3 q1^3                                         (term q1^3)
@@ -33,10 +33,10 @@ from __future__ import annotations
 import math
 
 from identify.model import SparseModel
-from identify.terms import FeatureSpace
+from identify.regression.terms import FeatureSpace
 
 #: Plain-term physics built here rather than by RigParameters' own path; every effect's force,
-#: F = value * sum(weight * term), is its class's (identify.effects, Effect.force). asymmetric_stiffness is
+#: F = value * sum(weight * term), is its class's (identify.explain.effects, Effect.force). asymmetric_stiffness is
 #: given for the q > 0 side; asymmetric_side = -1 flips the |q2| weight.
 SIM_TERM_EFFECTS = ("cubic_damping", "asymmetric_stiffness")
 #: Effect names that are not `effects` entries but fields (physics) or sensor faults (measurement).
@@ -155,7 +155,7 @@ def build_model(rig, q1_base: dict, end_stops: bool) -> SparseModel:
         add("q1_dot", spring if term == "q2" else term, coef)
     if rig.stiffness_drift:
         add("q1_dot", f"{spring}*drift", -k * rig.stiffness_drift / m)
-    from identify.effects import CATALOG
+    from identify.explain.effects import CATALOG
     for name, value in rig.effects.items():
         weights = dict(CATALOG[name].force)
         if name == "asymmetric_stiffness" and rig.asymmetric_side == -1:

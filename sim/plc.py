@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from identify.simulate import simulate
+from identify.simulation.simulate import simulate
 from protocol.plc import RIG_STATE_BOUND, SETPOINT_NAMES, Command, Fault, Limits, State
 from protocol.sweep import SineSweep, smoothstep
 

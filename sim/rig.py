@@ -8,11 +8,11 @@ q1 = q' (m/s), q2 = q (m), this is an identify.SparseModel, so the simulator and
 one model type and one integrator.
 
 The rail has end stops: beyond a travel d each side (|q| > d) the mass presses into a stiff damped
-bumper, F = -k_c stop(q) - c_c q' contact(q) (identify.terms). Without them the paper's Table 1 model,
+bumper, F = -k_c stop(q) - c_c q' contact(q) (identify.regression.terms). Without them the paper's Table 1 model,
 whose +1.162e4 q' q^2 term is negative damping for |q| > 17.9 mm, diverges on a slow sweep. The
 travel can differ per side (end_stop_lower_mm, end_stop_upper_mm; inf: no stop on that side).
 
-Physics beyond the plain terms of identify.effects, the ground truth of the discrepancy suite
+Physics beyond the plain terms of identify.explain.effects, the ground truth of the discrepancy suite
 (sim/scenarios.py), described here on the sim's own terms so the truth does not depend on the catalog
 it is judged against (sim/physics.py builds the equations):
 - cubic_damping (effects value: N s^3/m^3, F = c3 q'^3) and asymmetric_stiffness (effects value dk in
@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from identify.effects import CATALOG
+from identify.explain.effects import CATALOG
 from identify.model import SparseModel
 
 from . import physics
@@ -48,7 +48,7 @@ END_STOP_TRAVEL_MM = 17.5
 #: Bumper stiffness (N/m) and damping (N s/m): an elastomer pad. On the 0.49 kg mass the contact
 #: frequency sqrt(k_c/m)/2pi is 200 Hz: 10x the sweep's top frequency, so the stop is a wall to the
 #: rig (a 0.6 m/s impact penetrates 0.33 mm of the 17.5 mm travel, for 2.6 ms), yet RK4 at the PLC's
-#: 2048 Hz x 8 substeps takes ~40 steps per contact (omega_c h = 0.077 < 0.1, identify.simulate's
+#: 2048 Hz x 8 substeps takes ~40 steps per contact (omega_c h = 0.077 < 0.1, identify.simulation.simulate's
 #: accuracy target). Damping ratio c_c/(2 sqrt(k_c m)) = 0.24: restitution 0.45, a lossy elastomer;
 #: much less and the mass rattles, much more and the linear pad pulls on release.
 CONTACT_STIFFNESS_N_PER_M = 7.7e5
@@ -149,7 +149,7 @@ class RigParameters:
         if physics.general(self):
             return physics.build_model(self, q1, end_stops)
         for name, coef in self.effects.items():
-            for term, weight in CATALOG[name].force.items():  # the effect's own force (identify.effects)
+            for term, weight in CATALOG[name].force.items():  # the effect's own force (identify.explain.effects)
                 q1[term] = q1.get(term, 0.0) - coef * weight / m
         if not (end_stops and self.end_stops):
             return SparseModel({"q1_dot": q1, "q2_dot": {"q1": 1.0}})

@@ -57,7 +57,7 @@ from .sensors import Accelerometer
 from .synth import SyntheticRun, run_sweep
 
 CATEGORIES = ("none", "single", "two_effects", "sensor_fault", "out_of_catalog")
-#: Catalog physics: the effect names identify.effects.CATALOG uses (docs/discrepancy.md, Catalog).
+#: Catalog physics: the effect names identify.explain.effects.CATALOG uses (docs/discrepancy.md, Catalog).
 PHYSICS = ("coulomb_friction", "displacement_dependent_damping", "quadratic_stiffness", "quadratic_damping",
            "cubic_damping", "asymmetric_stiffness", "end_stop", "stiffness_drift", "hysteresis")
 MEASUREMENT = ("mass_acc_gain", "table_acc_gain", "channel_delay", "bias_drift")

@@ -5,8 +5,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from identify.recording import Recording
-from identify.simulate import simulate
+from identify.data.recording import Recording
+from identify.simulation.simulate import simulate
 from protocol.sweep import SineSweep
 
 from .rig import RigParameters

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from identify.recording import write_csv
+from identify.data.recording import write_csv
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep

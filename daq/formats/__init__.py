@@ -2,7 +2,7 @@
 upload check and its jobs all open files here, so a format is one module of this package (defining
 FORMAT) plus its line in FORMAT_MODULES.
 
-A format's module turns a file into named channels (samples, unit, clock); identify.recording's
+A format's module turns a file into named channels (samples, unit, clock); identify.data.recording's
 recording_from_channels then chooses input, output and time by name (--input/--output/--time), checks
 units and the sample clock: one path for every format. Formats with a reader of their own (the DAQ's
 HDF5: gaps, quality flags, row ranges read without loading the rest) give `open` instead.
@@ -17,12 +17,12 @@ from pathlib import Path
 from typing import Callable
 
 from identify.errors import RecordingError
-from identify.recording import LAYOUTS, Recording, check_file, recording_from_channels
+from identify.data.recording import LAYOUTS, Recording, check_file, recording_from_channels
 
 #: The registry: one line per format, its module's name in this package.
 FORMAT_MODULES = (
     "hdf5",  # the DAQ's own HDF5 recordings (daq.recorder)
-    "csvtext",  # CSV / text columns with a header (identify.csvfile)
+    "csvtext",  # CSV / text columns with a header (identify.data.csvfile)
     "matlab",  # MATLAB .mat v4-v7 (scipy)
     "tdms",  # NI TDMS: LabVIEW, DAQmx (npTDMS)
     "uff58",  # Universal File Format type 58, ASCII and binary 58b: Testlab, ME'scope, modal software (pyuff)

@@ -1,6 +1,6 @@
-"""CSV and text files: a header naming the columns, then rows of numbers (identify.csvfile reads them)."""
-from identify.csvfile import read_csv
-from identify.recording import CSV_SUFFIXES
+"""CSV and text files: a header naming the columns, then rows of numbers (identify.data.csvfile reads them)."""
+from identify.data.csvfile import read_csv
+from identify.data.recording import CSV_SUFFIXES
 
 from . import FileFormat
 

@@ -3,7 +3,7 @@ flags and the status, and reads only the rows asked for; the upload check reads 
 import re
 
 from identify.errors import RecordingError
-from identify.recording import H5_SUFFIXES
+from identify.data.recording import H5_SUFFIXES
 
 from . import FileFormat, ReadRequest
 

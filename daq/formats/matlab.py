@@ -1,5 +1,5 @@
 """MATLAB .mat files (v4 to v7; v7.3 is HDF5 and refused with a hint): one vector per variable."""
-from identify.recording import MAT_SUFFIXES, read_mat
+from identify.data.recording import MAT_SUFFIXES, read_mat
 
 from . import FileFormat
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from identify.channels import Channel, NotASignal, SampleClock
+from identify.data.channels import Channel, NotASignal, SampleClock
 from identify.errors import RecordingError
 
 from . import FileFormat

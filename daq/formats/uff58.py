@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from identify.channels import Channel, NotASignal, SampleClock, clock_from_time
+from identify.data.channels import Channel, NotASignal, SampleClock, clock_from_time
 from identify.errors import RecordingError
 
 from . import FileFormat

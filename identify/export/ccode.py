@@ -34,7 +34,7 @@ def coefficient_names(model: SparseModel) -> list[str]:
 
 def max_step_s(model: SparseModel) -> float:
     """The longest internal RK4 step: MAX_STEP_S, or shorter for a model faster than STEP_OMEGA / MAX_STEP_S."""
-    from ..simulate import STEP_OMEGA, max_frequency  # scipy's signal module: only when code is generated
+    from ..simulation.simulate import STEP_OMEGA, max_frequency  # scipy's signal module: only when code is generated
 
     omega = max_frequency(model, np.full(len(model.states), STEP_SCALE))
     return float(min(MAX_STEP_S, STEP_OMEGA / omega)) if omega > 0 else MAX_STEP_S

@@ -1,6 +1,6 @@
 """One renderer of a term in four syntaxes (C, numpy, LaTeX, identifier), driven by the term's structure.
 
-A term is a product of powers of features (identify.terms); a feature's kind and signal come from
+A term is a product of powers of features (identify.regression.terms); a feature's kind and signal come from
 FeatureSpace.describe, the same feature order the library matrix and the compiled kernel use. So each
 syntax knows only how to write the six feature kinds, a power and a product: a new term needs nothing
 here, and no table of term names exists to drift from the library.
@@ -11,7 +11,7 @@ import keyword
 import re
 
 from ..errors import ModelError
-from ..terms import FEATURE_KINDS, FeatureSpace, Term
+from ..regression.terms import FEATURE_KINDS, FeatureSpace, Term
 
 #: Significant digits of the coefficients in the LaTeX equations (as reports.text.model_text prints them);
 #: C and Python carry every coefficient exactly (repr, 17 digits).

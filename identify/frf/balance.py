@@ -10,7 +10,7 @@ z = Z sin wt (zdd = -Z w^2 sin wt) makes the residual
 
 vanish, with E the synthesis on N samples per period, P its projection (the DFT) and D the
 derivative in coefficient space. f is evaluated in the time domain by the project's compiled term
-evaluator (identify.simulate.equation_rows), at the samples and at central-difference offsets of each
+evaluator (identify.simulation.simulate.equation_rows), at the samples and at central-difference offsets of each
 argument, all in one call: the derivative columns give the Jacobian
 dR/dX = w^2 D^2 - P [diag(f_q1) w E D + diag(f_q2) E] and dR/dw.
 """
@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import ModelError
 from ..model import SparseModel
-from ..simulate import equation_rows
+from ..simulation.simulate import equation_rows
 
 #: Relative central-difference step of the derivative columns (of each argument's range over the period).
 DIFF_STEP = 1e-6

@@ -2,7 +2,7 @@
 
 Why Floquet multipliers from a monodromy integration rather than Hill's method: the rig model has one
 degree of freedom, so the monodromy matrix is 2 x 2 and one period of the project's compiled RK4
-(identify.simulate) per column costs microseconds; it does not depend on the harmonic truncation (Hill's
+(identify.simulation.simulate) per column costs microseconds; it does not depend on the harmonic truncation (Hill's
 method's eigenvalues include spurious ones from the truncated harmonics, which must be sorted out, and
 its accuracy follows H), it sees the jumps of non-smooth terms (sign, |q1|, end stops) that the AFT
 Jacobian's difference quotients miss, and it detects period doubling (a multiplier through -1), which
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..simulate import choose_substeps, simulate
+from ..simulation.simulate import choose_substeps, simulate
 
 #: Output samples per period of the monodromy integration (RK4 steps: this x the substeps).
 PERIOD_SAMPLES = 64
@@ -22,7 +22,7 @@ OFFSET = 1e-5
 
 def substeps_for(model, w_max: float, scale: np.ndarray) -> int:
     """RK4 steps per output sample for periods down to 2 pi / w_max with states within `scale`
-    (identify.simulate's accuracy target), at least 2: 128 steps a period."""
+    (identify.simulation.simulate's accuracy target), at least 2: 128 steps a period."""
     return max(2, choose_substeps(model, 2 * np.pi / w_max / PERIOD_SAMPLES, scale))
 
 

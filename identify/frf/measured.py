@@ -18,9 +18,9 @@ import numpy as np
 from scipy.fft import next_fast_len
 from scipy.signal import hilbert
 
-from ..chain import reconstruct_states
+from ..chain.states import reconstruct_states
 from ..errors import IdentificationError
-from ..simulate import simulate
+from ..simulation.simulate import simulate
 from .response import frequency_response
 
 #: A measured jump: the steepest change of the per-cycle envelope in the sweep's jump direction, its
@@ -72,7 +72,7 @@ def cycle_envelope(q2: np.ndarray, zdd: np.ndarray | None, fs_hz: float, cycles:
 
 def sweep_envelope(rec, sig=None) -> dict:
     """The recording's per-cycle envelope (cycle_envelope) from the chain's relative displacement and
-    band-limited table acceleration (identify.chain), plus the sweep's direction ("up" | "down") and
+    band-limited table acceleration (identify.chain.states), plus the sweep's direction ("up" | "down") and
     rate (Hz/s) and the table amplitude (mm, median over the cycles). `sig`: the recording's chain states
     when they are at hand (an identification's: the chain is not run twice on one record), else the
     chain is run here."""

@@ -179,7 +179,7 @@ def for_identification(result: dict, model, recordings: list, names: list[str] |
 def identification_document(ident, recordings: list, quality: dict | None = None,
                             names: list[str] | None = None) -> dict:
     """What an identification delivers (model.json, `shakeid identify --json`, the demo's report): the fitted
-    SparseIdentifier's result, the data's quality verdict (identify.quality.check_identifiable's), and the
+    SparseIdentifier's result, the data's quality verdict (identify.data.quality.check_identifiable's), and the
     predicted frequency response beside the measured sweeps. One sequence for the CLI, the demo and the
     service's jobs. The sweep is read from the identification's own chain states when it fitted exactly
     `recordings` in memory (the chain is the CLI's largest cost beside the fit: not run twice)."""

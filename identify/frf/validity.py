@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import brentq
 
-from ..simulate import equation_rows
+from ..simulation.simulate import equation_rows
 
 #: Displacements scanned for the damping's sign change, m (geometric grid up to 1 m: beyond any rail).
 SCAN_M = np.geomspace(1e-6, 1.0, 400)

@@ -6,7 +6,7 @@ import time
 from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from fastapi.responses import FileResponse
 
-from identify.quality import with_status
+from identify.data.quality import with_status
 
 from .. import schemas
 from ..catalog import new_id

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from daq.formats import FORMATS, open_recording
-from identify.channels import STANDARD_GRAVITY_M_S2
+from identify.data.channels import STANDARD_GRAVITY_M_S2
 from identify.errors import RecordingError
 from identify.identifier import SparseIdentifier
-from identify.recording import write_csv
+from identify.data.recording import write_csv
 
 from .lab_writers import write_csv_exact, write_mdf, write_tdms, write_uff
 

@@ -9,7 +9,7 @@ import pytest
 
 from daq.preflight import WARN_SHARE, assess, nominal_response, predict
 from daq.sweep import SineSweep
-from identify.quality import clip_level
+from identify.data.quality import clip_level
 from sim.config import RigConfig
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep

@@ -11,7 +11,7 @@ from daq.plc import ModbusPLC
 from daq.recorder import Recorder, describe
 from daq.sources import SerialSource
 from daq.sweep import SweepRequest, SweepRunner
-from identify.quality import clip_level
+from identify.data.quality import clip_level
 from shakeid.cli import main
 from protocol.plc import Limits
 from sim.plc import PLCConfig

@@ -1,11 +1,11 @@
 """Known truth for the frequency-response tests: the model integrated in time (the project's compiled
-RK4, identify.simulate) at a sequence of fixed frequencies, each held until its response is periodic,
+RK4, identify.simulation.simulate) at a sequence of fixed frequencies, each held until its response is periodic,
 the state carried from one frequency to the next (a stepped sine, up or down)."""
 from __future__ import annotations
 
 import numpy as np
 
-from identify.simulate import simulate
+from identify.simulation.simulate import simulate
 
 #: Output samples per period; RK4 steps per sample (h w = 2 pi / 256: error ~1e-8 of the response).
 SAMPLES, SUBSTEPS = 64, 2

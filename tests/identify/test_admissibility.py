@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from identify.admissibility import check
-from identify.structure import Fitter, Structure
+from identify.explain.admissibility import check
+from identify.explain.structure import Fitter, Structure
 
 STOP = ("stop(q2)", "sign(q2)*stop(q2)", "q1*contact(q2)", "q1*sign(q2)*contact(q2)")
 
@@ -58,8 +58,8 @@ def test_wald_test_of_a_one_sided_stop_counts_its_free_coefficients():
     statistic is chi-square with 2 degrees of freedom, not 4 (a p-value 4-8x too large near 1e-3)."""
     from scipy import stats
 
-    from identify.effects import wald_p
-    from identify.structure import Fit
+    from identify.explain.effects import wald_p
+    from identify.explain.structure import Fit
 
     terms = ("q1", "q2") + STOP
     T = Fitter.tie_matrix(Structure(terms, travel=1e-3, side=1), list(terms))

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from sklearn.linear_model import lasso_path
 
-from identify.chain import reconstruct_states
-from identify.gram import BlockGram
-from identify.library import Library
-from identify.optimizers import ADMMLasso
+from identify.chain.states import reconstruct_states
+from identify.regression.gram import BlockGram
+from identify.regression.library import Library
+from identify.regression.optimizers import ADMMLasso
 
 
 def _scaled_problem(table1_run):

@@ -5,7 +5,7 @@ import pytest
 
 from identify.identifier import SparseIdentifier
 from identify.model import SparseModel
-from identify.validation import physics_verdict
+from identify.simulation.validation import physics_verdict
 from sim.rig import RigParameters
 from protocol.sweep import SineSweep
 

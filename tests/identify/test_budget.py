@@ -1,4 +1,4 @@
-"""The term budget chosen by free-run error (identify/budget.py), against known truth.
+"""The term budget chosen by free-run error (identify/selection/budget.py), against known truth.
 
 Simulated rig: the paper's Table 1 model (5 terms in q1_dot) under a 30 s 1-20 Hz sweep at 1.3 mm, 0.5 %
 noise, sampled at 1024 Hz. Given the true terms plus spurious candidates that can stand in for them (the constant, q2^2, and
@@ -19,14 +19,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from identify.budget import choose_budget
+from identify.selection.budget import choose_budget
 from identify.errors import IdentificationError
-from identify.gram import BlockGram
+from identify.regression.gram import BlockGram
 from identify.identifier import SparseIdentifier, holdout_blocks
-from identify.recording import read_recording
-from identify.optimizers.base import least_squares
-from identify.selection import _backward_eliminate
-from identify.simulate import choose_substeps
+from identify.data.recording import read_recording
+from identify.regression.optimizers.base import least_squares
+from identify.selection.pareto import _backward_eliminate
+from identify.simulation.simulate import choose_substeps
 from protocol.sweep import SineSweep
 pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 

@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from identify.band import excited_band
-from identify.chain import reconstruct_states, spectral_op
+from identify.chain.band import excited_band
+from identify.chain.states import reconstruct_states, spectral_op
 from identify.errors import IdentificationError
-from identify.recording import Recording
+from identify.data.recording import Recording
 
 FS = 2048.0
 
@@ -96,7 +96,7 @@ def test_input_between_samples_is_the_band_limited_inputs_own(substeps):
 
     from scipy.fft import irfft
 
-    from identify.simulate import fine_grid_input
+    from identify.simulation.simulate import fine_grid_input
     t = np.arange(int(20 * FS)) / FS
     tone = 0.7 * np.sin(2 * np.pi * 6.3 * t + 0.4)
     table = tone * np.sin(np.pi * t / 20) ** 2  # faded in and out
@@ -131,7 +131,7 @@ def test_input_grid_of_a_strided_run_holds_what_its_steps_read(n_extra):
     reads; a stride-2 run on it is the run on the full grid, to rounding (that middle is summed over the
     bins instead of transformed)."""
     from identify.model import SparseModel
-    from identify.simulate import simulate
+    from identify.simulation.simulate import simulate
     t = np.arange(int(20 * FS) + n_extra) / FS
     table = 0.7 * np.sin(2 * np.pi * 6.3 * t + 0.4) * np.sin(np.pi * t / t[-1]) ** 2
     s = reconstruct_states(Recording(table, 1.3 * table, FS, "base"), band_hz=(1.0, 40.0))

@@ -1,4 +1,4 @@
-"""The out-of-core measurement chain (identify.chunked) against the whole-record chain (identify.chain).
+"""The out-of-core measurement chain (identify.chain.chunked) against the whole-record chain (identify.chain.states).
 
 Tolerance: the chunked states may differ from the whole-record ones by the band operator's tail beyond
 the overlap (40 periods of f_lo) and the whole-record chain's own padding tail, both ~1e-6 of the peak
@@ -14,10 +14,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from identify.band import excited_band
-from identify.chain import reconstruct_states
-from identify.chunked import ChunkedChain, chunk_ranges
-from identify.recording import Recording
+from identify.chain.band import excited_band
+from identify.chain.states import reconstruct_states
+from identify.chain.chunked import ChunkedChain, chunk_ranges
+from identify.data.recording import Recording
 from protocol.sweep import SineSweep
 
 STATES = ("q1", "q2", "q1_dot", "input")
@@ -102,7 +102,7 @@ def test_a_windows_input_between_samples_is_the_chains(sweep, layout):
     the overlap; the line restored when DC is in the band), so a free run over a window reads the input
     between samples as the whole-record chain has it (StateSignals.input_fine), not interpolated: within
     TOLERANCE of the whole record's at the half steps (measured 6e-9 - 1e-8 of the peak)."""
-    from identify.simulate import fine_grid_input
+    from identify.simulation.simulate import fine_grid_input
     rec = sweep.recording
     if layout == "force":
         rng = np.random.default_rng(3)

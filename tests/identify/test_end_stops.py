@@ -8,10 +8,10 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from identify.errors import ModelError
-from identify.library import Library
+from identify.regression.library import Library
 from identify.model import SparseModel
-from identify.simulate import simulate
-from identify.terms import FeatureSpace
+from identify.simulation.simulate import simulate
+from identify.regression.terms import FeatureSpace
 
 D = 0.0175                      # travel, m
 W = 2 * np.pi * 200.0           # contact frequency, rad/s

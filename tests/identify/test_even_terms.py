@@ -64,10 +64,10 @@ def test_the_parity_shortcut_gives_the_data_check(table1_run, terms):
     """has_even_force answers from the terms' parities when every kept term is odd, without evaluating
     the model; the data check it skips must agree: for each model, the answer with the shortcut equals
     f(x) + f(-x) evaluated on the record (and both kinds of answer occur)."""
-    from identify.chain import reconstruct_states
-    from identify.inband import has_even_force
+    from identify.chain.states import reconstruct_states
+    from identify.chain.inband import has_even_force
     from identify.model import SparseModel
-    from identify.simulate import equation_rows
+    from identify.simulation.simulate import equation_rows
 
     sig = reconstruct_states(table1_run.recording)
     model = SparseModel({"q1_dot": terms, "q2_dot": {"q1": 1.0}}, ("q1", "q2"), (sig.input_name,))

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from identify.explain import DiscrepancyAnalysis
+from identify.explain.workflow import DiscrepancyAnalysis
 from identify.model import SparseModel
-from identify.recording import write_csv
+from identify.data.recording import write_csv
 from sim.rig import RigParameters
 from protocol.sweep import SineSweep
 

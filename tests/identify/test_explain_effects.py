@@ -6,10 +6,10 @@ import json
 import numpy as np
 import pytest
 
-from identify.explain import DiscrepancyAnalysis
+from identify.explain.workflow import DiscrepancyAnalysis
 from identify.model import SparseModel
-from identify.recording import Recording
-from identify.simulate import simulate
+from identify.data.recording import Recording
+from identify.simulation.simulate import simulate
 from sim.rig import RigParameters
 from sim.scenarios import make_scenario
 from sim.sensors import Accelerometer
@@ -118,7 +118,7 @@ def test_plain_rig_at_three_percent_noise_answers_none():
 def test_bias_drift_is_named_from_the_raw_channel(channel, change):
     """A sensor bias drifting by 0.03 m/s^2 over the record never reaches the band-limited states, so no
     gap shows it (the suite's drifts left gaps at 0.8-1.0x the noise floor and were answered `none`);
-    the raw channel below the band does (identify.drift). Measured on the suite's five drift cases:
+    the raw channel below the band does (identify.explain.drift). Measured on the suite's five drift cases:
     t = 12-198 and the change within 0.1-5.5 % of the truth; on the clean rigs beside them |t| <= 2.5.
     Asked: named, on the right channel, within 15 %; the other channel not named."""
     drifting = Accelerometer(noise_fraction=0.005, bias_drift_ms2=change)
@@ -173,7 +173,7 @@ def _physics_names(res, at_least=0.5):
 def test_a_soft_contact_after_the_named_effect_is_not_called_an_end_stop():
     """Case 22: a 5.5 % stiffness drift, named; then a one-sided `end_stop` of 6.4 N/m per kg on a rig of
     1894 took 38 % of a gap at 1.2x the noise floor at confidence 0.95. A contact softer than the rig's own
-    spring is no stop (identify.admissibility): only the drift is named."""
+    spring is no stop (identify.explain.admissibility): only the drift is named."""
     sc, res = _suite_case(22, "single", ["stiffness_drift"])
     assert sc.truth_effects == ["stiffness_drift"]
     assert res["effect"] == "stiffness_drift" and _physics_names(res) == ["stiffness_drift"]

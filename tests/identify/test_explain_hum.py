@@ -6,7 +6,7 @@ channel, at a phase drawn from a fresh seed (printed)."""
 import numpy as np
 import pytest
 
-from identify.explain import DiscrepancyAnalysis
+from identify.explain.workflow import DiscrepancyAnalysis
 from protocol.sweep import SineSweep
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer

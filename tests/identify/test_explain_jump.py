@@ -1,13 +1,13 @@
 """A jump in a held-out block does not decide the answer. The design rig without end stops, swept
 1-20 Hz in 30 s at 2.0 mm (1000 Hz, 0.5 % noise): its jump falls where one held-out segment carries most
 of the baseline's held-out shooting error (measured: 67 %, the gap 1.7x the noise floor summed plainly).
-The decision totals leave out the largest TRIM_SHARE of the held-out segments (identify.shooting), so the
+The decision totals leave out the largest TRIM_SHARE of the held-out segments (identify.simulation.shooting), so the
 plain rig answers `none`, and a quadratic stiffness on the same rig and sweep is still named."""
 import numpy as np
 import pytest
 
-from identify.explain import DiscrepancyAnalysis
-from identify.shooting import TRIM_SHARE, n_trimmed, trimmed_total
+from identify.explain.workflow import DiscrepancyAnalysis
+from identify.simulation.shooting import TRIM_SHARE, n_trimmed, trimmed_total
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from protocol.sweep import SineSweep

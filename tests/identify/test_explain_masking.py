@@ -5,7 +5,7 @@ test_two_effects_are_both_named_with_their_coefficients. Design rig, 1-20 Hz in 
 1000 Hz, 0.5 % sensor noise."""
 import pytest
 
-from identify.explain import DiscrepancyAnalysis
+from identify.explain.workflow import DiscrepancyAnalysis
 from protocol.sweep import SineSweep
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer

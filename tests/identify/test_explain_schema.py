@@ -8,7 +8,7 @@ from pathlib import Path
 import jsonschema
 import pytest
 
-from identify.recording import write_csv
+from identify.data.recording import write_csv
 from sim.rig import RigParameters
 from protocol.sweep import SineSweep
 pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)

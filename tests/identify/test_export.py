@@ -14,7 +14,7 @@ from scipy.linalg import expm
 from identify.export import export_model
 from identify.export.ccode import coefficient_names
 from identify.model import SparseModel
-from identify.simulate import choose_substeps, simulate
+from identify.simulation.simulate import choose_substeps, simulate
 from sim.rig import RigParameters
 
 TABLE1 = RigParameters.paper_table1().model()  # the paper's Table 1, as the rig simulator runs it

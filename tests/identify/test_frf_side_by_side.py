@@ -13,8 +13,8 @@ from scipy.signal import butter, sosfiltfilt
 from identify.frf import frequency_response
 from identify.frf.side_by_side import for_identification, side_by_side
 from identify.model import SparseModel
-from identify.recording import Recording
-from identify.simulate import equation_rows, simulate
+from identify.data.recording import Recording
+from identify.simulation.simulate import equation_rows, simulate
 from protocol.sweep import SineSweep
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer

@@ -1,7 +1,7 @@
-"""Inverting normal matrices whose columns differ in scale by many orders (identify.gram.scaled_pinv)."""
+"""Inverting normal matrices whose columns differ in scale by many orders (identify.regression.gram.scaled_pinv)."""
 import numpy as np
 
-from identify.gram import scaled_pinv
+from identify.regression.gram import scaled_pinv
 
 
 def test_scaled_pinv_keeps_small_scale_directions():

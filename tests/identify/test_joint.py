@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from identify.errors import IdentificationError
-from identify.gram import BlockGram
+from identify.regression.gram import BlockGram
 from identify.identifier import SparseIdentifier
 from identify.joint import CHANGE_RATIO
-from identify.uncertainty import refit_all_rows
+from identify.trust.uncertainty import refit_all_rows
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep

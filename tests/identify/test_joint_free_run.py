@@ -1,16 +1,16 @@
 """Free-run budget and refit over several recordings (identify.joint with budget="free-run" or
-refine="free-run"; identify.refine.PooledFreeRunError), against known truth: the paper's Table 1 rig,
+refine="free-run"; identify.simulation.refine.PooledFreeRunError), against known truth: the paper's Table 1 rig,
 1-20 Hz at 1024 Hz, 0.5 % noise, at two table amplitudes (1.3 mm over 30 s, 1.1 mm over 24 s: recordings of
 unequal length, so that the pooled error's weights matter)."""
 import numpy as np
 import pytest
 
-from identify.budget import choose_budget
-from identify.gram import BlockGram
+from identify.selection.budget import choose_budget
+from identify.regression.gram import BlockGram
 from identify.identifier import SparseIdentifier, holdout_blocks, per_record
 from identify.model import SparseModel
-from identify.refine import FreeRunError, PooledFreeRunError, free_run_error
-from identify.validation import validate
+from identify.simulation.refine import FreeRunError, PooledFreeRunError, free_run_error
+from identify.simulation.validation import validate
 from protocol.sweep import SineSweep
 
 SWEEPS = ((1.3, 30.0), (1.1, 24.0))  # (amplitude mm, duration s)

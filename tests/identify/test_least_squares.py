@@ -2,7 +2,7 @@
 and the row grouping it relies on."""
 import numpy as np
 
-from identify.optimizers.base import distinct_rows, least_squares, least_squares_many
+from identify.regression.optimizers.base import distinct_rows, least_squares, least_squares_many
 
 
 def _design(rng, n=400, m=10):

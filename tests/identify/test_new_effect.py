@@ -1,4 +1,4 @@
-"""Adding an effect is one class plus one registration (identify.effects): an effect defined here, in the
+"""Adding an effect is one class plus one registration (identify.explain.effects): an effect defined here, in the
 test, is simulated by the rig simulator, taken by name by the identification library, fitted and named
 by the discrepancy workflow, and shown by its report and JSON, with no other change anywhere.
 
@@ -10,10 +10,10 @@ import json
 
 import pytest
 
-from identify.effects import CATALOG, Effect, expand_terms, register, unregister
-from identify.explain import DiscrepancyAnalysis
+from identify.explain.effects import CATALOG, Effect, expand_terms, register, unregister
+from identify.explain.workflow import DiscrepancyAnalysis
 from identify.identifier import SparseIdentifier
-from identify.library import Library
+from identify.regression.library import Library
 from reports.explain import write_explain_report
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer

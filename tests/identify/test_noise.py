@@ -1,10 +1,10 @@
-"""The one noise-floor estimator (identify.spectral.noise_level, identify.noise): the level of white noise
+"""The one noise-floor estimator (identify.chain.spectral.noise_level, identify.noise.floor): the level of white noise
 of known variance, from few Welch segments as from many, by the median and by the low decile."""
 import numpy as np
 import pytest
 
-from identify.noise import noise_floor, noise_std
-from identify.spectral import noise_level, welch_psd, welch_segments
+from identify.noise.floor import noise_floor, noise_std
+from identify.chain.spectral import noise_level, welch_psd, welch_segments
 
 
 @pytest.mark.parametrize("n, nper", [(4096, 1024), (400_000, 1024)])  # 7 and ~780 segments
@@ -36,8 +36,8 @@ def test_gap_floor_of_white_noise_is_its_share_in_the_band():
     """A base-layout record whose response is white noise alone: the gap's floor is the noise's RMS
     through the band over the target's spread, here sqrt(in-band share of the bandwidth) / 1 within the
     band's roll-off (the target is the same noise band-limited)."""
-    from identify.chain import reconstruct_states
-    from identify.recording import Recording
+    from identify.chain.states import reconstruct_states
+    from identify.data.recording import Recording
 
     rng = np.random.default_rng()
     fs, n = 1000.0, 200_000

@@ -1,17 +1,17 @@
-"""The sensor noise's share of a refit's variance (identify.noise_spread): its shortcuts (transforms of
+"""The sensor noise's share of a refit's variance (identify.trust.noise_spread): its shortcuts (transforms of
 theta and the residual shared between signals, decimated transforms) against the formula evaluated
 directly, every signal's score derivative transformed at full rate."""
 import numpy as np
 import pytest
 from scipy.fft import irfft, rfft
 
-from identify import noise_spread, uncertainty as unc
-from identify.chain_noise import BandLimitedNoise
-from identify.corrected import term_exponents
-from identify.gram import scaled_pinv
+from identify.trust import noise_spread, uncertainty as unc
+from identify.noise.chain_noise import BandLimitedNoise
+from identify.chain.bias_correction import term_exponents
+from identify.regression.gram import scaled_pinv
 from identify.identifier import SparseIdentifier, holdout_blocks
-from identify.noise_spread import boxcar_spectrum, decimation, noise_variance
-from identify.spectral import lowband_rfft
+from identify.trust.noise_spread import boxcar_spectrum, decimation, noise_variance
+from identify.chain.spectral import lowband_rfft
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep
@@ -154,7 +154,7 @@ def test_noise_variance_is_the_formula_evaluated_directly(noise_fraction, monkey
 
 def _poly_call(polys, y, n, step, m, length, dtype):
     from identify import _polyrows
-    from identify.noise_spread import packed_rows
+    from identify.trust.noise_spread import packed_rows
 
     width = -(-len(range(0, n, step)) // m)
     out = np.full((len(polys), m, length), np.nan, dtype=dtype)

@@ -7,7 +7,7 @@ import pytest
 from identify.errors import IdentificationError
 from identify.identifier import SparseIdentifier
 from identify.out_of_core import ChunkedIdentifier
-from identify.recording import Recording
+from identify.data.recording import Recording
 from protocol.sweep import SineSweep
 
 #: as tests/identify/test_identifier.py (issue 2 acceptance): within 2 %, the weak q1*q2^2 within 5 %

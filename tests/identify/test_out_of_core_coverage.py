@@ -10,7 +10,7 @@ from daq.h5source import H5ChunkSource
 from daq.long_record import write_long_record
 from identify.identifier import SparseIdentifier
 from identify.out_of_core import ChunkedIdentifier
-from identify.recording import Recording
+from identify.data.recording import Recording
 from sim.synth import noise_free_sweep
 pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 

@@ -1,10 +1,10 @@
-"""Quality detectors on arrays with known faults (identify/quality.py), fed whole and block by block."""
+"""Quality detectors on arrays with known faults (identify/data/quality.py), fed whole and block by block."""
 import numpy as np
 import pytest
 
-from identify.quality import (MAX_CLIPPED_SHARE, QualityMonitor, RATIO_RANGE, assess_arrays, assess_recording,
+from identify.data.quality import (MAX_CLIPPED_SHARE, QualityMonitor, RATIO_RANGE, assess_arrays, assess_recording,
                               clip_level, infer_full_scale, verdict)
-from identify.recording import Recording
+from identify.data.recording import Recording
 
 FS = 2048.0
 SENS = 32767 / 50.0  # the simulated rig: +-50 m/s^2 on int16

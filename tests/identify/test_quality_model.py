@@ -1,9 +1,9 @@
-"""The model verdict (identify/validation.py model_verdict): a fit that does not reproduce the motion is
+"""The model verdict (identify/simulation/validation.py model_verdict): a fit that does not reproduce the motion is
 reported failed, the fitted model stays available to a library user."""
 import pytest
 
 from identify.identifier import SparseIdentifier
-from identify.validation import FIT_RETENTION
+from identify.simulation.validation import FIT_RETENTION
 
 
 def test_the_default_fit_is_ok_and_its_free_run_keeps_the_one_step_fit(table1_run):

@@ -4,7 +4,7 @@ import pytest
 from scipy.io import savemat
 
 from identify.errors import RecordingError
-from identify.recording import read_recording, write_csv
+from identify.data.recording import read_recording, write_csv
 
 
 def _csv(tmp_path, text, name="rec.csv"):

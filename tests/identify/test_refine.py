@@ -1,11 +1,11 @@
-"""The free-run error the output-error refit minimises (identify.refine): its RK4 steps are chosen as
-validation chooses them (identify.simulate.choose_step), several samples at a time for a model slow
+"""The free-run error the output-error refit minimises (identify.simulation.refine): its RK4 steps are chosen as
+validation chooses them (identify.simulation.simulate.choose_step), several samples at a time for a model slow
 against the sample rate, and that moves neither the error nor the refit beyond RK4's own error."""
 import numpy as np
 import pytest
 
 from identify.identifier import SparseIdentifier
-from identify.refine import FreeRunError, refine_free_run
+from identify.simulation.refine import FreeRunError, refine_free_run
 
 
 @pytest.fixture(scope="module")
@@ -17,7 +17,7 @@ def test_free_run_error_steps_as_validation_does(table1_fit):
     """The Table 1 rig at 2048 Hz (omega_max dt = 0.036) takes RK4 steps of 2 samples, as validation's free
     run does; the error it reports is the sample-by-sample run's to RK4's error. Measured: residuals within
     1.0e-7 of each other (the largest is 4.2e-4), costs within 3.9e-4 of each other. Bound: RK4 at
-    h omega = 0.072 is off by up to 1.4e-5 of the peak (identify.simulate.STEP_OMEGA) against a model
+    h omega = 0.072 is off by up to 1.4e-5 of the peak (identify.simulation.simulate.STEP_OMEGA) against a model
     error of ~1e-2 of it, which moves a sum of squares by up to ~3e-3 of itself."""
     sig, model = table1_fit.states_, table1_fit.model_
     strided = FreeRunError(sig, None, model=model)

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-import identify.uncertainty as unc
+import identify.trust.uncertainty as unc
 from identify.identifier import SparseIdentifier, effective_samples, holdout_blocks
-from identify.selection import heldout_supports
+from identify.selection.pareto import heldout_supports
 from protocol.sweep import SineSweep
 
 TRUE_Q1 = {"q1", "q2", "q1*q2^2", "q2^3", "zdd"}

@@ -2,8 +2,8 @@
 noise, records that end with the sweep (no settle time)."""
 import pytest
 
-from identify.band import excited_band
-from identify.chain import reconstruct_states
+from identify.chain.band import excited_band
+from identify.chain.states import reconstruct_states
 from identify.identifier import SparseIdentifier
 from sim.rig import RigParameters
 from protocol.sweep import SineSweep

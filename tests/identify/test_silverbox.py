@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from identify.identifier import SparseIdentifier
-from identify.recording import read_recording
-from identify.simulate import simulate
+from identify.data.recording import read_recording
+from identify.simulation.simulate import simulate
 
 DATA = __import__("pathlib").Path(__file__).resolve().parents[2] / "data/silverbox/SNLS80mV.mat"
 FS = 1e7 / 2**14
@@ -50,10 +50,10 @@ def test_silverbox_two_records_budget_extrapolates_to_the_arrowhead(silverbox):
     range's amplitudes by 39 %, then scores 0.312 mV, the same here and with the whole default support
     (benchmarks/silverbox.py; 0.376-0.384 mV from the estimation range alone, the target 0.36). The
     in-range multisine test pays for it: 0.280 against 0.249 mV."""
-    from identify.budget import choose_budget
-    from identify.gram import BlockGram
+    from identify.selection.budget import choose_budget
+    from identify.regression.gram import BlockGram
     from identify.identifier import holdout_blocks, per_record
-    from identify.refine import FreeRunError
+    from identify.simulation.refine import FreeRunError
 
     spec = importlib.util.spec_from_file_location("silverbox_bench", DATA.parents[2] / "benchmarks" / "silverbox.py")
     bench = importlib.util.module_from_spec(spec)

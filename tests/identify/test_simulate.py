@@ -4,7 +4,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from identify.model import SparseModel
-from identify.simulate import fine_grid_input, simulate
+from identify.simulation.simulate import fine_grid_input, simulate
 
 TABLE1 = {"q1_dot": {"q1": -3.7294, "q2": -971.0169, "q1*q2^2": 1.162e4, "q2^3": -2.5033e6, "zdd": -1.0243},
           "q2_dot": {"q1": 1.0}}
@@ -83,7 +83,7 @@ def test_fine_grid_input_keeps_samples_and_interpolates(method):
 def test_equation_rows_is_the_models_rhs(equations, travel, equation):
     """The compiled one-equation evaluation against SparseModel.rhs (numpy, the library's columns), on
     strided state columns and an input column: the same sums, so equal to rounding."""
-    from identify.simulate import equation_rows
+    from identify.simulation.simulate import equation_rows
 
     rng = np.random.default_rng(3)
     model = SparseModel(equations, travel=travel)
@@ -141,7 +141,7 @@ def test_a_stride_is_refused_where_it_does_not_apply():
 def test_choose_step_keeps_h_omega_within_the_bound():
     """Steps of several samples only for a model without end stops slow against the sample rate, each
     with h omega_max <= STEP_OMEGA like substeps."""
-    from identify.simulate import STEP_OMEGA, choose_step, max_frequency
+    from identify.simulation.simulate import STEP_OMEGA, choose_step, max_frequency
     scale = [0.8, 0.023]  # the Table 1 rig's states at 15 mm (x 1.5)
     model = SparseModel(TABLE1)
     omega = max_frequency(model, scale)

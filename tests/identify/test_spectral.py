@@ -8,11 +8,11 @@ import pytest
 from scipy.fft import irfft, next_fast_len, rfft, rfftfreq
 from scipy.signal import welch
 
-from identify import band, chain
-from identify.band import excited_band
-from identify.chain import EDGE_FRACTION, band_gain, reconstruct_states, spectral_op, spectral_ops
-from identify.recording import Recording
-from identify.spectral import welch_psd
+from identify.chain import band, states as chain
+from identify.chain.band import excited_band
+from identify.chain.states import EDGE_FRACTION, band_gain, reconstruct_states, spectral_op, spectral_ops
+from identify.data.recording import Recording
+from identify.chain.spectral import welch_psd
 
 FS = 2048.0
 
@@ -145,9 +145,9 @@ def test_force_layout_states_equal_the_previous_chain():
 
 
 def _free_run_before(model, sig):
-    """identify.validation.free_run as it was: full right-hand side, one band_limit per signal, in double
+    """identify.simulation.validation.free_run as it was: full right-hand side, one band_limit per signal, in double
     precision (the input between samples and the steps as now: StateSignals.input_fine, choose_step)."""
-    from identify.simulate import choose_step, simulate
+    from identify.simulation.simulate import choose_step, simulate
     v = sig.valid
     states = sig.states[v]
     u = sig.input[v][:, None]
@@ -170,7 +170,7 @@ def test_free_run_equals_the_previous_formulation(table1_run, table1_truth):
     own, rhs at the samples a stride-2 run interpolates), and within 1e-3 at the ends, where the taper
     shapes each differently (2.8e-4, 1.9e-4)."""
     from identify.model import SparseModel
-    from identify.validation import first_equation, free_run
+    from identify.simulation.validation import first_equation, free_run
     sig = reconstruct_states(table1_run.recording)
     model = SparseModel(table1_truth)
     sim, qdot, _, diverged, _ = free_run(model, sig)
@@ -234,7 +234,7 @@ def test_band_limit_derivatives_are_the_derivatives_band_limited(table1_run):
 def test_lowband_transforms_are_the_band_bins_of_the_full_ones(n, nfft, band_share):
     """Polyphase split (M = 1, 2, 6, 8 here) against scipy's full-length transforms, in double precision
     and, forward, in single."""
-    from identify.spectral import lowband_irfft, lowband_rfft, polyphase_factor
+    from identify.chain.spectral import lowband_irfft, lowband_rfft, polyphase_factor
     k_max = min(int(band_share * nfft / 2), nfft // 2)
     x = np.vstack([_signal(n, 5), _signal(n, 6) ** 2])
     ref = rfft(x, nfft, axis=-1)
@@ -253,7 +253,7 @@ def test_forward_and_inverse_transforms_share_their_twiddles():
     the default) transforms of one record compute the twiddles once: one cache entry per precision,
     however the precision is spelled (a numpy dtype and the scalar type hash differently, and once made
     the chain compute them twice); single precision gets its own, rounded."""
-    from identify.spectral import _cached_twiddles, _twiddles, lowband_irfft, lowband_rfft
+    from identify.chain.spectral import _cached_twiddles, _twiddles, lowband_irfft, lowband_rfft
     n, nfft, k_max = 5000, 12000, 1000
     _cached_twiddles.cache_clear()
     spec = lowband_rfft(np.vstack([_signal(n, 5)]), nfft, k_max)
@@ -270,7 +270,7 @@ def test_twiddles_by_recurrence_match_the_exponentials():
     """The twiddles are built as powers of one row (w^(k r) = (w^k)^r), that row as products of two short
     tables of exponentials; on a million-sample record's transform (M = 8, ~59,000 bins) they stay
     within rounding of exp(-2 pi i (k r mod nfft) / nfft)."""
-    from identify.spectral import _twiddles
+    from identify.chain.spectral import _twiddles
     nfft, m, k_max = 1_105_920, 8, 58_860
     kr = np.outer(np.arange(m), np.arange(k_max + 1)) % nfft
     exact = np.exp(-2j * np.pi * kr / nfft)
@@ -286,7 +286,7 @@ def test_bin_weights_are_parsevals(nfft):
     """spectral.bin_weights (BandLimitedNoise's sums over the bins, BandLimitedSignal.at): sum_k w_k |X_k|^2
     / nfft over an rfft's bins is the signal's energy, for an even nfft (a Nyquist bin of weight 1) and an
     odd one (whose last bin has a twin: weight 2)."""
-    from identify.spectral import bin_weights
+    from identify.chain.spectral import bin_weights
     x = np.random.default_rng(4).standard_normal(nfft)
     spec = rfft(x)
     w = bin_weights(spec.size, nfft)

@@ -2,9 +2,9 @@
 import pytest
 import numpy as np
 
-from identify.gram import BlockGram
+from identify.regression.gram import BlockGram
 from identify.identifier import SparseIdentifier
-from identify.optimizers import STLSQ
+from identify.regression.optimizers import STLSQ
 
 TRUE_Q1 = {"q1", "q2", "q1*q2^2", "q2^3", "zdd"}
 

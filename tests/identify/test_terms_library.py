@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from identify.errors import ModelError
-from identify.library import Library
-from identify.terms import FeatureSpace
+from identify.regression.library import Library
+from identify.regression.terms import FeatureSpace
 
 
 def test_paper_library_has_16_columns_in_table_order():

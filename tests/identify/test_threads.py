@@ -35,7 +35,7 @@ def test_overlapping_calls_hold_one_limit_and_the_last_restores_it():
 
 def test_a_fit_runs_on_one_blas_thread_and_gives_the_limit_back():
     from identify.identifier import SparseIdentifier
-    from identify.library import Library
+    from identify.regression.library import Library
 
     seen = []
     evaluate = Library.evaluate
@@ -55,7 +55,7 @@ def test_a_fit_runs_on_one_blas_thread_and_gives_the_limit_back():
         x[0] += a / fs
         x[1] += x[0] / fs
         out[i] = a + zdd[i]
-    from identify.recording import Recording
+    from identify.data.recording import Recording
 
     rec = Recording(zdd, out + 0.01 * rng.standard_normal(n), fs)
     with threadpool_limits(limits=2, user_api="blas"):

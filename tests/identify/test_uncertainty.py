@@ -4,13 +4,13 @@ and reported coefficients that do not depend on where the held-out blocks fall."
 import numpy as np
 import pytest
 
-import identify.uncertainty as unc
-from identify.chain import reconstruct_states
+import identify.trust.uncertainty as unc
+from identify.chain.states import reconstruct_states
 from identify.errors import IdentificationError
-from identify.gram import BlockGram
+from identify.regression.gram import BlockGram
 from identify.identifier import SparseIdentifier, holdout_blocks
-from identify.optimizers.base import least_squares
-from identify.validation import validate
+from identify.regression.optimizers.base import least_squares
+from identify.simulation.validation import validate
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer
 from sim.synth import run_sweep
@@ -81,7 +81,7 @@ def test_the_issue_case_is_covered(issue_case):
 def test_chain_bias_is_measured_and_removed():
     """At 5 % noise the integrated states' noise biases q2 and q2^3 (errors in variables). The noise
     floors read from the spectra match the sensors' true noise, and the bias estimate (in closed form,
-    identify.corrected) removes the bias: mean over 4 records of the error with and without the
+    identify.chain.bias_correction) removes the bias: mean over 4 records of the error with and without the
     correction. Measured (60 s sweeps): q2 -0.206 % -> -0.040 %, q2^3 +0.353 % -> +0.086 %, what is
     left half a standard error of the 4-record mean (the linear SIMEX extrapolation used before left
     -0.056 % and +0.14 %). Asked: at least half of each removed, and what is left within 1.5 standard
@@ -109,7 +109,7 @@ def test_chain_bias_is_measured_and_removed():
 def _closed_form_and_simex(recording):
     """The default fit of `recording` (no validation, no placements), its all-rows coefficients, and its
     chain bias both ways on the same fit: closed form and SIMEX with 256 replicates."""
-    from identify import uncertainty as unc
+    from identify.trust import uncertainty as unc
 
     ident = SparseIdentifier(validate=False, placements=0).fit(recording)
     sig = ident.states_
@@ -123,13 +123,13 @@ def _closed_form_and_simex(recording):
 
 @pytest.mark.slow
 def test_closed_form_bias_matches_a_large_simex():
-    """The corrected-score bias (identify.corrected, the default) against SIMEX with 256 replicates on
+    """The corrected-score bias (identify.chain.bias_correction, the default) against SIMEX with 256 replicates on
     the same fit: Table 1 rig, 60 s, 5 % noise. SIMEX is a Monte Carlo (mc_var: its variance) and
     extrapolates linearly in the noise variance, the closed form is exact for Gaussian noise: they agree
     to first order. Measured: every kept term within 0.42 of SIMEX's Monte Carlo standard errors; asked
     within 4 of them plus 5 % of the bias (the curvature SIMEX's linear extrapolation misses), and the
     bias must be well resolved (> 5 Monte Carlo SE for q2 and q2^3) so the comparison means something."""
-    from identify import uncertainty as unc
+    from identify.trust import uncertainty as unc
 
     run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 60, 1.3), seed=0, **_sensors(0.05))
     ident, sups, coefs, closed, simex = _closed_form_and_simex(run.recording)
@@ -149,7 +149,7 @@ def test_closed_form_bias_matches_a_large_simex():
 @pytest.mark.slow
 def test_closed_form_noise_spread_matches_the_replicates_spread():
     """The sensor noise's share of each coefficient's variance, linearised on the band's bins
-    (identify.noise_spread), against the spread of 256 SIMEX replicates (128 antithetic pairs: each
+    (identify.trust.noise_spread), against the spread of 256 SIMEX replicates (128 antithetic pairs: each
     standard deviation to ~6 %) on the same fit. At 0.5 % noise the replicates are linear in the noise
     to well below that (at 5 % their antithetic halves carry third-order terms: 5-20 % apart). Table 1
     rig at 1.2 mm, 60 s. Measured 0.1-7 % apart; asked within 20 % (3 Monte Carlo sigma) for every kept
@@ -170,7 +170,7 @@ def test_simex_where_the_closed_form_does_not_apply():
     corrected score: the closed form declines (None) and the identifier says SIMEX ran; bias_method=
     "simex" forces SIMEX on a monomial model, and the coefficients then differ from the closed form's by
     less than their standard errors (both remove the same bias)."""
-    from identify import uncertainty as unc
+    from identify.trust import uncertainty as unc
 
     run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 20, 1.3), seed=4, **_sensors(0.02))
     ident = SparseIdentifier(validate=False, placements=0, extra_terms=("q1*|q1|",)).fit(run.recording)
@@ -293,13 +293,13 @@ def test_the_kinematic_equation_is_exact_not_measured(issue_case):
 @pytest.mark.parametrize("layout", ["base", "force"])
 def test_noise_chain_is_the_chain_applied_to_the_noise(layout):
     """SIMEX replicates add the chain's image of the noise to the states instead of rerunning the chain:
-    exact because every step of the chain is linear. Checked against identify.chain itself, so a change
+    exact because every step of the chain is linear. Checked against identify.chain.states itself, so a change
     there that this copy misses fails here."""
     import dataclasses
 
-    from identify.chain import reconstruct_states
-    from identify.recording import Recording
-    from identify.uncertainty import NoiseChain
+    from identify.chain.states import reconstruct_states
+    from identify.data.recording import Recording
+    from identify.trust.uncertainty import NoiseChain
 
     run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 10, 1.3), fs_hz=1024, **_sensors(0.005))
     rec = run.recording
@@ -331,9 +331,9 @@ def test_noise_drawn_on_the_band_has_the_chains_statistics(layout):
     record holds few independent samples of it: over 40 draws of each the variances of q1 and q2 differed
     by 3.0 % and 3.7 %, over 400 draws by 0.03 % and 0.14 % (every entry within 0.15 % of the product of
     the standard deviations). 200 draws each, asked within 5 %."""
-    from identify.chain import reconstruct_states
-    from identify.recording import Recording
-    from identify.uncertainty import NoiseChain
+    from identify.chain.states import reconstruct_states
+    from identify.data.recording import Recording
+    from identify.trust.uncertainty import NoiseChain
 
     run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 20, 1.3), fs_hz=1024, **_sensors(0.005))
     rec = run.recording
@@ -356,7 +356,7 @@ def test_noise_drawn_on_the_band_has_the_chains_statistics(layout):
 
 def test_replicates_follow_the_record_length():
     """64 SIMEX replicates (32 antithetic pairs) where they are cheap, 16 at a million samples."""
-    from identify.uncertainty import replicates_for
+    from identify.trust.uncertainty import replicates_for
 
     assert [replicates_for(n) for n in (30_000, 250_000, 500_000, 1_000_000, 10_000_000)] == [64, 64, 32, 16, 16]
 
@@ -370,7 +370,7 @@ def test_lag0_covariance_is_that_of_the_band_limited_draws(layout):
     noise sits near 1 Hz, ~60 independent periods per draw: 1 / sqrt(300 x 60) x sqrt(2) ~ 1 %);
     asked within 3 %. The q2 / q1_dot covariance (the errors-in-variables bias of the stiffness) must be
     clearly negative, and q1's with q2 zero (H_q1 conj H_q2 is imaginary on every bin)."""
-    from identify.chain_noise import BandLimitedNoise
+    from identify.noise.chain_noise import BandLimitedNoise
 
     fs, n = 1024.0, 61_440
     band = (1.0, 100.0) if layout == "base" else (0.0, 100.0)
@@ -387,18 +387,18 @@ def test_lag0_covariance_is_that_of_the_band_limited_draws(layout):
 
 @pytest.mark.slow
 def test_corrected_sums_are_unbiased_for_the_noise_free_moments():
-    """identify.corrected: for a monomial y^k of noisy signals y = x + d (d the chain's Gaussian noise
+    """identify.chain.bias_correction: for a monomial y^k of noisy signals y = x + d (d the chain's Gaussian noise
     image), sum_t T_k(y_t) has expectation sum_t x_t^k. Known truth: x is a fixed set of signals (a
     simulated rig's states), d is drawn by BandLimitedNoise at a noise level where the raw sums are off
     by many of their standard errors. Over 200 draws the mean corrected sum must lie within 4 standard
     errors of the mean of the noise-free sum, for monomials up to degree 9 (a Gram entry of a degree-4
     library with q1_dot's target is at most q1_dot x degree 4; q1^2 q2^4 q1_dot^2... covers products of
     all four signals)."""
-    from identify.chain_noise import BandLimitedNoise
-    from identify.corrected import CorrectedSums
+    from identify.noise.chain_noise import BandLimitedNoise
+    from identify.chain.bias_correction import CorrectedSums
 
     run = run_sweep(RigParameters.paper_table1(), SineSweep(1, 20, 20, 1.3), fs_hz=1024, **_sensors(0.0))
-    from identify.chain import reconstruct_states
+    from identify.chain.states import reconstruct_states
 
     sig = reconstruct_states(run.recording, (1.0, 100.0))
     v = sig.valid

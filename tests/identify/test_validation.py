@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from identify.validation import _runs, _runs_of, fit_metrics, heldout_and_all_metrics
+from identify.simulation.validation import _runs, _runs_of, fit_metrics, heldout_and_all_metrics
 
 
 @pytest.mark.parametrize("mask", [
@@ -56,11 +56,11 @@ def test_fit_metrics_follow_their_definitions_and_refuse_a_non_finite_simulation
 
 def test_the_validation_reports_the_steps_it_took(table1_run, table1_truth):
     """validate's document says how the free run stepped: RK4 substeps per sample and samples per step
-    (identify.simulate.choose_step: the Table 1 rig at 2048 Hz is slow enough for steps of 2 samples)."""
-    from identify.chain import reconstruct_states
+    (identify.simulation.simulate.choose_step: the Table 1 rig at 2048 Hz is slow enough for steps of 2 samples)."""
+    from identify.chain.states import reconstruct_states
     from identify.model import SparseModel
-    from identify.simulate import choose_step
-    from identify.validation import validate
+    from identify.simulation.simulate import choose_step
+    from identify.simulation.validation import validate
     sig = reconstruct_states(table1_run.recording)
     model = SparseModel(table1_truth)
     v = sig.valid

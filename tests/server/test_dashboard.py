@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from identify.recording import write_csv
+from identify.data.recording import write_csv
 from protocol.sweep import SineSweep
 
 from .conftest import OPERATOR, VIEWER, Service, wait_for

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from identify.recording import write_csv
+from identify.data.recording import write_csv
 from server.catalog import Catalog, new_id
 from protocol.sweep import SineSweep
 

@@ -24,7 +24,7 @@ def test_campaign_name_and_non_finite_upload_rate_are_refused_in_words(service):
 
 def test_sweeps_and_jobs_beyond_what_the_rig_or_the_recording_allow_are_refused_at_the_request(service, tmp_path,
                                                                                               table1_run):
-    from identify.recording import write_csv
+    from identify.data.recording import write_csv
 
     with service.client() as op:
         # a duration the PLC's float32 setpoint reads as 0: refused by the limits, the rig stays ready

@@ -11,7 +11,7 @@ from fmpy import simulate_fmu
 from fmpy.validation import validate_fmu
 
 from identify.model import SparseModel
-from identify.simulate import choose_substeps, simulate
+from identify.simulation.simulate import choose_substeps, simulate
 
 from .conftest import OPERATOR, VIEWER, Service, wait_for
 from .test_dashboard import CHROMIUM, CHROMIUM_ARGS, TIMEOUT_MS
@@ -30,7 +30,7 @@ def identified(service, tmp_path_factory, make_run):
     """An uploaded Table 1 recording (30 s sweep at 1 kHz), identified: (recording id, its model as served)."""
     import httpx
 
-    from identify.recording import write_csv
+    from identify.data.recording import write_csv
     from protocol.sweep import SineSweep
 
     op, viewer = service.client(), service.client(VIEWER)

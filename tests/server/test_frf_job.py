@@ -7,8 +7,8 @@ import json
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from identify.recording import Recording, write_csv
-from identify.simulate import equation_rows, simulate
+from identify.data.recording import Recording, write_csv
+from identify.simulation.simulate import equation_rows, simulate
 from server.worker import FRF_FILE, run_job
 from sim.rig import RigParameters
 pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from identify.recording import write_csv
+from identify.data.recording import write_csv
 from server.catalog import Catalog
 from server.jobs import JobQueue
 

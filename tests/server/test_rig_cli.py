@@ -48,7 +48,7 @@ def test_each_rig_action_has_its_own_help_and_needs_a_server_or_a_config():
 
 
 def test_recordings_lists_the_service_s_recordings(service, tmp_path, table1_run):
-    from identify.recording import write_csv
+    from identify.data.recording import write_csv
 
     empty = _cli("recordings", "--server", service.url, token=VIEWER)
     assert empty.returncode == 0 and "0 recording(s) on" in empty.stdout, empty.stdout + empty.stderr

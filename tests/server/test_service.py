@@ -147,7 +147,7 @@ def test_emergency_stop_stops_the_simulated_table(service):
 
 
 def test_uploads_jobs_and_clear_errors(service, tmp_path, table1_run):
-    from identify.recording import write_csv
+    from identify.data.recording import write_csv
 
     op, viewer = service.client(), service.client(VIEWER)
     csv = tmp_path / "sweep.csv"
@@ -222,7 +222,7 @@ def test_queued_and_interrupted_jobs_run_after_a_restart(tmp_path, table1_run):
     """Jobs live in the catalog: one queued and one left 'running' by a dead service both complete."""
     import time
 
-    from identify.recording import write_csv
+    from identify.data.recording import write_csv
     from server.catalog import Catalog
 
     svc = Service(tmp_path / "data").start()
@@ -275,7 +275,7 @@ def test_sigterm_mid_sweep_ends_the_recording_aborted_with_the_reason(tmp_path):
 def test_explain_job_names_a_hidden_effect(service, tmp_path, make_run):
     """POST /explain on an uploaded sweep of a rig with hidden quadratic damping: the analysis names it and
     adding it closes the free-run gap; its figures are served."""
-    from identify.recording import write_csv
+    from identify.data.recording import write_csv
     from protocol.sweep import SineSweep
 
     run = make_run(rig=RigParameters.design(effects={"quadratic_damping": 2.0}), sweep=SineSweep(1.0, 20.0, 30.0, 1.3),
@@ -331,7 +331,7 @@ def test_joint_and_job_requests_are_checked_when_made(service, tmp_path, table1_
     the dashboard's recordings carry no server path."""
     from scipy.io import savemat
 
-    from identify.recording import write_csv
+    from identify.data.recording import write_csv
 
     op = service.client()
     rec = table1_run.recording

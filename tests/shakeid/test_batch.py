@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from daq.recorder import Recorder
-from identify.recording import write_csv
+from identify.data.recording import write_csv
 from shakeid.cli import main
 from sim.server import free_port
 from protocol.sweep import SineSweep

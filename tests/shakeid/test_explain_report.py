@@ -7,7 +7,7 @@ import pytest
 
 import reports.explain as exrep
 import reports.identification as idrep
-from identify.explain import DiscrepancyAnalysis
+from identify.explain.workflow import DiscrepancyAnalysis
 from reports.explain import FIGURES, write_explain_report
 from sim.rig import RigParameters
 from protocol.sweep import SineSweep

@@ -12,7 +12,7 @@ from fmpy import simulate_fmu
 from fmpy.validation import validate_fmu
 
 from identify.model import SparseModel
-from identify.simulate import choose_substeps, simulate
+from identify.simulation.simulate import choose_substeps, simulate
 pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from daq.recorder import Recorder
-from identify.recording import write_csv
+from identify.data.recording import write_csv
 from shakeid.cli import main
 from sim.rig import RigParameters
 from sim.sensors import Accelerometer

@@ -12,7 +12,7 @@ import pytest
 
 from daq.recorder import Recorder
 from identify.errors import ShakeidError
-from identify.recording import Recording, write_csv
+from identify.data.recording import Recording, write_csv
 from server.worker import run_job
 from shakeid.cli import main
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from identify.model import SparseModel
-from identify.simulate import simulate
+from identify.simulation.simulate import simulate
 from protocol import frames
 from protocol.plc import Command, Fault, State
 from sim.plc import PLCConfig, RigPLC

@@ -8,7 +8,7 @@ import serial
 from pymodbus.client import ModbusTcpClient
 
 from identify.identifier import SparseIdentifier
-from identify.recording import Recording
+from identify.data.recording import Recording
 from protocol.frames import FrameDecoder
 from protocol.plc import Fault, Limits, State
 from sim.plc import PLCConfig

@@ -1,0 +1,59 @@
+"""Which band the measurement chain integrates in: the range a record's input excites above its noise
+floor, read from Welch spectra (identify.chain.states.reconstruct_states reads them from the whole record,
+identify.chain.chunked accumulates the same segments chunk by chunk; one rule, band_from_psd)."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import IdentificationError
+from .spectral import noise_level, welch_psd, welch_segments
+
+#: Excited = Welch PSD at least this many dB above the noise floor (excited_band: the noise level itself).
+EXCITATION_MARGIN_DB = 8.0  # over the noise level: the old rule's 10 dB over a low decile (0.55-0.67 of it)
+#: Excited bins closer than this (Welch bins, ~0.125 Hz each) belong to one band.
+MAX_GAP_BINS = 8
+
+
+def excited_band(x: np.ndarray, fs_hz: float, margin_db: float = EXCITATION_MARGIN_DB) -> tuple[float, float]:
+    """Frequency range (Hz) where the signal's PSD stands `margin_db` above its noise floor."""
+    f, p, nper = excitation_spectrum(x, fs_hz)
+    return band_from_psd(f, p, x.size, nper, margin_db)
+
+
+def excitation_spectrum(x: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """(f Hz, PSD, segment length) of x that excited_band reads: scipy.signal.welch(..., detrend="linear")
+    in segments of welch_length, transformed in single precision: a threshold 8 dB over the noise floor
+    does not see the 1.4e-5 it moves a noisy bin by, and its own floor, ~157 dB below the peak, lies under
+    any sensor's noise (welch_psd)."""
+    nper = welch_length(x.size, fs_hz)
+    f, p = welch_psd(x, fs_hz, nper, np.float32)
+    return f, p, nper
+
+
+def welch_length(n: int, fs_hz: float) -> int:
+    """The Welch segment length excited_band uses on a record of n samples (~0.125 Hz resolution)."""
+    nper = int(min(n, 2 ** int(np.ceil(np.log2(fs_hz * 8.0)))))
+    return max(min(nper, n // 2), 16)
+
+
+def band_from_psd(f: np.ndarray, p: np.ndarray, n: int, nper: int,
+                  margin_db: float = EXCITATION_MARGIN_DB) -> tuple[float, float]:
+    """excited_band's rule on a Welch PSD of a record of n samples in segments of nper (identify.chain.chunked
+    accumulates that PSD chunk by chunk, without holding the record)."""
+    skip = 3  # the lowest bins hold the window's leakage of offsets and drifts, not excitation
+    # the noise level: the spectrum's low decile (robust to how many bins the excitation fills) over
+    # the low decile of a noise bin's own distribution (spectral.noise_level, the one estimator)
+    floor = noise_level(p[skip:], welch_segments(n, nper), 0.1)
+    above = np.flatnonzero(p[skip:] > floor * 10 ** (margin_db / 10)) + skip
+    if above.size == 0:
+        raise IdentificationError("the input shows no excited frequency band above its noise floor")
+    # With few Welch averages single bins of noise cross any threshold: keep the run of excited bins
+    # (gaps up to MAX_GAP bins merged, for multisines' sparse lines) that holds the most power.
+    breaks = np.flatnonzero(np.diff(above) > MAX_GAP_BINS)
+    starts = np.concatenate([[0], breaks + 1])
+    stops = np.concatenate([breaks, [above.size - 1]])
+    power = [p[above[a]:above[b] + 1].sum() for a, b in zip(starts, stops)]
+    best = int(np.argmax(power))
+    lo_bin, hi_bin = above[starts[best]], above[stops[best]]
+    df = f[1] - f[0]
+    return float(max(f[lo_bin] - df, df)), float(min(f[hi_bin] + df, df * nper / 2))  # df nper / 2: Nyquist

@@ -1,0 +1,1 @@
+"""Recordings as the rig wrote them: channels, file readers, data quality."""

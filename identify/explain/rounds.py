@@ -1,0 +1,143 @@
+"""The rounds of the discrepancy workflow (identify.explain.workflow): every catalog effect's candidate on top of
+the current explanation scored on the held-out segments' shooting error, the admissible best added when
+it closes enough; the totals that decide (trimmed in the first round, plain sums after). A mixin of
+DiscrepancyAnalysis, which holds the thresholds (alpha, min_gap_closed, refine) and the fitter.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import admissibility
+from .effects import CATALOG, Candidate, Effect
+from ..simulation.shooting import bootstrap_prob, trimmed_total
+from .structure import Fitter, Structure
+
+#: Candidates refit on the shooting error per round: the best REFINE_TOP - 1 by shooting error at their
+#: equation-error start and the best REFINE_TOP - 1 by held-out equation error.
+REFINE_TOP = 3
+#: Below none_factor x the floor the first effect must close NEAR_CLOSED of the squared gap and beat the
+#: baseline with bootstrap probability NEAR_P_BEATS, else the answer is `none` (the suite's single
+#: effects at 2-3 % sensor noise left gaps of 1-2x the floor that were answered `none`).
+NEAR_CLOSED = 0.4
+NEAR_P_BEATS = 0.95
+#: An effect is added only when the block bootstrap says it beats the explanation before it with at
+#: least this probability on the held-out segments (it is chosen on the training segments).
+MIN_P_BEATS = 0.9
+#: A candidate closing at least this share of what the named one closes is reported as its surrogate.
+SURROGATE_SHARE = 0.7
+
+
+def closed_shares(gap_before: float, gap_after: float) -> dict:
+    """The one definition of the gap closed, and the share of the squared gap it derives: gap_closed =
+    1 - after/before (on the NRMSE, as the top level's), gap_share_closed = 1 - (after/before)^2 =
+    1 - (1 - gap_closed)^2 (what min_gap_closed is compared with)."""
+    r = gap_after / gap_before if gap_before > 0 else 1.0
+    return {"gap_closed": float(1 - r), "gap_share_closed": float(1 - r * r)}
+
+
+def all_candidates(fitter: Fitter, cur: Structure, catalog: dict) -> list[Candidate]:
+    """Every effect of `catalog` ({name: Effect, or None for the registered one}) fitted on top of `cur`,
+    those that apply (each effect proposes its own: identify.explain.effects)."""
+    out = []
+    for name, effect in catalog.items():
+        effect: Effect = effect if effect is not None else CATALOG[name]
+        c = effect.propose(fitter, cur)
+        if c is not None:
+            out.append(c)
+    return out
+
+
+def coefficients(c: Candidate) -> dict:
+    """A candidate's report coefficients: its terms', its searched parameters, as its structure has them."""
+    st = c.structure
+    coef = {t: st.coefficients.get(t, 0.0) for t in c.terms}
+    coef.update(c.extra)
+    effect = CATALOG.get(c.name)
+    if effect is not None:  # refit on the shooting error with the coefficients
+        coef.update({k: v for k, v in effect.refit_fields(st).items() if k in coef})
+    return coef
+
+
+class Rounds:
+    _plain = False
+
+    def _total(self, err: np.ndarray):
+        """The total that decides: trimmed (shooting.trimmed_total) in the first round, whether anything
+        is missing and what; plain sums once an effect is named, as a second effect shows in the
+        resonance's few segments, which trimming would drop (Coulomb + quadratic damping named Coulomb
+        alone with every round trimmed)."""
+        return np.sum(err, axis=-1) if self._plain else trimmed_total(err)
+
+    def _decision_gap(self, err: np.ndarray) -> float:
+        h = self.fitter_.seg_held
+        return float(np.sqrt(self._total(err[h]) / self._norm)) if self._norm > 0 else 0.0
+
+    def _gap(self, err: np.ndarray) -> float:
+        h = self.fitter_.seg_held
+        return float(np.sqrt(trimmed_total(err[h]) / self._norm)) if self._norm > 0 else 0.0
+
+    def _round(self, fitter: Fitter, cur: Structure, err, cur_se, mse_cur, catalog, near: bool = False) -> dict:
+        """One round: every candidate on top of `cur`; the best admissible one if it closes enough."""
+        train, held = ~fitter.seg_held, fitter.seg_held
+        cands = all_candidates(fitter, cur, catalog)
+        for c in cands:
+            self._score(fitter, c, cur, err, cur_se, mse_cur)
+        ok = sorted([c for c in cands if c.admissible], key=lambda c: np.sum(c.err))
+        if self.refine:
+            # the equation-error start can free-run far from the candidate's own optimum (an asymmetric
+            # spring's start was worse than the baseline, refit it closed 80 %): refit the best by the
+            # shooting error at the start and the best by held-out equation error
+            by_eq = sorted(ok, key=lambda c: -c.score)
+            chosen = list({id(c): c for c in ok[:REFINE_TOP - 1] + by_eq[:REFINE_TOP - 1]}.values())
+            for c in chosen:
+                refined = c.refit(fitter.refine(c.structure))
+                self._score(fitter, refined, cur, err, cur_se, mse_cur)
+                if refined.admissible and np.sum(refined.err[train]) < np.sum(c.err[train]):
+                    cands[cands.index(c)] = refined
+            ok = sorted([c for c in cands if c.admissible], key=lambda c: np.sum(c.err))
+        table = [self._public(c) for c in sorted(cands, key=lambda c: -c.gap_share_closed)]
+        # a candidate that fits the training segments best but makes the held-out gap worse has fitted
+        # something else there (a gain fault bending to a one-sided end stop's contacts: -85 % on the
+        # held-out segments while the stop itself closed 49 %): it is passed over, not taken as the best
+        ok = [c for c in ok if c.gap_share_closed > 0] or ok
+        need, p_need = (NEAR_CLOSED, NEAR_P_BEATS) if near else (self.min_gap_closed, MIN_P_BEATS)
+        if not ok or ok[0].gap_share_closed < need or ok[0].p_beats_current < p_need:
+            return {"best": None, "table": table}
+        best, others = ok[0], ok[1:]
+        return {"best": best, "table": table, "entry": self._entry(best, others, err, held)}
+
+    def _entry(self, best: Candidate, others: list, err, held) -> dict:
+        """The named effect's report entry: its confidence, runner-up and surrogates."""
+        runner = min(others, key=lambda c: self._total(c.err[held])) if others else None
+        p_runner = bootstrap_prob(runner.err[held], best.err[held], trim=not self._plain) if runner else 1.0
+        conf = (1 - best.p_value) * min(p_runner, best.p_beats_current)
+        closed = best.gap_share_closed
+        sur = list(best.same_as) + [c.name for c in others if c.gap_share_closed >= SURROGATE_SHARE * closed]
+        return {"name": best.name, "kind": best.kind, "terms": best.terms,
+                "coefficients": coefficients(best), "confidence": float(conf),
+                "gap_after": self._gap(best.err), **closed_shares(self._gap(err), self._gap(best.err)),
+                "surrogate_for": sur, "p_value": best.p_value, "p_beats_runner_up": float(p_runner),
+                "p_beats_previous": best.p_beats_current, "runner_up": runner.name if runner else None}
+
+    def _score(self, fitter, c: Candidate, cur, err, cur_se, mse_cur) -> None:
+        st = c.structure
+        held = fitter.seg_held
+        c.err = fitter.errors(st)
+        reason = admissibility.check(c.name, st.coefficients, cur.coefficients, cur_se, c.fit.se)
+        if not reason and not c.p_value < self.alpha:  # a measurement name needs the same evidence
+            test = "Wald p" if c.kind == "physics" else "p of its own test"
+            reason = f"not significant ({test} = {c.p_value:.2g} >= {self.alpha:g})"
+        c.rejected = reason
+        c.admissible = not reason
+        e0, e1 = self._total(err[held]), self._total(c.err[held])
+        c.gap_share_closed = float(1 - e1 / e0) if e0 > 0 else 0.0
+        c.p_beats_current = bootstrap_prob(err[held], c.err[held], trim=not self._plain)
+        c.score = float((mse_cur - c.fit.mse_heldout) / mse_cur) if mse_cur > 0 else 0.0
+
+    def _public(self, c: Candidate) -> dict:
+        effect = CATALOG.get(c.name)
+        return {"name": c.name, "kind": c.kind, "terms": c.terms, "coefficients": coefficients(c),
+                "score": c.score, "p_value": c.p_value, "gap_share_closed": c.gap_share_closed,
+                "gap_closed": float(1 - np.sqrt(max(1 - c.gap_share_closed, 0.0))), "gap_after": self._gap(c.err),
+                "p_beats_baseline": c.p_beats_current, "admissible": c.admissible, "rejected": c.rejected,
+                "description": effect.description if effect is not None else ""}

@@ -1,0 +1,244 @@
+"""A candidate explanation as a model structure, and its fit: equation error first, then multiple shooting.
+
+A Structure is the baseline's terms plus the effects added so far: plain terms, an end-stop travel,
+a Bouc-Wen state, a time ramp input, and measurement-fault parameters. The Fitter turns one into
+(1) the states it implies (the channels corrected for the faults; the hysteresis state integrated from
+the measured velocity), (2) coefficients by least squares on band-limited columns of the training
+blocks, with the block-robust covariance, (3) a SparseModel, and (4) its per-segment multiple-shooting
+error (identify.simulation.shooting), and can refit the coefficients on the shooting error of the training segments.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.optimize import least_squares as nl_least_squares
+
+from ..chain.states import StateSignals, spectral_op
+from ..regression.gram import BlockGram, sandwich_covariance
+from ..regression.library import Library
+from .measurement import ZERO, ChannelChain
+from ..model import SparseModel
+from ..regression.optimizers.base import least_squares
+from ..data.recording import Recording
+from ..simulation.shooting import ShootingData, segment_edges
+from ..simulation.simulate import simulate
+
+#: The gap is measured on what was measured: the relative acceleration for the accelerometer rig, the
+#: output y itself for a force-input layout (its second derivative is a noise-amplified derived signal).
+GAP_SIGNAL = {"base": "q1_dot", "force": "q2"}
+#: An end stop's asymmetry term and the symmetric term it follows on a one-sided stop: on the stop's
+#: side s, f + s sign(q2) f = 2 f there and 0 on the other side.
+ONE_SIDED = {"sign(q2)*stop(q2)": "stop(q2)", "q1*sign(q2)*contact(q2)": "q1*contact(q2)"}
+
+
+@dataclass(frozen=True)
+class Structure:
+    terms: tuple[str, ...]                  # dq1/dt terms (canonical names), the input included
+    meas: tuple = tuple(sorted(ZERO.items()))  # fault parameters (identify.explain.measurement.PARAMS)
+    travel: float | None = None             # end-stop travel (m)
+    hyst: tuple[float, float] | None = None  # Bouc-Wen (beta, gamma) in 1/m
+    coef: tuple = ()                        # ((term, dq1/dt coefficient), ...)
+    effects: tuple[str, ...] = ()           # catalog names added to the baseline, in order
+    #: a one-sided end stop: +1 upper, -1 lower (None: two sided). Its asymmetry terms are tied to the
+    #: symmetric ones, coef(sign(q2)*f) = side x coef(f), so the stop acts on that side only.
+    side: int | None = None
+    #: the end-stop travel is refit with the coefficients (identify.explain.effects.end_stop sets it when it adds
+    #: the stop; adding any later effect clears it)
+    travel_free: bool = False
+
+    @property
+    def ties(self) -> dict:
+        """{tied term: (free term, factor)}: coefficients that follow another's."""
+        if self.side is None:
+            return {}
+        return {t: (f, float(self.side)) for t, f in ONE_SIDED.items() if t in self.terms and f in self.terms}
+
+    @property
+    def p(self) -> dict:
+        return dict(self.meas)
+
+    @property
+    def coefficients(self) -> dict:
+        return dict(self.coef)
+
+    def adding(self, name: str, terms=(), **kw) -> "Structure":
+        new = tuple(self.terms) + tuple(t for t in terms if t not in self.terms)
+        kw.setdefault("travel_free", False)
+        return replace(self, terms=new, effects=self.effects + (name,), **kw)
+
+
+@dataclass
+class Fit:
+    """Equation-error fit of a structure: coefficients, standard errors, held-out equation-error MSE."""
+
+    coef: dict
+    se: dict
+    cov: np.ndarray
+    names: list
+    mse_heldout: float
+
+
+class Fitter:
+    def __init__(self, rec: Recording, sig: StateSignals, edges: np.ndarray, held: np.ndarray):
+        self.rec, self.sig0, self.edges, self.held = rec, sig, edges, held
+        self.layout = rec.layout
+        self.gap = GAP_SIGNAL[self.layout]
+        self.u_name = sig.input_name
+        self.chain = ChannelChain(rec, sig) if self.layout == "base" else None
+        v = sig.valid
+        n = rec.n_samples
+        self.tau = (np.arange(n) / max(n - 1, 1) - 0.5)[v]
+        self.rows_held = np.repeat(held, np.diff(edges))
+        self._z: dict = {}
+        self._data: dict = {}
+        self.starts = self.stops = self.seg_held = None
+
+    # -- signals ----------------------------------------------------------------------------------
+    def signals(self, st: Structure) -> StateSignals:
+        p = st.p
+        if self.chain is None or not any(p.values()):
+            return self.sig0
+        return self.chain.signals(p)
+
+    def z_state(self, sig: StateSignals, hyst) -> np.ndarray:
+        """Bouc-Wen state integrated from the measured velocity (valid rows), z(0) = 0."""
+        key = (id(sig), hyst)  # the cache holds sig itself, so its id cannot be reused while cached
+        if key not in self._z:
+            beta, gamma = hyst
+            q1 = sig.q1[sig.valid]
+            zm = SparseModel({"z_dot": {"v": 1.0, "av*z": -beta, "v*|z|": -gamma}}, states=("z",), inputs=("v", "av"))
+            scale = float(np.max(np.abs(q1))) / max(beta + gamma, 1e-9) + 1e-9
+            res = simulate(zm, 1.0 / sig.fs_hz, [0.0], np.column_stack([q1, np.abs(q1)]), interpolation="linear",
+                           substeps=2, bound=1e3 * scale)
+            if len(self._z) > 64:
+                self._z.clear()
+            self._z[key] = (sig, np.nan_to_num(res.states[:, 0]))
+        return self._z[key][1]
+
+    def names(self, st: Structure):
+        states = ("q1", "q2", "z") if st.hyst is not None else ("q1", "q2")
+        inputs = (self.u_name, "tau") if any("tau" in t for t in st.terms) else (self.u_name,)
+        return states, inputs
+
+    def arrays(self, st: Structure, sig: StateSignals | None = None):
+        """(states (n, k), inputs (n, m)) on the valid rows."""
+        sig = sig or self.signals(st)
+        v = sig.valid
+        cols = [sig.q1[v], sig.q2[v]] + ([self.z_state(sig, st.hyst)] if st.hyst is not None else [])
+        ins = [sig.input[v]] + ([self.tau] if any("tau" in t for t in st.terms) else [])
+        return np.column_stack(cols), np.column_stack(ins)
+
+    def library(self, st: Structure) -> Library:
+        states, inputs = self.names(st)
+        return Library.from_terms(st.terms, states=states, inputs=inputs,
+                                  travel={"q2": st.travel} if st.travel else None)
+
+    # -- equation error ---------------------------------------------------------------------------
+    def equation_fit(self, st: Structure, band_limited: bool = True) -> Fit:
+        sig = self.signals(st)
+        lib = self.library(st)
+        X, U = self.arrays(st, sig)
+        T = self.tie_matrix(st, lib.names)  # all coefficients = T @ the free ones
+        A = lib.evaluate(X, U) @ T
+        if band_limited:
+            A = np.column_stack([sig.band_limit(c) for c in A.T])
+        gram = BlockGram(np.column_stack([A, sig.q1_dot[sig.valid]]), 1, self.edges)
+        train, heldout = gram.equations(~self.held), gram.equations(self.held)
+        support = np.ones(A.shape[1], bool)
+        x = least_squares(train.G, train.B[:, 0], support)
+        S = np.arange(A.shape[1])
+        cov = T @ sandwich_covariance(gram, ~self.held, train.G, S, x, 0) @ T.T
+        mse = float(heldout.mse(x[:, None], 0)[0])
+        x = T @ x
+        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        return Fit(dict(zip(lib.names, map(float, x))), dict(zip(lib.names, map(float, se))), cov, lib.names, mse)
+
+    @staticmethod
+    def tie_matrix(st: Structure, names) -> np.ndarray:
+        """(all terms, free terms) matrix mapping the free coefficients to every term's (Structure.ties)."""
+        ties = st.ties
+        free = [t for t in names if t not in ties]
+        T = np.zeros((len(names), len(free)))
+        for i, t in enumerate(names):
+            src, factor = ties.get(t, (t, 1.0))
+            T[i, free.index(src)] = factor
+        return T
+
+    # -- models and the shooting error ------------------------------------------------------------
+    def model(self, st: Structure, coef: dict | None = None) -> SparseModel:
+        coef = st.coefficients if coef is None else coef
+        states, inputs = self.names(st)
+        eqs = {"q1_dot": dict(coef), "q2_dot": {"q1": 1.0}}
+        if st.hyst is not None:
+            beta, gamma = st.hyst
+            eqs["z_dot"] = {"q1": 1.0, "|q1|*z": -beta, "q1*|z|": -gamma}
+        return SparseModel(eqs, states=states, inputs=inputs, travel={"q2": st.travel} if st.travel else None)
+
+    def set_segments(self, f_res_hz: float) -> None:
+        self.starts, self.stops, self.seg_held = segment_edges(self.edges, self.held, self.sig0.fs_hz, f_res_hz)
+
+    def data(self, st: Structure, starts=None, stops=None) -> ShootingData:
+        key = (st.meas, st.hyst, any("tau" in t for t in st.terms), starts is None)
+        if key in self._data:
+            return self._data[key]
+        sig = self.signals(st)
+        X, U = self.arrays(st, sig)
+        v = sig.valid
+        measured = sig.q1_dot[v] if self.gap == "q1_dot" else sig.q2[v]
+        fs, (lo, hi), taper = sig.fs_hz, sig.band_hz, sig.taper_n
+        lowpass = (lambda x: spectral_op(x, fs, (0.0, hi), 0, 0))  # noqa: E731  contacts ring above it
+        s0 = self.starts if starts is None else np.asarray(starts)
+        s1 = self.stops if stops is None else np.asarray(stops)
+        held = self.seg_held if starts is None else np.zeros(len(s0), bool)
+        d = ShootingData(X, U, measured, self.gap, fs, s0, s1, held, 1.0 + st.p.get("mass_acc_gain", 0.0), lowpass)
+        if len(self._data) > 48:
+            self._data.clear()  # before inserting: the entry is used right after
+        self._data[key] = d
+        return d
+
+    def errors(self, st: Structure) -> np.ndarray:
+        """Per-segment squared shooting error of the gap signal, in recorded units."""
+        return self.data(st).run(self.model(st))[1]
+
+    def free_run(self, st: Structure):
+        """One free run over all valid rows: the simulated gap signal (NaN where it diverged)."""
+        n = self.sig0.valid.stop - self.sig0.valid.start
+        return self.data(st, [0], [n]).run(self.model(st))[0]
+
+    def refine(self, st: Structure, max_nfev: int = 12) -> Structure:
+        """Coefficients refit on the training segments' shooting error (trust region, Gauss-Newton); for
+        a Bouc-Wen structure (beta, gamma) too, on a log scale (the grid only starts them), the state
+        z at each segment start integrated again from the measured velocity for every trial pair; for an
+        end stop just added, its travel too (log scale: the grid's step is 6-10 % of the peak, and a
+        stiff contact's force is its stiffness times a penetration of that order)."""
+        ties = st.ties
+        names = [t for t in st.coefficients if t not in ties]  # tied terms follow their free term
+        theta0 = np.array([st.coefficients[t] for t in names])
+        k = len(names)
+        hyst = st.hyst is not None
+        travel = bool(st.travel) and st.travel_free
+        extra = (list(np.log(np.maximum(st.hyst, 1e-3))) if hyst else []) + ([np.log(st.travel)] if travel else [])
+        theta0 = np.concatenate([theta0, extra])
+        train = ~self.seg_held
+        norm = float(np.sqrt(np.sum(self.data(st).measured ** 2))) or 1.0
+
+        def build(theta) -> Structure:
+            coef = dict(zip(names, map(float, theta[:k])))
+            coef.update({t: factor * coef[src] for t, (src, factor) in ties.items()})
+            out = replace(st, coef=tuple((t, coef[t]) for t in st.coefficients))
+            if hyst:
+                out = replace(out, hyst=tuple(map(float, np.exp(theta[k:k + 2]))))
+            return replace(out, travel=float(np.exp(theta[-1]))) if travel else out
+
+        def resid(theta):
+            cand = build(theta)
+            return self.data(cand).residuals(self.model(cand), train) / norm
+
+        r0 = resid(theta0)
+        scale = np.maximum(np.abs(theta0), 1e-12)
+        scale[k:] = 1.0
+        sol = nl_least_squares(resid, theta0, x_scale=scale, diff_step=1e-6, max_nfev=max_nfev, method="trf")
+        if not (np.all(np.isfinite(sol.x)) and 2 * sol.cost < float(r0 @ r0)):
+            return st
+        return build(sol.x)

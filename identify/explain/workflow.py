@@ -1,0 +1,322 @@
+"""Discrepancy workflow: where a model and the rig (or its recording) disagree, which effects are missing,
+and how much adding them closes the gap.
+
+    analysis = DiscrepancyAnalysis().fit(recording)        # or DiscrepancyAnalysis(baseline=model)
+    analysis.result()["effects"]                           # [{name, kind, terms, coefficients, ...}, ...]
+
+1. Baseline: a given model (digital twin, earlier identification), or the textbook Duffing structure
+   {q1, q2, q2^3, input} (plus a constant for force inputs, whose DC is in band) fitted by equation
+   error and refit on the multiple-shooting error (identify.simulation.shooting), which keeps it on the measured
+   branch of the resonance's jump.
+2. Gap: the held-out multiple-shooting NRMSE of the measured signal (q'' for the accelerometer rig, y for
+   force inputs), against the sensor-noise floor (identify.noise.floor). The first round's totals (the gap,
+   the share a candidate closes, the bootstrap) leave out the largest TRIM_SHARE of the held-out
+   segments' errors (identify.simulation.shooting.trimmed_total): no segment that holds the resonance's jump, a
+   bifurcation a model's last digits move, can decide whether anything is missing or what (later
+   rounds decide on plain sums, _total). The jump itself is reported
+   apart: its time and frequency, measured and as the models' free runs predict it (identify.explain.jumps).
+3. Explain until explained (identify.explain.rounds, candidates from identify.explain.effects): while the gap is above
+   `none_factor` x the noise floor, every catalog effect (physics and measurement faults) is fitted on
+   top of the current explanation; candidates a rule excludes are dropped; the best by training
+   shooting error is added if it removes at least `min_gap_closed` of the held-out squared shooting
+   error. Each added effect's confidence: (1 - Wald p) x the block-bootstrap probability that it beats
+   both the runner-up and the explanation before it; candidates that come within SURROGATE_SHARE of
+   what it closes are reported as its surrogates.
+4. Answer: `effect` = the first added effect; `none` when the baseline's gap is within `none_factor`
+   x the noise floor; `unexplained` when it is above and no candidate closes enough, with the
+   localisation of what remains (also given when effects were added but the gap stays above
+   OUTSIDE_FACTOR x the floor: then the named effects are flagged as surrogates for physics outside
+   the catalog and their confidence is scaled by the share of the excess error they explain).
+5. A drifting sensor bias, which the band-limited chain removes before any gap is measured, is looked
+   for in the raw channels below the band (identify.explain.drift) and listed after the effects; it is the
+   answer when the gap needs nothing else.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..chain.states import reconstruct_states
+from .effects import CATALOG, Effect
+from .effects.stiffness_drift import sweep_direction
+from ..errors import IdentificationError
+from .rounds import SURROGATE_SHARE, Rounds, closed_shares
+from ..identifier import holdout_blocks
+from .jumps import jump_time
+from .localise import excitation_hz, localise, remaining
+from ..model import SparseModel
+from ..noise.floor import noise_floor
+from ..data.recording import Recording
+from ..simulation.shooting import TRIM_SHARE
+from .structure import GAP_SIGNAL, Fitter, Structure
+from ..threads import one_blas_thread
+
+__all__ = ["DiscrepancyAnalysis", "closed_shares"]
+
+TEXTBOOK = ("q1", "q2", "q2^3")
+METRIC = {"base": "held-out multiple-shooting NRMSE of the relative acceleration q''",
+          "force": "held-out multiple-shooting NRMSE of the output y"}
+#: Candidates are looked at once the baseline's gap exceeds this multiple of the floor; below
+#: none_factor x the floor the first effect must clear explain_rounds.NEAR_CLOSED / NEAR_P_BEATS.
+LOOK_FACTOR = 1.0
+#: Once an effect is added, the next one is looked for while the gap is above the (upper-estimate) noise
+#: floor, as the issue asks. Perfect models reach 0.6-0.9x of it (measured: Coulomb friction, gain and
+#: delay faults on the design rig at 2048 Hz), a missing second effect left 1.07x at 1000 Hz and 1.7x at
+#: 2048 Hz. It was 0.7x: below the floor the rest is mostly the noise plus what an effect's form misses,
+#: and the suite's quadratic damping + hysteresis rig (case 57 of benchmarks/explain_robustness.py) then
+#: took displacement-dependent damping at 0.95x the floor, confidence 1.0, for what Bouc-Wen n = 1 left.
+CONTINUE_FACTOR = 1.0
+#: The explanation so far is refit on the shooting error to convergence (this many evaluations; a
+#: candidate's refit stops at 12) before the gap decides whether something is still missing: case 88 of
+#: benchmarks/explain_robustness.py (quadratic stiffness + Bouc-Wen hysteresis, both named) left 1.79x
+#: the floor after 12, 1.10x after 40 (as after 100), and took cubic damping, confidence 1.0, for the
+#: difference.
+POLISH_NFEV = 40
+#: Above this multiple of the noise floor after the explanation, the rest is outside the catalog.
+OUTSIDE_FACTOR = 5.0
+OUTSIDE = "physics outside the catalog"
+
+
+def default_catalog() -> dict[str, Effect]:
+    """The effects offered in the rounds: every registered one that is looked for there (a bias drift is
+    looked for in the raw channels after the rounds: the chain removes it before any gap is measured)."""
+    return {k: v for k, v in CATALOG.items() if v.in_rounds}
+
+
+class DiscrepancyAnalysis(Rounds):
+    """Parameters: baseline (SparseModel or None for the fitted textbook Duffing), catalog of effects
+    ({name: Effect}; default: identify.explain.effects' registry), holdout_fraction, alpha (Wald test level for
+    physics terms), min_gap_closed (smallest share of the current held-out squared shooting error an
+    added effect must remove), none_factor (gap within this multiple of the noise floor: nothing to
+    explain), max_effects, refine (shooting refit of baseline and candidates), band_hz (measurement chain)."""
+
+    def __init__(self, baseline: SparseModel | None = None, catalog: dict[str, Effect] | None = None,
+                 holdout_fraction: float = 0.2, alpha: float = 1e-3, min_gap_closed: float = 0.2,
+                 none_factor: float = 2.0, max_effects: int = 3, refine: bool = True, band_hz=None):
+        self.baseline = baseline
+        self.catalog = catalog
+        self.holdout_fraction = holdout_fraction
+        self.alpha = alpha
+        self.min_gap_closed = min_gap_closed
+        self.none_factor = none_factor
+        self.max_effects = max_effects
+        self.refine = refine
+        self.band_hz = band_hz
+
+    # -- fitting ----------------------------------------------------------------------------------
+    @one_blas_thread  # as SparseIdentifier.fit: small BLAS products, oversubscribed under load (identify.threads)
+    def fit(self, recording: Recording) -> "DiscrepancyAnalysis":
+        catalog = default_catalog() if self.catalog is None else self.catalog
+        sig = reconstruct_states(recording, self.band_hz)
+        edges, held = holdout_blocks(sig, self.holdout_fraction)
+        if not held.any():
+            raise IdentificationError("the discrepancy workflow needs held-out samples (holdout fraction > 0)")
+        fitter = Fitter(recording, sig, edges, held)
+        self.layout_, self.states_, self.fitter_ = recording.layout, sig, fitter
+        self.heldout_rows_ = fitter.rows_held
+        cur, err = self._baseline(recording, sig, fitter)
+        cur, err, effects = self._explain(fitter, cur, err, catalog)
+        self._answer(cur, err, effects)
+        for e in effects:  # the coefficients of the final model, all effects refit together
+            e["coefficients"].update({t: cur.coefficients.get(t, 0.0) for t in e["terms"]})
+            if e["name"] in CATALOG:
+                e["coefficients"].update(CATALOG[e["name"]].refit_fields(cur))
+        self._flag_outside(effects)
+        self.sweep_rho_ = sweep_direction(sig)
+        for e in effects:
+            if e["name"] in CATALOG:
+                CATALOG[e["name"]].annotate(e, self)
+        self._after_rounds(recording, sig, effects)
+        self.terms_ = effects[0]["terms"] if effects else []
+        self.pair_p_value_ = effects[0].get("p_beats_runner_up") if effects else None
+        self._validate(fitter, sig, cur, err, effects)
+        return self
+
+    def _baseline(self, recording, sig, fitter):
+        """The baseline structure (refit on the shooting error when it is the textbook one), its segments,
+        per-segment errors, the gap before and the noise floor."""
+        start = self._baseline_structure(recording, sig.input_name, fitter)
+        k = -start.coefficients.get("q2", 0.0)
+        self.f_res_hz_ = np.sqrt(k) / (2 * np.pi) if k > 0 else 0.1 * sig.band_hz[1]
+        fitter.set_segments(self.f_res_hz_)
+        cur = fitter.refine(start) if (self.baseline is None and self.refine) else start
+        self.baseline_structure_ = cur
+        self._base_fit = fitter.equation_fit(cur)
+        self.baseline_residual_mse_ = self._base_fit.mse_heldout
+        meas0 = fitter.data(cur).measured
+        self.gap_measured_ = meas0
+        self._norm = float(sum(np.sum((meas0[a:b] - meas0[fitter.rows_held].mean()) ** 2)
+                               for a, b, h in zip(fitter.starts, fitter.stops, fitter.seg_held) if h))
+        err = fitter.errors(cur)
+        self.noise_floor_ = noise_floor(recording, sig, fitter.rows_held)
+        self.gap_before_ = self._gap(err)
+        self.baseline_segment_errors_ = err  # per shooting segment (held-out: fitter_.seg_held)
+        return cur, err
+
+    def _explain(self, fitter, cur, err, catalog):
+        """Explain until explained: rounds while the gap is above the floor (LOOK_FACTOR, then
+        CONTINUE_FACTOR), each adding the best candidate that closes enough, the whole refit after."""
+        effects, rounds = [], []
+        cur_se, mse0 = self._base_fit.se, self._base_fit.mse_heldout
+        self._plain = False
+        while len(effects) < self.max_effects and self._decision_gap(err) > (
+                LOOK_FACTOR if not effects else CONTINUE_FACTOR) * self.noise_floor_:
+            # within none_factor x the floor the answer is `none` unless a candidate clearly closes the gap
+            near = not effects and self._gap(err) <= self.none_factor * self.noise_floor_
+            step = self._round(fitter, cur, err, cur_se, mse0, catalog, near)
+            self._plain = True  # rounds after the first decide on plain sums (see _total)
+            rounds.append(step["table"])
+            if step["best"] is None:
+                break
+            best, entry, gap_prev = step["best"], step["entry"], self._gap(err)
+            cur, err = best.structure, best.err
+            if self.refine:
+                cur, err = self._polish(fitter, cur, err)
+                entry.update(gap_after=self._gap(err), **closed_shares(gap_prev, self._gap(err)))
+            effects.append(entry)
+            cur_se = fitter.equation_fit(cur).se
+        self.rounds_ = rounds
+        self.candidates_ = rounds[0] if rounds else []
+        return cur, err, effects
+
+    def _answer(self, cur, err, effects) -> None:
+        """The answer: the first effect added, `none` or `unexplained`, and its confidence."""
+        self.effects_ = effects
+        self.final_structure_ = cur
+        self.gap_after_ = self._gap(err)
+        floor = self.noise_floor_
+        ratio = self.gap_before_ / floor if floor > 0 else np.inf
+        if effects:
+            self.effect_ = effects[0]["name"]
+            self.confidence_ = effects[0]["confidence"]
+        elif self.gap_before_ <= self.none_factor * floor:
+            self.effect_ = "none"
+            # the gap sits at the noise floor: as sure as it is below the threshold (0.5 at it)
+            self.confidence_ = float(np.clip(1 - 0.5 * (ratio - 1) / (self.none_factor - 1), 0.5, 0.99))
+        else:
+            self.effect_ = "unexplained"
+            # how sure that something is missing: 0.5 at none_factor x the floor (the threshold), 0.99
+            # from twice that (the mirror of `none`'s); the closest candidate is in `candidates`
+            self.confidence_ = float(np.clip(0.5 + 0.5 * (ratio / self.none_factor - 1), 0.5, 0.99))
+
+    def _validate(self, fitter, sig, cur, err, effects) -> None:
+        """Models, free runs (validation), the jump, localisation and what remains."""
+        self.baseline_model_ = self.baseline if self.baseline is not None else fitter.model(
+            cur if not effects else self.baseline_structure_)
+        self.model_ = fitter.model(cur)
+        self.sim_before_qdot_ = fitter.free_run(self.baseline_structure_)
+        self.sim_after_qdot_ = fitter.free_run(cur) if effects else self.sim_before_qdot_
+        self.validation_before_ = self._validation(self.sim_before_qdot_)
+        self.validation_after_ = self._validation(self.sim_after_qdot_)
+        self.jump_ = self._jump(self.gap_measured_, self.sim_before_qdot_, self.sim_after_qdot_)
+        # localisation reads the model on the measured (q1, q2) and the input alone
+        states, inputs = fitter.names(self.baseline_structure_)
+        self.localisation_ = localise(fitter.model(self.baseline_structure_), sig) \
+            if states == ("q1", "q2") and inputs == (sig.input_name,) else {}
+        self.remaining_ = None
+        if self.gap_after_ > self.none_factor * self.noise_floor_ and (
+                self.effect_ == "unexplained" or any(OUTSIDE in e["surrogate_for"] for e in effects)):
+            self.remaining_ = remaining(fitter, cur, err)
+
+    def _after_rounds(self, recording, sig, effects: list) -> None:
+        """What effects show outside the gap, looked for after the rounds (a drifting sensor bias in the
+        raw channels: identify.explain.effects.bias_drift), listed after whatever closed the gap; such an effect
+        is the answer when nothing else was (`none` becomes it); an `unexplained` gap stays unexplained."""
+        self.bias_trends_ = []
+        for effect in CATALOG.values():
+            for entry in effect.after_rounds(self, recording, sig):
+                effects.append(entry)
+                if self.effect_ == "none":
+                    self.effect_, self.confidence_ = entry["name"], entry["confidence"]
+
+    def _baseline_structure(self, recording, u_name, fitter) -> Structure:
+        if self.baseline is not None:
+            b = self.baseline
+            if tuple(b.inputs) != (u_name,):
+                raise IdentificationError(f"baseline model's input {b.inputs} does not match the recording's ({u_name})")
+            if tuple(b.states) != ("q1", "q2"):
+                raise IdentificationError(f"baseline model's states {b.states}: the discrepancy workflow takes (q1, q2)")
+            terms = list(b.equations["q1_dot"]) + ([u_name] if u_name not in b.equations["q1_dot"] else [])
+            return Structure(tuple(terms), travel=b.travel.get("q2"), coef=tuple(b.equations["q1_dot"].items()))
+        terms = list(TEXTBOOK) + [u_name]
+        if recording.layout == "force":
+            # DC is inside the band for a force input, so an offset of the force channel (Silverbox:
+            # +6 mV) is a constant force the textbook model must carry; for accelerations it is filtered
+            terms.insert(0, "1")
+        st = Structure(tuple(terms))
+        fit = fitter.equation_fit(st)
+        return Structure(st.terms, coef=tuple(fit.coef.items()))
+    def _jump(self, measured, before, after) -> dict:
+        """The jump as its own observable (identify.explain.jumps): measured, and as the baseline's and the
+        explanation's free runs predict it; None where there is none."""
+        sig = self.fitter_.sig0
+        u = sig.input[sig.valid]
+
+        def at(signal):
+            j = jump_time(signal, u, sig.fs_hz, self.f_res_hz_)
+            if j is None:
+                return None
+            r = j["row"]
+            return {"t_s": (sig.valid.start + r) / sig.fs_hz, "direction": j["direction"], "ratio": j["ratio"],
+                    "excitation_hz": excitation_hz(u, max(r - 1, 0), r + 1, sig.fs_hz, sig.band_hz[0])}
+
+        return {"measured": at(measured), "predicted_before": at(before), "predicted_after": at(after)}
+    def _polish(self, fitter: Fitter, st: Structure, err: np.ndarray):
+        """(structure, per-segment errors) refit to convergence on the training segments' shooting error
+        (kept only if the training error falls)."""
+        train = ~fitter.seg_held
+        out = fitter.refine(st, max_nfev=POLISH_NFEV)
+        if out is st:
+            return st, err
+        e = fitter.errors(out)
+        return (out, e) if np.sum(e[train]) < np.sum(err[train]) else (st, err)
+    def _flag_outside(self, effects: list) -> None:
+        """Effects added but the gap stays well above the noise floor: what they explain is partly
+        something else. Flag them and scale their confidence by the share of the excess explained."""
+        floor = self.noise_floor_
+        if not effects or self.gap_after_ <= OUTSIDE_FACTOR * floor:
+            return
+        excess = self.gap_before_ ** 2 - floor ** 2
+        share = (self.gap_before_ ** 2 - self.gap_after_ ** 2) / excess if excess > 0 else 0.0
+        for e in effects:
+            e["surrogate_for"] = e["surrogate_for"] + [OUTSIDE]
+            e["confidence"] = float(e["confidence"] * np.clip(share, 0, 1))
+        self.confidence_ = effects[0]["confidence"]
+    def _validation(self, sim: np.ndarray) -> dict:
+        """Full free run (one simulation over the record) against the measured gap signal."""
+        from ..simulation.validation import fit_metrics
+
+        h = self.heldout_rows_
+        return {"diverged": bool(not np.all(np.isfinite(sim))),
+                "heldout": {GAP_SIGNAL[self.layout_]: fit_metrics(self.gap_measured_[h], sim[h])},
+                "all": {GAP_SIGNAL[self.layout_]: fit_metrics(self.gap_measured_, sim)}}
+
+    # -- the JSON document ------------------------------------------------------------------------
+
+    # -- the JSON document ------------------------------------------------------------------------
+    def result(self) -> dict:
+        """The `shakeid explain --json` document."""
+        gb, ga = self.gap_before_, self.gap_after_
+        return {
+            "effect": self.effect_, "terms": self.terms_, "confidence": self.confidence_,
+            "effects": self.effects_,
+            "candidates": self.candidates_, "rounds": self.rounds_,
+            "gap_before": gb, "gap_after": ga,
+            "gap_closed": (1 - ga / gb) if gb else None,
+            "metric": METRIC[self.layout_],
+            "noise_floor": self.noise_floor_,
+            "model": self.model_.to_dict()["model"],
+            **{k: v for k, v in self.model_.to_dict().items() if k in ("states", "inputs", "travel")},
+            "measurement": {k: v for k, v in self.final_structure_.meas if v},
+            "baseline": {"model": self.baseline_model_.to_dict()["model"],
+                         "source": "given" if self.baseline is not None else "textbook Duffing fitted",
+                         "equation_error_heldout_mse": self.baseline_residual_mse_},
+            "validation": {"before": self.validation_before_, "after": self.validation_after_},
+            "localisation": {k: v for k, v in self.localisation_.items() if not k.startswith("_")},
+            "remaining": self.remaining_,
+            "thresholds": {"alpha": self.alpha, "min_gap_closed": self.min_gap_closed,
+                           "none_factor": self.none_factor, "outside_factor": OUTSIDE_FACTOR,
+                           "surrogate_share": SURROGATE_SHARE, "trim_share": TRIM_SHARE},
+            "p_beats_runner_up": self.pair_p_value_,
+            "jump": self.jump_,
+            "bias_trends": self.bias_trends_,
+        }

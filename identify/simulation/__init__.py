@@ -1,0 +1,1 @@
+"""Free run of a model: simulation, validation, output-error refine, multiple shooting."""

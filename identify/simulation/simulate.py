@@ -1,0 +1,187 @@
+"""Free-run simulation of a SparseModel driven by a sampled (or analytic) input.
+
+Fixed-step classical RK4 in a compiled kernel, `substeps` steps per sample interval. The input at
+the RK stages (every half step) comes from interpolating the samples: band-limited by default
+(polyphase windowed-sinc, right for signals sampled above Nyquist such as accelerometer channels),
+or linear / cubic. Inputs known between samples can be given on the fine grid: the rig simulator's
+analytic table motion, and the chain's band-limited input, exact from its spectrum
+(identify.chain.states.StateSignals.input_fine: what validation and the free-run refit use).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.signal import resample_poly
+
+from .. import _simkernel
+from ..model import SparseModel
+
+#: RK4 step size target: h * omega_max. The global error grows as (h omega)^4 below it: the Table 1 rig
+#: under an 8 s sweep, of its peak, 1.2e-8 / 2.0e-7 / 3.4e-6 at h omega 0.036 / 0.072 / 0.14
+#: (tests/identify/test_simulate.py); on the million-sample sweep of benchmarks/identify_speed.py,
+#: whose error peaks at resonance, 6.9e-7 / 1.4e-5 at 0.036 / 0.072. Either way below any
+#: accelerometer's noise (0.5 % = 5e-3), which is what a free run is compared with.
+STEP_OMEGA = 0.1
+MAX_SUBSTEPS = 256
+#: Longest RK4 step, in samples, of a smooth model slow against the sample rate (choose_step).
+MAX_STRIDE = 4
+
+
+@dataclass
+class SimulationResult:
+    """Simulated states (n, n_states); rows after a divergence are NaN."""
+
+    states: np.ndarray
+    n_valid: int
+    substeps: int
+    #: samples per RK4 step (simulate's stride; 1: `substeps` steps per sample)
+    stride: int = 1
+
+    @property
+    def diverged(self) -> bool:
+        return self.n_valid < self.states.shape[0]
+
+
+def fine_grid_input(inputs: np.ndarray, substeps: int, interpolation: str = "bandlimited") -> np.ndarray:
+    """Input samples (n, n_inputs) -> values every h/2, shape ((n-1)*2*substeps+1, n_inputs)."""
+    inputs = np.asarray(inputs, dtype=float)
+    if inputs.ndim == 1:
+        inputs = inputs[:, None]
+    n = inputs.shape[0]
+    up = 2 * substeps
+    n_fine = (n - 1) * up + 1
+    if n < 2 or up == 1:
+        return np.ascontiguousarray(inputs[:n_fine])
+    if interpolation == "linear":
+        x = np.arange(n_fine) / up
+        return np.column_stack([np.interp(x, np.arange(n), c) for c in inputs.T])
+    if interpolation == "cubic":
+        return CubicSpline(np.arange(n), inputs, axis=0)(np.arange(n_fine) / up)
+    if interpolation == "bandlimited":
+        # resample_poly keeps the original samples' positions (output[k*up] ~= input[k]) and handles
+        # non-periodic records without wrap-around; mean removed so its zero-padded edges do not ring.
+        mean = inputs.mean(axis=0)
+        if inputs.shape[1] == 1:  # one channel as a 1-D signal: the same numbers, without the strided axis
+            return (resample_poly(inputs[:, 0] - mean[0], up, 1)[:n_fine] + mean[0])[:, None]
+        fine = resample_poly(inputs - mean, up, 1, axis=0)[:n_fine] + mean
+        return np.ascontiguousarray(fine)
+    raise ValueError(f"unknown interpolation {interpolation!r} (bandlimited, cubic, linear)")
+
+
+def max_frequency(model: SparseModel, state_scale, n_grid: int = 6) -> float:
+    """Largest |eigenvalue| (rad/s) of the model's Jacobian over a grid of states within +-state_scale.
+
+    The grid has an even number of points, so no point sits on a state's zero, where sign(q) and |q|
+    jump or kink: a difference quotient across the jump is 1/eps, not a frequency."""
+    scale = np.asarray(state_scale, dtype=float)
+    axes = [np.linspace(-s, s, n_grid) for s in scale]
+    pts = np.stack(np.meshgrid(*axes), axis=-1).reshape(-1, len(scale))
+    u = np.zeros((pts.shape[0], len(model.inputs)))
+    eps = 1e-6 * np.maximum(scale, 1e-12)
+    jac = np.empty((pts.shape[0], len(scale), len(scale)))
+    for i in range(len(scale)):
+        dp = np.zeros(len(scale))
+        dp[i] = eps[i]
+        jac[:, :, i] = (model.rhs(pts + dp, u) - model.rhs(pts - dp, u)) / (2 * eps[i])
+    jac = np.where(np.isfinite(jac), jac, 0.0)
+    return float(np.max(np.abs(np.linalg.eigvals(jac)))) if jac.size else 0.0
+
+
+def choose_substeps(model: SparseModel, dt: float, state_scale) -> int:
+    """RK4 steps per sample so that h omega_max <= STEP_OMEGA."""
+    return choose_step(model, dt, state_scale)[0]
+
+
+def choose_step(model: SparseModel, dt: float, state_scale) -> tuple[int, int]:
+    """(substeps, stride): RK4 steps of dt / substeps with h omega_max <= STEP_OMEGA, or, for a model
+    without end stops slow enough for steps of several samples, steps of `stride` <= MAX_STRIDE samples
+    within the same bound (simulate's stride: the Table 1 rig at 2048 Hz, omega_max dt = 0.036, takes
+    steps of 2 samples)."""
+    omega = max_frequency(model, state_scale)
+    substeps = int(np.clip(np.ceil(omega * dt / STEP_OMEGA), 1, MAX_SUBSTEPS))
+    if substeps > 1 or has_end_stops(model):
+        return substeps, 1
+    return 1, int(np.clip(np.floor(STEP_OMEGA / max(omega * dt, 1e-300)), 1, MAX_STRIDE))
+
+
+def has_end_stops(model: SparseModel) -> bool:
+    """Whether any term uses an end-stop feature (stop(q), contact(q)), whose jumps need the kernel's
+    step cutting, sample by sample."""
+    _, feat, _ = model.space.encode(model.terms)
+    return bool(np.any(np.asarray(feat) >= 3 * len(model.states) + len(model.inputs)))
+
+
+def equation_rows(model: SparseModel, states, inputs, equation: int = 0) -> np.ndarray:
+    """model.rhs(states, inputs)[:, equation] (the equation's derivative, e.g. q1_dot in m/s^2) at n
+    independent rows, in the compiled kernel: one pass, none of the library's intermediate columns.
+
+    states : sequence of n_states 1-D arrays (n,) (strided views are fine), or an (n, n_states) array;
+    inputs : (n, n_inputs) array, a sequence of columns, or one column (n,). End-stop features take each
+    row's own side."""
+    def columns(a):
+        if isinstance(a, np.ndarray):
+            return list(a.T) if a.ndim == 2 else [a]
+        return list(a)
+
+    cols = columns(states) + columns(inputs)
+    cols = [np.asarray(c, dtype=float) for c in cols]
+    n = cols[0].shape[0] if cols else 0
+    if len(cols) != len(model.states) + len(model.inputs):
+        raise ValueError(f"{len(cols)} columns; model has states {model.states} and inputs {model.inputs}")
+    coef = np.zeros_like(model.coef_)
+    coef[equation] = model.coef_[equation]  # the other equations' terms are not evaluated at all
+    out = np.empty(n)
+    if n == 0 or not np.any(coef):
+        out[:] = 0.0
+        return out
+    ptr, feat, powr = model.space.encode(model.terms)
+    _simkernel.rhs_rows(np.asarray(ptr, dtype=np.int32).tobytes(), np.asarray(feat, dtype=np.int32).tobytes(),
+                        np.asarray(powr, dtype=np.int32).tobytes(), coef.tobytes(), tuple(cols), int(equation),
+                        out, np.array([model.travel.get(s, np.inf) for s in model.states]).tobytes())
+    return out
+
+
+def simulate(model: SparseModel, dt: float, x0, inputs=None, *, inputs_fine=None, substeps: int | None = None,
+             interpolation: str = "bandlimited", state_scale=None, n_samples: int | None = None,
+             bound: float | None = None, stride: int = 1) -> SimulationResult:
+    """Free-run `model` from state `x0` over the input's samples (spacing `dt` seconds).
+
+    Give either `inputs` (n, n_inputs) sampled at dt, or `inputs_fine` already on the h/2 grid (then
+    `substeps` and `n_samples` are required). `state_scale` (typical |state| per state) sets the
+    substeps automatically; `bound` stops the run when a state leaves [-bound, bound] (divergence).
+    `stride` > 1 (substeps 1, a model without end stops; choose_step says when): RK4 steps of `stride`
+    samples, their input read from the same half-sample grid, the samples inside a step from RK4's
+    continuous extension (third order, like a step's local error).
+    """
+    x0 = np.ascontiguousarray(np.asarray(x0, dtype=float).ravel())
+    if x0.size != len(model.states):
+        raise ValueError(f"x0 has {x0.size} values; model has {len(model.states)} states")
+    if inputs_fine is None:
+        inputs = np.asarray(inputs, dtype=float)
+        inputs = inputs[:, None] if inputs.ndim == 1 else inputs
+        n_samples = inputs.shape[0]
+        if substeps is None:
+            scale = state_scale if state_scale is not None else np.maximum(np.abs(x0), 1e-3)
+            substeps = choose_substeps(model, dt, scale)
+        inputs_fine = fine_grid_input(inputs, substeps, interpolation)
+    elif substeps is None or n_samples is None:
+        raise ValueError("inputs_fine needs substeps and n_samples")
+    u = np.ascontiguousarray(inputs_fine, dtype=float)
+    if u.ndim == 1:
+        u = u[:, None]
+    if u.shape[1] != len(model.inputs):
+        raise ValueError(f"input has {u.shape[1]} channels; model expects {model.inputs}")
+    if bound is None:
+        bound = 1e6 if state_scale is None else 1e3 * float(np.max(state_scale))
+    ptr, feat, powr = model.space.encode(model.terms)
+    out = np.empty((n_samples, x0.size))  # the kernel writes the rows it reaches; the rest are NaN'd below
+    n_valid = _simkernel.simulate(
+        np.asarray(ptr, dtype=np.int32).tobytes(), np.asarray(feat, dtype=np.int32).tobytes(),
+        np.asarray(powr, dtype=np.int32).tobytes(), np.ascontiguousarray(model.coef_).tobytes(),
+        x0.tobytes(), u.reshape(-1), u.shape[1], int(n_samples), int(substeps), int(stride), float(dt), float(bound),
+        out.reshape(-1), np.array([model.travel.get(s, np.inf) for s in model.states]).tobytes())
+    if n_valid < n_samples:
+        out[n_valid:] = np.nan
+    return SimulationResult(out, int(n_valid), int(substeps), int(stride))

@@ -1,0 +1,2 @@
+"""What a fitted model can be trusted for: standard errors, inclusion probabilities, the noise's
+share of the variance."""
