@@ -17,7 +17,7 @@ Steps, each with memory bounded by the chunk (identify.chain.chunked):
    floors from the scan's spectra and the noise covariance from the band, and its raw moments from the
    Gram: no pass over the record. The noise's share of the variance (identify.trust.noise_spread) needs the
    score's transforms: one more pass, chunk by chunk, each chunk's rows paired with an overlap of
-   NOISE_OVERLAP (the chain's overlap) on each side (ChunkedNoise.score_pieces);
+   NOISE_OVERLAP (the chain's overlap) on each side (ChunkedEquations.score_pieces);
 4. validation: free run on held-out windows (below), each started from the measured state.
 
 What is not done out of core, and why (also in result()["out_of_core"]):

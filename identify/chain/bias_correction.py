@@ -85,7 +85,7 @@ class CorrectedSums:
 
     def __init__(self, cov: np.ndarray, raw: dict, signals):
         """raw : {exponents: sum over the fitted rows}; signals : (q1, q2, q1_dot, input) on those rows, or
-        a function exponents -> that sum (a record read in chunks: out_of_core.ChunkedNoise.moment_sum),
+        a function exponents -> that sum (a record read in chunks: out_of_core.ChunkedEquations.moment_sum),
         summed only for a moment missing from raw."""
         self.mu, self.raw, self._signals, self._poly = GaussianMoments(cov), dict(raw), signals, {}
 

@@ -182,7 +182,7 @@ ANALYTIC, SIMEX = "analytic (corrected score)", "SIMEX"
 
 class RecordNoise:
     """What the closed-form chain bias and the noise's share of the variance read of one recording held
-    in memory (identify.out_of_core.ChunkedNoise reads the same chunk by chunk): its noise floors, the
+    in memory (identify.out_of_core.ChunkedEquations reads the same chunk by chunk): its noise floors, the
     chain's image of white noise, raw moment sums the Gram lacks, and the rows the score is built of."""
 
     def __init__(self, recording, sig):
@@ -220,7 +220,7 @@ def closed_form_bias(records: list, gram: BlockGram, library, supports: dict, co
     must do it: a kept term is not a monomial of the states and input, an offset is carried (the
     columns then go through the band: not monomials of the noisy states), or a noise floor cannot be read.
     records : per recording (gram's segments) a RecordNoise, or anything that reads the same (its .sig
-    names the band and input; out of core: identify.out_of_core.ChunkedNoise)."""
+    names the band and input; out of core: identify.out_of_core.ChunkedEquations)."""
     several = len(records) > 1
     if any(r.sig.q2_offset is not None for r in records):
         return None

@@ -44,7 +44,7 @@ class Candidate:
     p_value: float = 0.0
     extra: dict = field(default_factory=dict)     # its searched parameters (report fields)
     same_as: list = field(default_factory=list)   # effects the data cannot tell from it (reported as surrogates)
-    # set by the analysis (identify.explain.rounds.score)
+    # set by the analysis (identify.explain.rounds.Rounds._round)
     err: np.ndarray | None = None   # per-segment squared shooting error
     rejected: str = ""
     admissible: bool = False
