@@ -100,16 +100,17 @@ def _candidates_figure(analysis, result, path):
 def _gap_figure(analysis, result, path, u):
     """The held-out second around the largest baseline error: measurement, baseline and fixed model's
     free runs, and below them the residuals (measured − simulated) of both."""
-    sig = analysis.states_
-    v = sig.valid
     meas = analysis.gap_measured_
     held = analysis.heldout_rows_
     idx = np.flatnonzero(held)
     err = np.abs(np.nan_to_num(analysis.sim_before_qdot_, nan=np.inf) - meas)
     centre = idx[np.nanargmax(err[idx])] if idx.size else int(np.nanargmax(err))
+    part = analysis.fitter_.part_of(centre)  # several recordings: the second shown is within one of them
+    sig = part.sig
+    v = sig.valid
     half = int(sig.fs_hz)
-    z = slice(max(centre - half, 0), min(centre + half, meas.size))
-    tt = (np.arange(v.start, v.stop) / sig.fs_hz)[z]
+    z = slice(max(centre - half, part.offset), min(centre + half, part.offset + part.n))
+    tt = (np.arange(v.start, v.stop) / sig.fs_hz)[z.start - part.offset:z.stop - part.offset]
     ylabel = "relative acceleration (m/s²)" if u else "y"
     after = "+ " + ", ".join(e["name"] for e in result["effects"]) if result["effects"] else None
     fig, (ax, axr) = plt.subplots(2, 1, figsize=(10, 6), gridspec_kw={"height_ratios": [2, 1.2]})
@@ -122,7 +123,8 @@ def _gap_figure(analysis, result, path, u):
     axr.axhline(0, color="0.6", lw=0.6)
     lo, hi = ax.get_ylim()
     ax.set_ylim(lo, hi + 0.3 * (hi - lo))  # room for the legend above the data
-    ax.set(xlabel="time (s)", ylabel=ylabel, title="Free run on held-out samples: before and after")
+    where = f" ({part.rec.source})" if len(analysis.fitter_.parts) > 1 else ""
+    ax.set(xlabel="time (s)", ylabel=ylabel, title=f"Free run on held-out samples{where}: before and after")
     axr.set(xlabel="time (s)", ylabel=f"residual ({u})" if u else "residual", title="Residuals (own scale)")
     ax.legend(fontsize=8, loc="upper left", ncol=3)
     axr.legend(fontsize=8, loc="upper left", ncol=2)
@@ -140,6 +142,13 @@ def _index_html(out: Path, analysis, result: dict, u: str) -> str:
               "unexplained": "something is missing, but no effect of the catalog closes enough of the gap"}
     page.paragraph(f"Answer: {answer.get(effect, 'missing effect: ' + effect)} (confidence "
                    f"{result['confidence']:.2f}). Baseline: {result['baseline']['source']}.")
+    if len(result["recordings"]) > 1:
+        page.table(["recording", "duration (s)", "sweep vs time", "gap before", "gap after", "its noise floor"],
+                   [[r["source"], f"{r['duration_s']:.1f}", f"{r['sweep_rho']:+.2f}", _f(r["gap_before"]),
+                     _f(r["gap_after"]), _f(r["noise_floor"])] for r in result["recordings"]],
+                   "The recordings explained together: one explanation, its errors pooled over all of them. Sweep "
+                   "vs time: the rank correlation of the excitation frequency with time (+1 an up-sweep, -1 a "
+                   "down-sweep); each recording's own held-out gap before and after.")
     floor = result.get("noise_floor")
     page.table(["quantity", "before (baseline)", "after"], [
         ["gap: " + result["metric"], _f(result["gap_before"]), _f(result["gap_after"])],

@@ -127,32 +127,43 @@ def cmd_explain(args) -> int:
     from identify.explain.workflow import DiscrepancyAnalysis
     from identify.data.quality import check_identifiable
 
-    args.file, args.samples = file_and_samples(args.file, getattr(args, "samples", None))
+    names, samples = list(args.files), getattr(args, "samples", None)
     baseline = _baseline(args.model) if args.model else None
     if args.report:
         from reports.html import check_report_folder
 
         check_report_folder(args.report, "explain")  # before the analysis
-    rec = _read(args)
-    data = check_identifiable(rec, args.file, args.accept_faulty,  # as identify: no analysis of unusable data
-                              "use --accept-faulty to analyse it anyway")
+    recs, data = [], None
+    for name in names:  # several: one explanation over all of them (identify.explain.several)
+        args.file, args.samples = file_and_samples(name, samples)
+        rec = _read(args)
+        quality = check_identifiable(rec, args.file, args.accept_faulty,  # as identify: no analysis of unusable data
+                                     "use --accept-faulty to analyse it anyway")
+        recs.append(rec)
+        data = data or quality  # the first recording's, as the document has always said (each is checked)
     try:
-        analysis = DiscrepancyAnalysis(baseline=baseline, band_hz=tuple(args.band) if args.band else None).fit(rec)
+        analysis = DiscrepancyAnalysis(baseline=baseline, band_hz=tuple(args.band) if args.band else None).fit(recs)
     except IdentificationError as exc:
-        raise _naming(args.file, exc) from None
+        raise (_naming(args.file, exc) if len(recs) == 1 else ShakeidError(str(exc))) from None
     result = {**analysis.result(), **data}
     from identify.frf.side_by_side import for_explanation  # the jumps before/after beside the sweep's
 
-    result["frf"] = for_explanation(result, analysis.baseline_model_, analysis.model_, [rec])
+    result["frf"] = for_explanation(result, analysis.baseline_model_, analysis.model_, recs)
     replaced = _write_report("explain", analysis, args.report, result)
     if args.json:
         print(json.dumps(result))
         return 0
     f = lambda v: "n/a" if v is None else f"{v:.4f}"  # noqa: E731
+    if len(recs) > 1:
+        print(f"{len(recs)} recordings explained together:")
+        for r in result["recordings"]:
+            print(f"  {r['source']}: {r['duration_s']:.1f} s, sweep rank correlation with time {r['sweep_rho']:+.2f}, "
+                  f"gap {f(r['gap_before'])} -> {f(r['gap_after'])} (its floor {f(r['noise_floor'])})")
     print(f"baseline: {result['baseline']['source']}; {result['metric']}: {f(result['gap_before'])}"
           f" (sensor-noise floor <= {f(result['noise_floor'])})")
     worst = result["localisation"]["time"]["worst_window"]
-    print(f"largest misfit: {_span(worst)} into the recording, excitation {worst['excitation_hz']:.1f} Hz")
+    where = result["localisation"].get("recording", "the recording")
+    print(f"largest misfit: {_span(worst)} into {where}, excitation {worst['excitation_hz']:.1f} Hz")
     print("candidates (equation-error share: of the held-out equation error it explains; shooting gap closed: "
           "1 - gap after² / gap before²):")
     for c in result["candidates"]:
@@ -326,8 +337,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.set_defaults(func=cmd_identify)
     add_batch_parser(sub, _add_identify_options, _identifier, _read)
     q = sub.add_parser("explain", help="where a model misses the rig, which effect is missing, and the fix")
-    q.add_argument("file", help=f"the recording ({FORMAT_NAMES}); FILE[START:STOP]: its samples "
-                                "[START, STOP) only")
+    q.add_argument("files", nargs="+", metavar="FILE",
+                   help=f"the recording ({FORMAT_NAMES}); FILE[START:STOP]: its samples [START, STOP) only; several "
+                        "recordings of one rig (an up and a down sweep, several amplitudes): one explanation over all")
     q.add_argument("--model", metavar="MODEL.json",
                    help="baseline model, e.g. model.json of an identify --report (default: the textbook Duffing, "
                         "fitted to the data)")

@@ -79,27 +79,80 @@ class Fit:
     mse_heldout: float
 
 
+@dataclass
+class Part:
+    """One recording in the fit: its chain's signals, its own blocks (edges over its valid rows) and
+    held-out ones, its channel chain (base layout), its drift time tau, and where its valid rows start
+    among the pooled rows."""
+
+    rec: Recording
+    sig: StateSignals
+    edges: np.ndarray
+    held: np.ndarray
+    chain: ChannelChain | None
+    tau: np.ndarray
+    offset: int
+
+    @property
+    def n(self) -> int:
+        return self.sig.valid.stop - self.sig.valid.start
+
+
 class Fitter:
-    def __init__(self, rec: Recording, sig: StateSignals, edges: np.ndarray, held: np.ndarray):
-        self.rec, self.sig0, self.edges, self.held = rec, sig, edges, held
-        self.layout = rec.layout
+    """Fits structures over one recording or several of the same rig (same layout, input and sampling
+    rate), pooled: each recording keeps its own chain, states, blocks and shooting segments (none crosses
+    from one recording into the next), its rows follow the previous recording's; the equation error sums
+    the blocks of all, the shooting error is per segment of all, and the coefficients (and fault
+    parameters) are one set. A single recording is the list of one.
+
+    The drift time tau runs over each recording (t/T - 1/2 of its own length), not over the campaign: a
+    recording carries no clock the others share, a rig rests (and cools) between recordings, and the
+    catalog's drift is k (1 + r t/T) over a record, so its rate means the same over one recording or
+    several; what several recordings add is sweeps in both directions, over which a drift keeps its
+    sign in time while a frequency-dependent stiffness flips."""
+
+    def __init__(self, parts: list[tuple[Recording, StateSignals, np.ndarray, np.ndarray]]):
+        self.parts: list[Part] = []
+        offset = 0
+        for rec, sig, edges, held in parts:
+            v = sig.valid
+            n = rec.n_samples
+            chain = ChannelChain(rec, sig) if rec.layout == "base" else None
+            self.parts.append(Part(rec, sig, np.asarray(edges), np.asarray(held), chain,
+                                   (np.arange(n) / max(n - 1, 1) - 0.5)[v], offset))
+            offset += v.stop - v.start
+        first = self.parts[0]
+        self.rec, self.sig0 = first.rec, first.sig
+        #: block edges and held-out flags over the pooled valid rows
+        self.edges = np.concatenate([first.edges] + [p.edges[1:] + p.offset for p in self.parts[1:]])
+        self.held = np.concatenate([p.held for p in self.parts])
+        self.cuts = tuple(p.offset for p in self.parts[1:])
+        self.layout = first.rec.layout
         self.gap = GAP_SIGNAL[self.layout]
-        self.u_name = sig.input_name
-        self.chain = ChannelChain(rec, sig) if self.layout == "base" else None
-        v = sig.valid
-        n = rec.n_samples
-        self.tau = (np.arange(n) / max(n - 1, 1) - 0.5)[v]
-        self.rows_held = np.repeat(held, np.diff(edges))
+        self.u_name = first.sig.input_name
+        self.fs_hz = first.sig.fs_hz
+        self.chain = first.chain  # None for a force layout (no channel faults)
+        self.tau = np.concatenate([p.tau for p in self.parts])
+        self.rows_held = np.repeat(self.held, np.diff(self.edges))
         self._z: dict = {}
         self._data: dict = {}
         self.starts = self.stops = self.seg_held = None
 
     # -- signals ----------------------------------------------------------------------------------
-    def signals(self, st: Structure) -> StateSignals:
+    def signals(self, st: Structure) -> list[StateSignals]:
+        """Each recording's signals, corrected for the structure's fault parameters."""
         p = st.p
         if self.chain is None or not any(p.values()):
-            return self.sig0
-        return self.chain.signals(p)
+            return [part.sig for part in self.parts]
+        return [part.chain.signals(p) for part in self.parts]
+
+    def pooled(self, sigs: list[StateSignals], name: str) -> np.ndarray:
+        """A signal of every recording on its valid rows, one after another."""
+        return np.concatenate([getattr(s, name)[s.valid] for s in sigs])
+
+    def displacement(self, st: Structure) -> np.ndarray:
+        """The displacement q2 on the pooled valid rows (the range an end stop or hysteresis searches)."""
+        return self.pooled(self.signals(st), "q2")
 
     def z_state(self, sig: StateSignals, hyst) -> np.ndarray:
         """Bouc-Wen state integrated from the measured velocity (valid rows), z(0) = 0."""
@@ -121,12 +174,14 @@ class Fitter:
         inputs = (self.u_name, "tau") if any("tau" in t for t in st.terms) else (self.u_name,)
         return states, inputs
 
-    def arrays(self, st: Structure, sig: StateSignals | None = None):
-        """(states (n, k), inputs (n, m)) on the valid rows."""
-        sig = sig or self.signals(st)
-        v = sig.valid
-        cols = [sig.q1[v], sig.q2[v]] + ([self.z_state(sig, st.hyst)] if st.hyst is not None else [])
-        ins = [sig.input[v]] + ([self.tau] if any("tau" in t for t in st.terms) else [])
+    def arrays(self, st: Structure, sigs: list[StateSignals] | None = None):
+        """(states (n, k), inputs (n, m)) on the pooled valid rows."""
+        sigs = sigs or self.signals(st)
+        drift = any("tau" in t for t in st.terms)
+        cols = [self.pooled(sigs, "q1"), self.pooled(sigs, "q2")]
+        if st.hyst is not None:
+            cols.append(np.concatenate([self.z_state(s, st.hyst) for s in sigs]))
+        ins = [self.pooled(sigs, "input")] + ([self.tau] if drift else [])
         return np.column_stack(cols), np.column_stack(ins)
 
     def library(self, st: Structure) -> Library:
@@ -136,14 +191,15 @@ class Fitter:
 
     # -- equation error ---------------------------------------------------------------------------
     def equation_fit(self, st: Structure, band_limited: bool = True) -> Fit:
-        sig = self.signals(st)
+        sigs = self.signals(st)
         lib = self.library(st)
-        X, U = self.arrays(st, sig)
+        X, U = self.arrays(st, sigs)
         T = self.tie_matrix(st, lib.names)  # all coefficients = T @ the free ones
         A = lib.evaluate(X, U) @ T
-        if band_limited:
-            A = np.column_stack([sig.band_limit(c) for c in A.T])
-        gram = BlockGram(np.column_stack([A, sig.q1_dot[sig.valid]]), 1, self.edges)
+        if band_limited:  # each recording's rows through its own band
+            A = np.vstack([np.column_stack([s.band_limit(c) for c in A[p.offset:p.offset + p.n].T])
+                           for s, p in zip(sigs, self.parts)])
+        gram = BlockGram(np.column_stack([A, self.pooled(sigs, "q1_dot")]), 1, self.edges)
         train, heldout = gram.equations(~self.held), gram.equations(self.held)
         support = np.ones(A.shape[1], bool)
         x = least_squares(train.G, train.B[:, 0], support)
@@ -176,22 +232,25 @@ class Fitter:
         return SparseModel(eqs, states=states, inputs=inputs, travel={"q2": st.travel} if st.travel else None)
 
     def set_segments(self, f_res_hz: float) -> None:
-        self.starts, self.stops, self.seg_held = segment_edges(self.edges, self.held, self.sig0.fs_hz, f_res_hz)
+        self.starts, self.stops, self.seg_held = segment_edges(self.edges, self.held, self.fs_hz, f_res_hz)
+
+    def lowpass(self, x: np.ndarray) -> np.ndarray:
+        """A simulated signal through each recording's band top (contacts ring above it)."""
+        return np.concatenate([spectral_op(x[p.offset:p.offset + p.n], p.sig.fs_hz, (0.0, p.sig.band_hz[1]), 0, 0)
+                               for p in self.parts])
 
     def data(self, st: Structure, starts=None, stops=None) -> ShootingData:
         key = (st.meas, st.hyst, any("tau" in t for t in st.terms), starts is None)
         if key in self._data:
             return self._data[key]
-        sig = self.signals(st)
-        X, U = self.arrays(st, sig)
-        v = sig.valid
-        measured = sig.q1_dot[v] if self.gap == "q1_dot" else sig.q2[v]
-        fs, (lo, hi), taper = sig.fs_hz, sig.band_hz, sig.taper_n
-        lowpass = (lambda x: spectral_op(x, fs, (0.0, hi), 0, 0))  # noqa: E731  contacts ring above it
+        sigs = self.signals(st)
+        X, U = self.arrays(st, sigs)
+        measured = self.pooled(sigs, "q1_dot" if self.gap == "q1_dot" else "q2")
         s0 = self.starts if starts is None else np.asarray(starts)
         s1 = self.stops if stops is None else np.asarray(stops)
         held = self.seg_held if starts is None else np.zeros(len(s0), bool)
-        d = ShootingData(X, U, measured, self.gap, fs, s0, s1, held, 1.0 + st.p.get("mass_acc_gain", 0.0), lowpass)
+        d = ShootingData(X, U, measured, self.gap, self.fs_hz, s0, s1, held, 1.0 + st.p.get("mass_acc_gain", 0.0),
+                         self.lowpass, self.cuts)
         if len(self._data) > 48:
             self._data.clear()  # before inserting: the entry is used right after
         self._data[key] = d
@@ -202,9 +261,13 @@ class Fitter:
         return self.data(st).run(self.model(st))[1]
 
     def free_run(self, st: Structure):
-        """One free run over all valid rows: the simulated gap signal (NaN where it diverged)."""
-        n = self.sig0.valid.stop - self.sig0.valid.start
-        return self.data(st, [0], [n]).run(self.model(st))[0]
+        """One free run per recording over its valid rows, from its first state: the simulated gap signal
+        on the pooled rows (NaN where it diverged)."""
+        return self.data(st, [p.offset for p in self.parts], [p.offset + p.n for p in self.parts]).run(self.model(st))[0]
+
+    def part_of(self, row: int) -> Part:
+        """The recording a pooled row belongs to."""
+        return [p for p in self.parts if p.offset <= row][-1]
 
     def refine(self, st: Structure, max_nfev: int = 12) -> Structure:
         """Coefficients refit on the training segments' shooting error (trust region, Gauss-Newton); for

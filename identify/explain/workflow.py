@@ -41,12 +41,12 @@ from .effects.stiffness_drift import sweep_direction
 from ..errors import IdentificationError
 from .rounds import SURROGATE_SHARE, Rounds, closed_shares
 from ..identifier import holdout_blocks
-from .jumps import jump_time
-from .localise import excitation_hz, localise, remaining
+from .localise import localise, remaining
 from ..model import SparseModel
 from ..noise.floor import noise_floor
 from ..data.recording import Recording
 from ..simulation.shooting import TRIM_SHARE
+from .several import as_recordings, jump_of, pooled_floor, recording_entries
 from .structure import GAP_SIGNAL, Fitter, Structure
 from ..threads import one_blas_thread
 
@@ -104,39 +104,49 @@ class DiscrepancyAnalysis(Rounds):
 
     # -- fitting ----------------------------------------------------------------------------------
     @one_blas_thread  # as SparseIdentifier.fit: small BLAS products, oversubscribed under load (identify.threads)
-    def fit(self, recording: Recording) -> "DiscrepancyAnalysis":
+    def fit(self, recordings: Recording | list[Recording]) -> "DiscrepancyAnalysis":
+        """One explanation of a recording, or of several recordings of the same rig together (an up and
+        a down sweep, sweeps at several amplitudes: identify.explain.several), through the same rounds: each
+        recording its own chain, states, held-out blocks and shooting segments, the errors pooled, one
+        set of coefficients (identify.explain.structure.Fitter; drift time per recording)."""
+        recs = as_recordings(recordings)
         catalog = default_catalog() if self.catalog is None else self.catalog
-        sig = reconstruct_states(recording, self.band_hz)
-        edges, held = holdout_blocks(sig, self.holdout_fraction)
-        if not held.any():
-            raise IdentificationError("the discrepancy workflow needs held-out samples (holdout fraction > 0)")
-        fitter = Fitter(recording, sig, edges, held)
-        self.layout_, self.states_, self.fitter_ = recording.layout, sig, fitter
+        parts = []
+        for rec in recs:
+            sig = reconstruct_states(rec, self.band_hz)
+            edges, held = holdout_blocks(sig, self.holdout_fraction)
+            if not held.any():
+                raise IdentificationError("the discrepancy workflow needs held-out samples (holdout fraction > 0)")
+            parts.append((rec, sig, edges, held))
+        fitter = Fitter(parts)
+        self.layout_, self.states_, self.fitter_ = fitter.layout, fitter.parts[0].sig, fitter
+        self.recordings_ = recs
         self.heldout_rows_ = fitter.rows_held
-        cur, err = self._baseline(recording, sig, fitter)
+        cur, err = self._baseline(fitter)
         cur, err, effects = self._explain(fitter, cur, err, catalog)
         self._answer(cur, err, effects)
+        self.final_segment_errors_ = err
         for e in effects:  # the coefficients of the final model, all effects refit together
             e["coefficients"].update({t: cur.coefficients.get(t, 0.0) for t in e["terms"]})
             if e["name"] in CATALOG:
                 e["coefficients"].update(CATALOG[e["name"]].refit_fields(cur))
         self._flag_outside(effects)
-        self.sweep_rho_ = sweep_direction(sig)
+        self.sweep_rhos_ = [sweep_direction(p.sig) for p in fitter.parts]
         for e in effects:
             if e["name"] in CATALOG:
                 CATALOG[e["name"]].annotate(e, self)
-        self._after_rounds(recording, sig, effects)
+        self._after_rounds(fitter, effects)
         self.terms_ = effects[0]["terms"] if effects else []
         self.pair_p_value_ = effects[0].get("p_beats_runner_up") if effects else None
-        self._validate(fitter, sig, cur, err, effects)
+        self._validate(fitter, cur, err, effects)
         return self
 
-    def _baseline(self, recording, sig, fitter):
+    def _baseline(self, fitter):
         """The baseline structure (refit on the shooting error when it is the textbook one), its segments,
-        per-segment errors, the gap before and the noise floor."""
-        start = self._baseline_structure(recording, sig.input_name, fitter)
+        per-segment errors, the gap before and the noise floor (pooled over the recordings)."""
+        start = self._baseline_structure(fitter)
         k = -start.coefficients.get("q2", 0.0)
-        self.f_res_hz_ = np.sqrt(k) / (2 * np.pi) if k > 0 else 0.1 * sig.band_hz[1]
+        self.f_res_hz_ = np.sqrt(k) / (2 * np.pi) if k > 0 else 0.1 * fitter.parts[0].sig.band_hz[1]
         fitter.set_segments(self.f_res_hz_)
         cur = fitter.refine(start) if (self.baseline is None and self.refine) else start
         self.baseline_structure_ = cur
@@ -147,7 +157,9 @@ class DiscrepancyAnalysis(Rounds):
         self._norm = float(sum(np.sum((meas0[a:b] - meas0[fitter.rows_held].mean()) ** 2)
                                for a, b, h in zip(fitter.starts, fitter.stops, fitter.seg_held) if h))
         err = fitter.errors(cur)
-        self.noise_floor_ = noise_floor(recording, sig, fitter.rows_held)
+        rows = fitter.rows_held
+        self.noise_floors_ = [noise_floor(p.rec, p.sig, rows[p.offset:p.offset + p.n]) for p in fitter.parts]
+        self.noise_floor_ = pooled_floor(self.noise_floors_, meas0, rows, fitter)
         self.gap_before_ = self._gap(err)
         self.baseline_segment_errors_ = err  # per shooting segment (held-out: fitter_.seg_held)
         return cur, err
@@ -198,8 +210,8 @@ class DiscrepancyAnalysis(Rounds):
             # from twice that (the mirror of `none`'s); the closest candidate is in `candidates`
             self.confidence_ = float(np.clip(0.5 + 0.5 * (ratio / self.none_factor - 1), 0.5, 0.99))
 
-    def _validate(self, fitter, sig, cur, err, effects) -> None:
-        """Models, free runs (validation), the jump, localisation and what remains."""
+    def _validate(self, fitter, cur, err, effects) -> None:
+        """Models, free runs (validation), the jumps, localisation and what remains."""
         self.baseline_model_ = self.baseline if self.baseline is not None else fitter.model(
             cur if not effects else self.baseline_structure_)
         self.model_ = fitter.model(cur)
@@ -207,28 +219,43 @@ class DiscrepancyAnalysis(Rounds):
         self.sim_after_qdot_ = fitter.free_run(cur) if effects else self.sim_before_qdot_
         self.validation_before_ = self._validation(self.sim_before_qdot_)
         self.validation_after_ = self._validation(self.sim_after_qdot_)
-        self.jump_ = self._jump(self.gap_measured_, self.sim_before_qdot_, self.sim_after_qdot_)
-        # localisation reads the model on the measured (q1, q2) and the input alone
+        self.jumps_ = [jump_of(fitter, p, self.gap_measured_, self.sim_before_qdot_, self.sim_after_qdot_,
+                               self.f_res_hz_) for p in fitter.parts]
+        self.jump_ = self.jumps_[0]
+        # localisation reads the model on the measured (q1, q2) and the input alone, of the recording where
+        # the baseline misses most (its share of the held-out shooting error)
         states, inputs = fitter.names(self.baseline_structure_)
-        self.localisation_ = localise(fitter.model(self.baseline_structure_), sig) \
-            if states == ("q1", "q2") and inputs == (sig.input_name,) else {}
+        worst = max(fitter.parts, key=lambda p: float(np.sum(self.baseline_segment_errors_[
+            fitter.seg_held & (fitter.starts >= p.offset) & (fitter.starts < p.offset + p.n)])))
+        self.localised_part_ = worst
+        self.localisation_ = localise(fitter.model(self.baseline_structure_), worst.sig) \
+            if states == ("q1", "q2") and inputs == (fitter.u_name,) else {}
+        if self.localisation_ and len(fitter.parts) > 1:
+            self.localisation_["recording"] = worst.rec.source
         self.remaining_ = None
         if self.gap_after_ > self.none_factor * self.noise_floor_ and (
                 self.effect_ == "unexplained" or any(OUTSIDE in e["surrogate_for"] for e in effects)):
             self.remaining_ = remaining(fitter, cur, err)
 
-    def _after_rounds(self, recording, sig, effects: list) -> None:
-        """What effects show outside the gap, looked for after the rounds (a drifting sensor bias in the
-        raw channels: identify.explain.effects.bias_drift), listed after whatever closed the gap; such an effect
-        is the answer when nothing else was (`none` becomes it); an `unexplained` gap stays unexplained."""
-        self.bias_trends_ = []
-        for effect in CATALOG.values():
-            for entry in effect.after_rounds(self, recording, sig):
-                effects.append(entry)
-                if self.effect_ == "none":
-                    self.effect_, self.confidence_ = entry["name"], entry["confidence"]
+    def _after_rounds(self, fitter, effects: list) -> None:
+        """What effects show outside the gap, looked for after the rounds in each recording (a drifting
+        sensor bias in the raw channels: identify.explain.effects.bias_drift), listed after whatever closed
+        the gap (with the recording they were seen in, when there are several); such an effect is the
+        answer when nothing else was (`none` becomes it); an `unexplained` gap stays unexplained."""
+        trends, found = [], []
+        for p in fitter.parts:
+            self.bias_trends_ = []
+            for effect in CATALOG.values():
+                for entry in effect.after_rounds(self, p.rec, p.sig):
+                    found.append(dict(entry, recording=p.rec.source) if len(fitter.parts) > 1 else entry)
+                    if self.effect_ == "none":
+                        self.effect_, self.confidence_ = entry["name"], entry["confidence"]
+            trends += [dict(d, recording=p.rec.source) if len(fitter.parts) > 1 else d for d in self.bias_trends_]
+        effects.extend(found)
+        self.bias_trends_ = trends
 
-    def _baseline_structure(self, recording, u_name, fitter) -> Structure:
+    def _baseline_structure(self, fitter) -> Structure:
+        u_name = fitter.u_name
         if self.baseline is not None:
             b = self.baseline
             if tuple(b.inputs) != (u_name,):
@@ -238,28 +265,13 @@ class DiscrepancyAnalysis(Rounds):
             terms = list(b.equations["q1_dot"]) + ([u_name] if u_name not in b.equations["q1_dot"] else [])
             return Structure(tuple(terms), travel=b.travel.get("q2"), coef=tuple(b.equations["q1_dot"].items()))
         terms = list(TEXTBOOK) + [u_name]
-        if recording.layout == "force":
+        if fitter.layout == "force":
             # DC is inside the band for a force input, so an offset of the force channel (Silverbox:
             # +6 mV) is a constant force the textbook model must carry; for accelerations it is filtered
             terms.insert(0, "1")
         st = Structure(tuple(terms))
         fit = fitter.equation_fit(st)
         return Structure(st.terms, coef=tuple(fit.coef.items()))
-    def _jump(self, measured, before, after) -> dict:
-        """The jump as its own observable (identify.explain.jumps): measured, and as the baseline's and the
-        explanation's free runs predict it; None where there is none."""
-        sig = self.fitter_.sig0
-        u = sig.input[sig.valid]
-
-        def at(signal):
-            j = jump_time(signal, u, sig.fs_hz, self.f_res_hz_)
-            if j is None:
-                return None
-            r = j["row"]
-            return {"t_s": (sig.valid.start + r) / sig.fs_hz, "direction": j["direction"], "ratio": j["ratio"],
-                    "excitation_hz": excitation_hz(u, max(r - 1, 0), r + 1, sig.fs_hz, sig.band_hz[0])}
-
-        return {"measured": at(measured), "predicted_before": at(before), "predicted_after": at(after)}
     def _polish(self, fitter: Fitter, st: Structure, err: np.ndarray):
         """(structure, per-segment errors) refit to convergence on the training segments' shooting error
         (kept only if the training error falls)."""
@@ -319,4 +331,5 @@ class DiscrepancyAnalysis(Rounds):
             "p_beats_runner_up": self.pair_p_value_,
             "jump": self.jump_,
             "bias_trends": self.bias_trends_,
+            "recordings": recording_entries(self),
         }

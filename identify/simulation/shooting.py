@@ -56,18 +56,27 @@ class ShootingData:
     held: np.ndarray
     scale: float = 1.0          # the gap error is reported in recorded units: (1 + mass gain) x error
     lowpass: object = None      # callable: the measurement chain's band applied to a simulated signal
+    #: rows where another recording starts (several recordings pooled, identify.explain.structure.Fitter):
+    #: no segment crosses one, and the input between samples is interpolated within each recording
+    cuts: tuple = ()
 
     def __post_init__(self):
         self._fine: dict[int, np.ndarray] = {}
         self.bound = 100.0 * float(np.max(np.abs(self.states[:, :2]))) + 1e-9
 
     def fine(self, substeps: int) -> np.ndarray:
+        """The inputs every h/2 (simulate's inputs_fine), row r at index 2 substeps r: each recording's
+        interpolated on its own, padded with its last value up to the next one's first row."""
         if substeps not in self._fine:
-            u = fine_grid_input(self.inputs[:, :1], substeps)
-            if self.inputs.shape[1] > 1:  # known smooth extra inputs (the time ramp): linear interpolation
-                extra = fine_grid_input(self.inputs[:, 1:], substeps, "linear")
-                u = np.column_stack([u, extra])
-            self._fine[substeps] = np.ascontiguousarray(u)
+            up = 2 * substeps
+            pieces = np.split(self.inputs, list(self.cuts))
+            grids = []
+            for i, piece in enumerate(pieces):
+                u = fine_grid_input(piece[:, :1], substeps)
+                if piece.shape[1] > 1:  # known smooth extra inputs (the time ramp): linear interpolation
+                    u = np.column_stack([u, fine_grid_input(piece[:, 1:], substeps, "linear")])
+                grids.append(u if i == len(pieces) - 1 else np.vstack([u, np.repeat(u[-1:], up - 1, axis=0)]))
+            self._fine[substeps] = np.ascontiguousarray(grids[0] if len(grids) == 1 else np.vstack(grids))
         return self._fine[substeps]
 
     def run(self, model: SparseModel, which: np.ndarray | None = None):

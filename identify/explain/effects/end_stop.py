@@ -28,10 +28,10 @@ class EndStop(Effect):
     def propose(self, fitter, cur):
         if self.name in cur.effects or cur.travel:
             return None
-        st, fit = self._search(fitter, cur, fitter.signals(cur))
+        st, fit = self._search(fitter, cur, fitter.displacement(cur))
         return self.candidate(cur, st, fitter, fit, {"travel_m": st.travel, "sides": SIDES[st.side]})
 
-    def _search(self, fitter, cur, sig):
+    def _search(self, fitter, cur, q2):
         """(structure, equation fit) of the end stop that fits best.
 
         Three variants: two sided, travel d at fractions of max |q2|, and one sided above or below, at
@@ -44,7 +44,6 @@ class EndStop(Effect):
         training segments' shooting error instead chose the two-sided form, which has the one-sided as
         special cases, in all three single-stop cases of benchmarks/explain_robustness.py, and the
         one-sided stop of its case 72 then closed 45 % of the gap instead of 90 %)."""
-        q2 = sig.q2[sig.valid]
         peaks = {None: float(np.max(np.abs(q2))), 1: float(max(np.max(q2), 0.0)), -1: float(max(-np.min(q2), 0.0))}
         fr = np.array(END_STOP_FRACTIONS)
         variants = []

@@ -24,8 +24,7 @@ class Hysteresis(Effect):
     def propose(self, fitter, cur):
         if self.name in cur.effects or cur.hyst is not None:
             return None
-        sig = fitter.signals(cur)
-        qmax = float(np.max(np.abs(sig.q2[sig.valid])))
+        qmax = float(np.max(np.abs(fitter.displacement(cur))))
         tries = [cur.adding(self.name, self.terms, hyst=((1 - share) / (sat * qmax), share / (sat * qmax)))
                  for sat in HYST_SATURATION for share in HYST_GAMMA_SHARE]
         st, fit = min(((st, fitter.equation_fit(st)) for st in tries), key=lambda v: v[1].mse_heldout)

@@ -57,9 +57,11 @@ class MainsHum(Effect):
         return best
 
     def propose(self, fitter, cur):
-        if self.name in cur.effects or fitter.chain is None:
+        """Over one recording only: the hum's phase is each recording's own (its clock starts anywhere in
+        the supply's cycle), while a structure's fault parameters are one set for all recordings."""
+        if self.name in cur.effects or fitter.chain is None or len(fitter.parts) > 1:
             return None
-        ev = self.evidence(fitter.rec)
+        ev = self.evidence(fitter.parts[0].rec)
         if ev is None:
             return None
         p = dict(cur.meas)

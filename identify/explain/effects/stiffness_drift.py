@@ -36,15 +36,20 @@ class StiffnessDrift(Effect):
     plain = False
 
     def annotate(self, entry: dict, analysis) -> None:
-        """A stiffness drift on a single sweep is confounded with a stiffness that depends on the
-        excitation frequency (time and frequency move together: the issue saw 27-94 % of k against
-        truths within +-7 %): its value is withheld and what would separate it is said instead."""
-        rho = analysis.sweep_rho_
-        if not abs(rho) >= ONE_SWEEP_RHO:
+        """A stiffness drift over sweeps that all run one way is confounded with a stiffness that depends on
+        the excitation frequency (time and frequency move together: the issue saw 27-94 % of k against
+        truths within +-7 % on one up-sweep): its value is withheld and what would separate it is said
+        instead. An up and a down sweep explained together (identify.explain.several) separate them."""
+        rhos = analysis.sweep_rhos_
+        if not all(abs(r) >= ONE_SWEEP_RHO for r in rhos) or len({r > 0 for r in rhos}) > 1:
             return
+        rho = rhos[0]
+        way = "up" if rho > 0 else "down"
+        what = (f"this record: one {way}-sweep" if len(rhos) == 1
+                else f"these records: {len(rhos)} recordings, each one {way}-sweep")
         value = entry["coefficients"].get("q2*tau")
         entry["separable"] = False
-        entry["note"] = (f"not separable on this record: one {'up' if rho > 0 else 'down'}-sweep, so time and "
+        entry["note"] = (f"not separable on {what}, so time and "
                          f"excitation frequency move together (rank correlation {rho:+.2f}) and a drift of the "
                          f"stiffness cannot be told from a frequency-dependent one (the confounded q2*tau "
                          f"would be {value:.4g}); an up and a down sweep, or the same sweep repeated, "
