@@ -24,6 +24,7 @@ from . import dashboard, schemas
 from .catalog import Catalog
 from .deps import Services, valid_text
 from .jobs import JobQueue
+from .memory import fix_malloc_thresholds
 from .rigclient import RigLink
 from .routers import campaigns, export, frf, jobs, live, recordings, results, rig, sweeps
 from .security import SecurityHeaders
@@ -41,6 +42,8 @@ def create_app(settings: Settings) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
+        if not fix_malloc_thresholds():  # before any load: freed memory goes back (server/memory.py)
+            print("shakeid serve: not glibc: memory freed after a load may stay with the process", flush=True)
         svc.catalog = Catalog(settings.data_dir / "catalog.sqlite")
         for note in svc.catalog.recover_after_restart():
             print(f"shakeid serve: {note}", flush=True)

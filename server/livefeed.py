@@ -8,7 +8,8 @@ Now a recording's feed reads the controller once per LIVE_POLL_S (on a thread of
 number of viewers), encodes each batch once as an SSE event, and hands the same bytes to every viewer.
 A viewer that does not keep up loses its oldest batches past VIEWER_QUEUE_FRAMES and is told how many
 samples it missed (a `missed` event; sample numbers are consecutive, so `first` of the next `samples`
-event says where it resumes). Nothing is kept per viewer once it leaves; a feed ends with its last viewer.
+event says where it resumes). Nothing is kept per viewer once it leaves; a feed ends with its last viewer,
+and when no feed is left the memory the streams used is given back to the system (server/memory.py).
 """
 from __future__ import annotations
 
@@ -19,6 +20,8 @@ from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import AsyncIterator, Callable
+
+from .memory import release_freed_memory
 
 #: seconds between two reads of a recording's samples from the rig controller (one read per recording,
 #: however many viewers: 10 a second against the ~200 decimated samples a second the controller keeps)
@@ -165,6 +168,8 @@ class LiveFeeds:
                 del self.feeds[recording_id]
                 if feed.task is not None and feed.end is None:
                     feed.task.cancel()
+            if not feed.viewers and not self.feeds:  # the last viewer anywhere: its memory back (server/memory.py)
+                release_freed_memory()
 
     async def _read(self, feed: Feed) -> None:
         """The feed's one reader: the controller's new samples every poll_s, to every viewer. A full

@@ -21,6 +21,8 @@ from fastapi import HTTPException, Request
 from daq.formats import FORMATS, check_upload
 from identify.errors import ShakeidError
 
+from .memory import release_freed_memory
+
 #: An upload's file name: its type (suffix) picks the reader, so only the types daq.formats reads are taken.
 FILENAME_PATTERN = r"^[\w.\-]{1,100}\.(" + "|".join(sx.lstrip(".") for f in FORMATS for sx in f.suffixes) + ")$"
 FILENAME_WORDS = ("a recording's file name: letters, digits, '.', '-' and '_' (up to 100), ending in "
@@ -64,6 +66,7 @@ async def store_upload(request: Request, directory: Path, rec_id: str, filename:
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
+        release_freed_memory()  # the body's buffers went through the allocator: back to the system
     return path, {**info, "bytes": size}
 
 
