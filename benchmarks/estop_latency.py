@@ -19,8 +19,9 @@ Run twice in one process: idle (the anchor), then under load (the issue's target
 - --busy processes spinning (`while True: pass`) beside it all, for the run with a busy machine.
 The web server's RSS is read before the load (baseline), during it (peak) and once the load has ended
 and its connections are closed (after; target: within 10 % of the baseline).
-Also: the web server's RSS during one upload of the big CSV (target <= baseline + 2x the file) and the
-largest interval between heartbeats of the sweeps under load (the watchdog must exceed it).
+Also: the web server's RSS during one upload of the big CSV (target <= baseline + 2x the file), and the
+heartbeat intervals of the sweeps under load: their p99 pooled over every sweep (target <= 60 ms), the
+worst sweep's own p99 and the largest interval (the watchdog must exceed it).
 """
 from __future__ import annotations
 
@@ -42,6 +43,7 @@ from daq.plc import ModbusPLC  # noqa: E402
 from protocol.plc import State  # noqa: E402
 from daq.realtime import make_realtime  # noqa: E402
 from sim.server import free_port  # noqa: E402
+from server.controller import HEARTBEAT_BIN_MS  # noqa: E402
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 TOKEN = "benchmark-operator-token"
@@ -200,6 +202,21 @@ def _presses(client: httpx.Client, plc: ModbusPLC, n: int, routes: dict) -> tupl
     return times, sweeps
 
 
+def pooled_p99_ms(histograms: list[dict]) -> tuple[float, int]:
+    """The p99 of the heartbeat intervals of all the sweeps, from each recording's histogram
+    (server/controller.py HEARTBEAT_BIN_MS): the upper edge of the bin holding the 99th percentile."""
+    counts: dict[float, int] = {}
+    for hist in histograms:
+        for edge, n in hist.items():
+            counts[float(edge)] = counts.get(float(edge), 0) + n
+    edges = sorted(counts)
+    if not edges:
+        return float("nan"), 0
+    total = sum(counts.values())
+    cumulative = np.cumsum([counts[e] for e in edges])
+    return edges[int(np.searchsorted(cumulative, 0.99 * total))] + HEARTBEAT_BIN_MS, total
+
+
 def report(label: str, times: dict, target: str = "") -> None:
     for k, (name, (to_response, to_plc)) in enumerate(times.items()):
         print(f"{label if k == 0 else '':<11} {name:<14} press->response {stats(to_response)}   "
@@ -340,9 +357,11 @@ def main() -> int:
         worst = max(b.get("heartbeat_max_s", 0) for b in beats)
         p99 = max(b.get("heartbeat_p99_s", 0) for b in beats)
         write = max(b.get("heartbeat_write_max_s", 0) for b in beats)
-        print(f"heartbeat intervals under load (nominal 50 ms): worst p99 {1e3 * p99:.1f} ms, largest {1e3 * worst:.1f} ms "
-              f"over {len(beats)} sweeps (of which the PLC's answer to one beat: at most {1e3 * write:.1f} ms)"
-              f"   (target p99 <= 60 ms)")
+        pooled, n_beats = pooled_p99_ms([b.get("heartbeat_histogram_ms", {}) for b in beats])
+        print(f"heartbeat intervals under load (nominal 50 ms): p99 {pooled:.0f} ms over all {n_beats} intervals of "
+              f"{len(beats)} sweeps   (target p99 <= 60 ms)\n            the worst sweep's own p99 {1e3 * p99:.1f} ms "
+              f"(a sweep pressed after 0.2-0.5 s has a few dozen beats: its p99 is its largest), largest "
+              f"{1e3 * worst:.1f} ms (of which the PLC's answer to one beat: at most {1e3 * write:.1f} ms)")
         time.sleep(max(0.0, 25 - (time.monotonic() - t_after)))
         rss_later = rss_mb(serve.pid)  # what the server keeps, not what it is still letting go of
         print(f"web server RSS: before the load {rss_before:.0f} MB, peak {rss_peak['mb']:.0f} MB, 5 s after it "

@@ -32,6 +32,7 @@ import socket
 import sys
 import threading
 import time
+from collections import Counter
 from pathlib import Path
 
 from daq.devices import DeviceError
@@ -51,6 +52,9 @@ from .stoplistener import StopListener, open_listener
 WEB_SERVER_GONE = "the web server went away during the sweep; the rig controller stopped the table"
 #: decimated points one live request returns at the most (~10 s at the live view's 200 per second)
 LIVE_BATCH = 2000
+#: a sweep's heartbeat intervals in recordings.info as counts per bin of this width (`heartbeat_histogram_ms`:
+#: {lower edge in ms: count}): those of many sweeps pool into one p99 (a short sweep's own p99 is its largest)
+HEARTBEAT_BIN_MS = 1
 
 
 class Refused(Exception):
@@ -343,8 +347,15 @@ class RigController:
         # in the catalog before the sweep thread exists, so its end always finds both rows
         cat.insert("recordings", id=rec_id, created=now, origin="sweep", filename=path.name, path=str(path),
                    status="running", sweep_id=sweep_id, info={"sweep": body})
+        started: dict = {}  # the sweep's runner, for its heartbeat intervals
+
         def on_end(result, error):
             try:
+                runner = started.get("runner")
+                if result is not None and runner is not None:
+                    bins = Counter(str(int(gap * 1000 // HEARTBEAT_BIN_MS) * HEARTBEAT_BIN_MS)
+                                   for gap in runner.heartbeat_intervals)
+                    result = {**result, "heartbeat_histogram_ms": dict(bins)}
                 self._sweep_ended(sweep_id, rec_id, path, result, error)
             finally:
                 if after_end is not None:
@@ -360,6 +371,7 @@ class RigController:
             cat.delete("recordings", rec_id)
             cat.update("sweeps", sweep_id, state="failed", error=str(exc), recording_id=None)
             raise Refused(503, f"rig not reachable: {exc}") from None
+        started["runner"] = (self.rig.active or {}).get("runner")  # ours: no other starts while `starting` is held
         return {"id": sweep_id, "state": "queued", "recording_id": rec_id}
 
     def _sweep_ended(self, sweep_id, rec_id, path, result, error) -> None:
