@@ -195,10 +195,10 @@ class Fitter:
         lib = self.library(st)
         X, U = self.arrays(st, sigs)
         T = self.tie_matrix(st, lib.names)  # all coefficients = T @ the free ones
-        A = lib.evaluate(X, U) @ T
-        if band_limited:  # each recording's rows through its own band
-            A = np.vstack([np.column_stack([s.band_limit(c) for c in A[p.offset:p.offset + p.n].T])
-                           for s, p in zip(sigs, self.parts)])
+        if band_limited:  # each recording's columns through its own band, over its whole record
+            A = np.vstack([self.band_limited_columns(lib, T, st, s, p) for s, p in zip(sigs, self.parts)])
+        else:
+            A = lib.evaluate(X, U) @ T
         gram = BlockGram(np.column_stack([A, self.pooled(sigs, "q1_dot")]), 1, self.edges)
         train, heldout = gram.equations(~self.held), gram.equations(self.held)
         support = np.ones(A.shape[1], bool)
@@ -209,6 +209,22 @@ class Fitter:
         x = T @ x
         se = np.sqrt(np.maximum(np.diag(cov), 0.0))
         return Fit(dict(zip(lib.names, map(float, x))), dict(zip(lib.names, map(float, se))), cov, lib.names, mse)
+
+    def band_limited_columns(self, lib: Library, T: np.ndarray, st: Structure, sig: StateSignals, part: Part):
+        """The library's columns of one recording through its chain's band, on its valid rows. The
+        columns are built over the whole record, as the chain built the target q1_dot from the whole raw
+        record: cut to the valid rows first, a record loud at the edge of its valid rows (a down-sweep
+        starting at its top frequency) rang through the band (with the true coefficients: a band-limited
+        residual of 10 (m/s^2)^2 over the first eighth of a 20-1 Hz down-sweep, 2e-5 built whole). The
+        hysteresis state, integrated over the valid rows from z = 0, is 0 before them and held after."""
+        n, v = part.rec.n_samples, sig.valid
+        cols = [sig.q1, sig.q2]
+        if st.hyst is not None:
+            z = self.z_state(sig, st.hyst)
+            cols.append(np.concatenate([np.zeros(v.start), z, np.full(n - v.stop, z[-1] if z.size else 0.0)]))
+        ins = [sig.input] + ([np.arange(n) / max(n - 1, 1) - 0.5] if any("tau" in t for t in st.terms) else [])
+        A = lib.evaluate(np.column_stack(cols), np.column_stack(ins)) @ T
+        return np.column_stack([spectral_op(c, sig.fs_hz, sig.band_hz, 0, sig.taper_n)[v] for c in A.T])
 
     @staticmethod
     def tie_matrix(st: Structure, names) -> np.ndarray:

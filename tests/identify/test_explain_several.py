@@ -53,26 +53,25 @@ def test_plain_rig_over_an_up_and_a_down_sweep_answers_none():
     assert min(floors) <= res["noise_floor"] <= max(floors)
 
 
-@pytest.mark.xfail(strict=True, reason="open on issue 32: over the up and the down sweep the drift's candidate "
-                   "closes 49-75 % of the pooled shooting gap but is rejected as not significant (Wald p 0.007-0.44 "
-                   "from the equation error): the down sweep's equation residual is 100-200x the up sweep's over its "
-                   "first, high-frequency half, independent of the sensor noise (chain or simulator on down sweeps), "
-                   "and its block-robust covariance swamps the drift's standard error; q2*tau from the equation "
-                   "error is -42 to -67 against a truth of -97")
 @pytest.mark.slow
 def test_stiffness_drift_is_named_with_its_rate_over_an_up_and_a_down_sweep():
     """A 10 % stiffness drift over each record, k (1 + r t/T): on the up sweep alone its value is withheld
     (confounded with frequency); over the up and the down sweep it is named, separable, and its q2*tau
-    within 25 % of the truth -k r / m (k/m from the rig's own model)."""
+    within 5 % of the truth -k r / m (k/m from the rig's own model; measured 0.1-0.5 % off at seeds 7, 21
+    and 33, where the confounded single up-sweep value was 8 % off), the gap brought within twice the
+    noise floor (measured 0.8x)."""
     r = 0.1
     rig = RigParameters.design(stiffness_drift=r)
     recs = _up_and_down(rig, _seed())
-    truth = -(-rig.model().equations["q1_dot"]["q2"]) * r
+    truth = rig.model().equations["q1_dot"]["q2"] * r  # -k r / m
+    alone = DiscrepancyAnalysis().fit(recs[0]).result()
+    assert all(e.get("separable") is False for e in alone["effects"] if e["name"] == "stiffness_drift")
     res = DiscrepancyAnalysis().fit(recs).result()
     drift = [e for e in res["effects"] if e["name"] == "stiffness_drift"]
     assert res["effect"] == "stiffness_drift" and drift, [(c["name"], c["rejected"]) for c in res["candidates"]]
     assert drift[0].get("separable", True) and "note" not in drift[0]
-    assert drift[0]["coefficients"]["q2*tau"] == pytest.approx(truth, rel=0.25)
+    assert drift[0]["coefficients"]["q2*tau"] == pytest.approx(truth, rel=0.05)
+    assert res["gap_after"] <= 2 * res["noise_floor"]
 
 
 def test_recordings_of_different_set_ups_are_refused_at_the_door():
