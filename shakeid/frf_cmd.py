@@ -65,13 +65,14 @@ def cmd_frf(args) -> int:
         print(json.dumps(doc))
         return 0
     print(f"frequency response of {args.model}, band {doc['band_hz'][0]:.3g}-{doc['band_hz'][1]:.3g} Hz "
-          "(steady state; a sweep jumps later by its sweep-rate bias, docs/frf.md)")
-    print(f"{'table mm':>9} {'jump down Hz':>13} {'jump up Hz':>11} {'peak mm':>9} {'H':>3}")
+          "(steady state; a sweep jumps later by its sweep-rate bias; harmonics: how many the balance\n"
+          "needed to converge, docs/frf.md)")
+    print(f"{'table mm':>9} {'jump down Hz':>13} {'jump up Hz':>11} {'peak mm':>9} {'harmonics':>9}")
     for r in doc["responses"]:
         peak = max(max(b["amplitude_mm"]) for b in r["branches"])
         down = "-" if r["jump_down_hz"] is None else f"{r['jump_down_hz']:.4f}"
         up = "-" if r["jump_up_hz"] is None else f"{r['jump_up_hz']:.4f}"
-        print(f"{r['amplitude_mm']:>9g} {down:>13} {up:>11} {peak:>9.3f} {r['harmonics']:>3}")
+        print(f"{r['amplitude_mm']:>9g} {down:>13} {up:>11} {peak:>9.3f} {r['harmonics']:>9}")
         for note in r["notes"]:
             print(f"  {r['amplitude_mm']:g} mm: {note}")
     if args.report:
