@@ -188,7 +188,10 @@ def test_explain_on_a_short_record_prints_no_unreadable_shares(tmp_path):
     assert figures, p.stdout
     for f in figures:
         assert f == "n/a" or f.startswith("worse: gap x") or -1.0 <= float(f) <= 1.0, (f, p.stdout)
-    assert any(f.startswith("worse: gap x") for f in figures), p.stdout  # the case this is about, reached
+    # the case this is about, reached: a candidate that makes the gap larger. Since explain's library columns
+    # are band-limited over the whole record (identify.explain.structure.Fitter.band_limited_columns) the
+    # candidates here make it up to 1.3x larger (-0.74), no longer 8.6-9x ("worse: gap x9": the test above)
+    assert any(f.startswith("worse: gap x") or (f != "n/a" and float(f) < 0) for f in figures), p.stdout
     # where it misses most: a window of ~0.2 s, to 0.01 s, at a frequency the 1-10 Hz sweep has (a window's
     # own FFT read 27.3 Hz on a 4 s record: its first bin)
     m = re.search(r"largest misfit: t = (\d+\.\d\d)-(\d+\.\d\d) s into the recording, excitation (\S+) Hz",
