@@ -128,15 +128,21 @@ def cmd_explain(args) -> int:
     from identify.data.quality import check_identifiable
 
     names, samples = list(args.files), getattr(args, "samples", None)
+    cuts = [file_and_samples(name, samples) for name in names]
     baseline = _baseline(args.model) if args.model else None
     if args.report:
         from reports.html import check_report_folder
 
         check_report_folder(args.report, "explain")  # before the analysis
+    if len(names) > 1:  # one file twice (by any path, overlapping ranges) would count its evidence twice
+        from .joint_cmd import _refuse_twice
+
+        _refuse_twice(names, cuts)
     recs, data = [], None
-    for name in names:  # several: one explanation over all of them (identify.explain.several)
-        args.file, args.samples = file_and_samples(name, samples)
+    for name, (args.file, args.samples) in zip(names, cuts):  # several: one explanation (identify.explain.several)
         rec = _read(args)
+        if len(names) > 1:
+            rec.source = name  # as the operator named it (FILE[START:STOP] included)
         quality = check_identifiable(rec, args.file, args.accept_faulty,  # as identify: no analysis of unusable data
                                      "use --accept-faulty to analyse it anyway")
         recs.append(rec)

@@ -116,3 +116,16 @@ def test_cli_explains_two_files_together(tmp_path):
     assert "2 recordings explained together" in proc.stdout and "down.csv" in proc.stdout
     page = (tmp_path / "rep" / "index.html").read_text()
     assert "down.csv" in page and (tmp_path / "rep" / "gap.png").exists()
+
+
+def test_cli_refuses_one_file_named_twice(tmp_path, capsys):
+    """`shakeid explain A A[0:100]` or overlapping ranges of one file: refused before anything is read
+    (its evidence would count twice), naming the file; disjoint ranges would be two recordings."""
+    from shakeid.cli import main
+
+    a = tmp_path / "a.csv"
+    a.write_text("t,table_acc,mass_acc\n")
+    for names, why in (([f"{a}[0:16000]", f"{a}[15000:30000]"], "overlapping samples"),
+                       ([str(a), f"{a}[0:100]"], f"{a}[0:100]: the same recording as {a}")):
+        assert main(["explain", *names]) == 2
+        assert why in capsys.readouterr().err
