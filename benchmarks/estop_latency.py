@@ -337,6 +337,7 @@ def main() -> int:
             t.start()
         time.sleep(3)  # let the load build up: an upload in flight, pollers running, a job in the worker
         loaded = presses(client, plc, args.presses, routes, realtime)
+        load_at_end = os.getloadavg()
         stop.set()
         for p in load:
             p.terminate()
@@ -349,7 +350,8 @@ def main() -> int:
         late, wakes = probe.communicate(timeout=10)[0].split()
         report("under load", loaded[0], "   (target p99 <= 100 ms)")
         print(f"            load: {args.viewers} live viewers ({args.stalled} never reading), {args.pollers} pollers, "
-              f"{size_mb:.0f} MB uploads back to back, identification jobs back to back")
+              f"{size_mb:.0f} MB uploads back to back, identification jobs back to back; load average at its end "
+              f"{load_at_end[0]:.1f} (1 min), {load_at_end[1]:.1f} (5 min)")
         print(f"            the machine: a {'real-time ' if prio else ''}process sleeping 10 ms at a time woke up to "
               f"{1e3 * float(late):.1f} ms late ({wakes} wake-ups)")
         beats = [client.get(f"/api/recordings/{client.get(f'/api/sweeps/{s}').json()['recording_id']}").json()["info"]

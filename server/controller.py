@@ -24,6 +24,7 @@ from this process, where no viewer traffic is queued.
 """
 from __future__ import annotations
 
+import gc
 import hmac
 import os
 import secrets
@@ -412,6 +413,11 @@ def main(settings: Settings, address: str | None = None, parent_pid: int | None 
     signal.signal(signal.SIGTERM, lambda *_: ctl.stop("the rig controller was stopped (SIGTERM)"))
     signal.signal(signal.SIGINT, lambda *_: ctl.stop("the rig controller was stopped (SIGINT)"))
     ctl.start()
+    # the heartbeat needs this interpreter's lock, and a full garbage collection holds it for the whole pass
+    # over every object (~76k once numpy, h5py and pymodbus are in): 65-70 ms of CPU under the viewer flood,
+    # in the sweep thread, and each heartbeat interval over 75 ms there was one (gc.callbacks). Whatever
+    # exists once the controller is up lives as long as it: out of the collector's passes
+    gc.freeze()
     print(f"shakeid controller: pid {os.getpid()}, {'real-time (SCHED_RR)' if realtime else 'normal'} scheduling, "
           f"listening on {ctl.address}"
           f" ({'embedded simulated rig' if ctl.rig.sim is not None else 'rig of ' + str(settings.rig.source)})"
