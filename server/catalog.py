@@ -54,7 +54,8 @@ JSON_FIELDS = {"recordings": {"info"}, "sweeps": {"request"}, "jobs": {"options"
 
 #: the file a job of each kind delivers, written atomically and last (server/worker.py): when it is there,
 #: whole, the job's result is complete, and a re-run of the job adopts it instead of computing again
-RESULT_FILES = {"identify": "model.json", "explain": "explain.json", "identify_joint": "joint.json"}
+RESULT_FILES = {"identify": "model.json", "explain": "explain.json", "identify_joint": "joint.json",
+                "explain_campaign": "explain.json"}
 
 
 def delivered(job: dict) -> bool:

@@ -135,11 +135,12 @@ class JobQueue:
                 self.catalog.update("jobs", job["id"], state="failed", error="recording no longer in the catalog")
                 continue
             path, recs = os.path.abspath(rec["path"]), [rec]
-            if job["kind"] == "identify_joint":  # several recordings: options name them all, in order
+            if job["kind"] in worker.SEVERAL_KINDS:  # several recordings: options name them all, in order
                 recs = [self.catalog.get("recordings", r) for r in job["options"].get("recording_ids", [])]
                 if any(r is None for r in recs) or len(recs) < 2:
+                    what = "joint identification" if job["kind"] == "identify_joint" else "campaign's explanation"
                     self.catalog.update("jobs", job["id"], state="failed",
-                                        error="a joint identification needs two or more recordings in the catalog")
+                                        error=f"a {what} needs two or more recordings in the catalog")
                     continue
                 path = [os.path.abspath(r["path"]) for r in recs]
             self.catalog.update("jobs", job["id"], state="running", attempts=job["attempts"] + 1)

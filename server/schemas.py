@@ -139,9 +139,10 @@ class ExplainIn(ReadOptions):
 
 class JobOut(BaseModel):
     id: str
-    kind: Literal["identify", "explain", "identify_joint"] = Field(
+    kind: Literal["identify", "explain", "identify_joint", "explain_campaign"] = Field(
         description="identify_joint: one model of several recordings (options.recording_ids, in order; "
-                    "recording_id is the first); its result_dir holds joint.json")
+                    "recording_id is the first); its result_dir holds joint.json. explain_campaign: one "
+                    "explanation of a campaign's recordings (options.campaign_id, recording_ids), explain.json")
     recording_id: str
     state: JobState
     attempts: int

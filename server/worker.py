@@ -69,9 +69,14 @@ def read(path: str, options: dict):
 IDENTIFY_KEYS = tuple(sorted(set(IdentifyIn.model_fields) - set(ReadOptions.model_fields)))
 
 
+#: job kinds over several recordings: the job's path is a list (options.recording_ids names them, in order)
+SEVERAL_KINDS = ("identify_joint", "explain_campaign")
+
+
 def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
     """Run one job; returns a short summary for the catalog. ShakeidError -> a message for the user.
-    kind "identify_joint": path is a list of recordings' paths, fitted as one model (identify.joint)."""
+    kind "identify_joint": path is a list of recordings' paths, fitted as one model (identify.joint);
+    "explain_campaign": a list explained together (identify.explain.several), as "explain" explains one."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if (out / RESULT_FILES.get(kind, "-")).is_file():
@@ -79,18 +84,16 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
     shutil.rmtree(out / STAGING, ignore_errors=True)  # an interrupted run's half-written report
     if kind == "identify_joint":
         return _run_joint(list(path), options, out)
+    paths = list(path) if kind in SEVERAL_KINDS else [path]
     try:
-        rec = read(path, options)
-        from identify.data.quality import check_identifiable
-
         # data that cannot carry a model is refused, as by the CLI (the job fails, saying why)
-        data = check_identifiable(rec, _label(path, options), bool(options.get("accept_faulty")),
-                                  f"set accept_faulty to {'identify' if kind == 'identify' else 'analyse'} it anyway")
+        recs, data = _read_checked(paths, options, "identify" if kind == "identify" else "analyse")
         if kind == "identify":
             from identify.frf.side_by_side import identification_document
             from identify.identifier import SparseIdentifier
             from reports.identification import write_report
 
+            rec = recs[0]
             params = {k: options[k] for k in IDENTIFY_KEYS if options.get(k) is not None}
             if options.get("band_hz"):
                 params["band_hz"] = tuple(options["band_hz"])
@@ -102,23 +105,47 @@ def run_job(kind: str, path, options: dict, out_dir: str) -> dict:
             write_report(ident, out / STAGING, result)
             _write_json(out / "model.json", result)
             return _adopt(kind, out)
-        if kind == "explain":
-            from identify.explain.workflow import DiscrepancyAnalysis
-            from reports.explain import write_explain_report
-
-            from identify.frf.side_by_side import for_explanation
-
-            analysis = DiscrepancyAnalysis(band_hz=tuple(options["band_hz"]) if options.get("band_hz") else None)
-            result = {**analysis.fit(rec).result(), **data}
-            # before/after the named effect beside the sweep, as `shakeid explain` (never fails the job)
-            result["frf"] = for_explanation(result, analysis.baseline_model_, analysis.model_, [rec],
-                                            [_label(path, options)])
-            write_explain_report(analysis, out / STAGING, result["frf"])
-            _write_json(out / "explain.json", result)
-            return _adopt(kind, out)
+        if kind in ("explain", "explain_campaign"):
+            return _explain(kind, recs, data, [_label(p, options) for p in paths], options, out)
         raise ShakeidError(f"unknown job kind {kind!r}")
     except (ShakeidError, ValueError) as exc:  # the user's input: a message, not a traceback
-        raise ShakeidError(_public(str(exc), [path], options)) from None
+        raise ShakeidError(_public(str(exc), paths, options)) from None
+
+
+def _read_checked(paths: list, options: dict, verb: str) -> tuple[list, dict]:
+    """The recordings at paths, each read with its stored read options under the request's
+    (options["read_options_by_recording"], in order; for one recording they are merged when queued) and
+    checked as the CLI checks them (check_identifiable: refused unless accept_faulty); several are named
+    by _label. Returns them and the first one's quality, as the CLI's document gives it."""
+    from identify.data.quality import check_identifiable
+
+    stored = options.get("read_options_by_recording") or [{}] * len(paths)
+    recs, data = [], None
+    for p, own in zip(paths, stored):
+        rec = read(p, {**own, **options})  # as uploaded, the request's read options over that
+        if len(paths) > 1:
+            rec.source = _label(p, options)
+        quality = check_identifiable(rec, _label(p, options), bool(options.get("accept_faulty")),
+                                     f"set accept_faulty to {verb} it anyway")
+        recs.append(rec)
+        data = data or quality
+    return recs, data
+
+
+def _explain(kind: str, recs: list, data: dict, names: list[str], options: dict, out: Path) -> dict:
+    """One discrepancy analysis of one recording or several together (`shakeid explain A [B ...]`):
+    explain.json and its report (the one path of the "explain" and "explain_campaign" jobs)."""
+    from identify.explain.workflow import DiscrepancyAnalysis
+    from identify.frf.side_by_side import for_explanation
+    from reports.explain import write_explain_report
+
+    analysis = DiscrepancyAnalysis(band_hz=tuple(options["band_hz"]) if options.get("band_hz") else None)
+    result = {**analysis.fit(recs if len(recs) > 1 else recs[0]).result(), **data}
+    # before/after the named effect beside the sweep, as `shakeid explain` (never fails the job)
+    result["frf"] = for_explanation(result, analysis.baseline_model_, analysis.model_, recs, names)
+    write_explain_report(analysis, out / STAGING, result["frf"])
+    _write_json(out / "explain.json", result)
+    return _adopt(kind, out)
 
 
 #: where a job writes its report before the result file is there (then renamed to "report")
@@ -146,8 +173,9 @@ def _adopt(kind: str, out: Path) -> dict:
     if (out / STAGING).is_dir():
         shutil.rmtree(out / "report", ignore_errors=True)
         os.replace(out / STAGING, out / "report")
-    if kind == "explain":
-        return {"effect": result["effect"], "gap_before": result["gap_before"], "gap_after": result["gap_after"]}
+    if kind in ("explain", "explain_campaign"):
+        summary = {"effect": result["effect"], "gap_before": result["gap_before"], "gap_after": result["gap_after"]}
+        return summary if kind == "explain" else {**summary, "recordings": [r["source"] for r in result["recordings"]]}
     terms = {eq: sorted(t) for eq, t in result["model"].items()}
     if kind == "identify_joint":
         if result["status"] == "failed":
@@ -163,17 +191,9 @@ def _run_joint(paths: list, options: dict, out: Path) -> dict:
     verdict (its `recordings` section says which recording one model does not explain); model.json only
     for a model that passed, as for one recording; a failed joint model fails the job with the reason."""
     from identify.identifier import SparseIdentifier
-    from identify.data.quality import check_identifiable
 
     try:
-        recs = []
-        stored = options.get("read_options_by_recording") or [{}] * len(paths)
-        for p, own in zip(paths, stored):
-            rec = read(p, {**own, **options})  # as uploaded, the request's read options over that
-            rec.source = _label(p, options)
-            check_identifiable(rec, rec.source, bool(options.get("accept_faulty")),
-                               "set accept_faulty to identify it anyway")
-            recs.append(rec)
+        recs, _ = _read_checked(paths, options, "identify")
         params = {k: options[k] for k in IDENTIFY_KEYS if options.get(k) is not None}
         if options.get("band_hz"):
             params["band_hz"] = tuple(options["band_hz"])

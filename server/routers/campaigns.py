@@ -1,6 +1,9 @@
-"""Campaigns: several sweeps one after another in the rig controller, then one joint identification."""
+"""Campaigns: several sweeps one after another in the rig controller, then one joint identification; on
+request one explanation of their recordings together."""
 from __future__ import annotations
 
+import json
+from pathlib import Path as FsPath
 from typing import Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Query
@@ -8,9 +11,10 @@ from fastapi.concurrency import run_in_threadpool
 from pydantic import Field
 
 from .. import schemas
-from ..catalog import Catalog
+from ..catalog import RESULT_FILES, Catalog, delivered
 from ..deps import ERRORS, Id, Services, operator, services, viewer
 from ..preflight import plan_refusal
+from .jobs import check_at_the_door
 
 router = APIRouter(tags=["campaigns"])
 CAMPAIGN_ERRORS = {**ERRORS, 404: {"model": schemas.Problem}, 409: {"model": schemas.Problem},
@@ -67,6 +71,73 @@ async def get_campaign(campaign_id: str = Id(), svc: Services = Depends(services
     if campaign is None:
         raise HTTPException(404, f"no campaign {campaign_id}")
     return {**campaign, "joint_identification": latest_joint_jobs(svc.catalog, [campaign_id]).get(campaign_id)}
+
+
+def usable_recordings(svc: Services, campaign: dict, accept_faulty: bool) -> tuple[list[dict], list[str]]:
+    """The campaign's recordings an explanation can use (in the catalog, complete, and not flagged
+    unusable unless accept_faulty), in plan order, and why each other one is left out."""
+    usable, left_out = [], []
+    for rec_id in campaign["recording_ids"]:
+        rec = svc.catalog.get("recordings", rec_id)
+        quality = (rec or {}).get("info", {}).get("quality") or {}
+        if rec is None:
+            left_out.append(f"{rec_id}: no longer in the catalog")
+        elif rec["status"] != "complete":
+            left_out.append(f"{rec_id}: {rec['status']}")
+        elif quality.get("usable_for_identification") is False and not accept_faulty:
+            left_out.append(f"{rec_id}: unusable ({'; '.join(quality.get('reasons') or []) or 'quality flags'})")
+        else:
+            usable.append(rec)
+    return usable, left_out
+
+
+@router.post("/api/campaigns/{campaign_id}/explain", status_code=202, response_model=schemas.JobOut,
+             dependencies=[operator], responses={**CAMPAIGN_ERRORS, 422: {"model": schemas.Problem}})
+def explain_campaign(body: schemas.ExplainIn | None = None, campaign_id: str = Id(),
+                     svc: Services = Depends(services)):
+    """Queue one discrepancy analysis of a completed campaign's recordings together (`shakeid explain A.h5
+    B.h5 ...`; job kind explain_campaign); the read options apply to every recording. 409 while the campaign
+    is not completed or has fewer than two usable recordings. Then GET /api/campaigns/{id}/explanation."""
+    campaign = svc.catalog.get("campaigns", campaign_id)
+    if campaign is None:
+        raise HTTPException(404, f"no campaign {campaign_id}")
+    if campaign["state"] != "completed":
+        raise HTTPException(409, f"campaign {campaign_id} is {campaign['state']}: a campaign is explained once it "
+                                 "has completed" + (f" ({campaign['reason']})" if campaign.get("reason") else ""))
+    options = body.model_dump(exclude_none=True) if body is not None else {}
+    recs, left_out = usable_recordings(svc, campaign, bool(options.get("accept_faulty")))
+    if len(recs) < 2:
+        raise HTTPException(409, f"campaign {campaign_id} has {len(recs)} usable recording(s); one explanation "
+                                 "over a campaign needs two or more (a single recording is explained by POST "
+                                 "/api/recordings/{id}/explain)" + (f"; left out: {', '.join(left_out)}" if left_out else ""))
+    stored = [rec["info"].get("read_options", {}) for rec in recs]
+    for rec, own in zip(recs, stored):
+        check_at_the_door(rec, {**own, **options})
+    ids = [rec["id"] for rec in recs]
+    return svc.jobs.submit("explain_campaign", ids[0], {**options, "recording_ids": ids, "campaign_id": campaign_id,
+                                                        "read_options_by_recording": stored, "left_out": left_out})
+
+
+@router.get("/api/campaigns/{campaign_id}/explanation", dependencies=[viewer],
+            responses={**ERRORS, 404: {"model": schemas.Problem}})
+def campaign_explanation(campaign_id: str = Id(), svc: Services = Depends(services)) -> dict:
+    """The campaign's latest explanation: the JSON of `shakeid explain A.h5 B.h5 ... --json` (its
+    `recordings` section, one entry per recording). 404 saying why there is none (yet)."""
+    if svc.catalog.get("campaigns", campaign_id) is None:
+        raise HTTPException(404, f"no campaign {campaign_id}")
+    jobs = svc.catalog.list("jobs", "kind = 'explain_campaign' AND json_extract(options, '$.campaign_id') = ?",
+                            (campaign_id,))
+    for job in jobs:  # newest first; a queued job may hold a delivered result (parked by a stop)
+        if job["state"] != "failed" and delivered(job):
+            return json.loads((FsPath(job["result_dir"]) / RESULT_FILES["explain_campaign"]).read_text())
+    if not jobs:
+        raise HTTPException(404, f"no explanation of campaign {campaign_id}: none was asked for "
+                                 f"(POST /api/campaigns/{campaign_id}/explain)")
+    job = jobs[0]
+    if job["state"] == "failed":
+        raise HTTPException(404, f"no explanation of campaign {campaign_id}: its latest explain job {job['id']} "
+                                 f"failed: {job['error']}")
+    raise HTTPException(404, f"no explanation of campaign {campaign_id} yet: job {job['id']} is {job['state']}")
 
 
 @router.post("/api/campaigns/{campaign_id}/{action}", status_code=202, response_model=schemas.Accepted,
