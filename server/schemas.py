@@ -216,6 +216,9 @@ class CampaignOut(BaseModel):
     joint_identification: JobOut | None = Field(
         None, description="the joint identification of recording_ids queued when the campaign completed "
                           "(job kind identify_joint; GET /api/jobs/{id}); None before that")
+    explanation: JobOut | None = Field(
+        None, description="the latest explanation of recording_ids together (job kind explain_campaign, asked for "
+                          "by POST /api/campaigns/{id}/explain; GET /api/campaigns/{id}/explanation); None before that")
     created: float
     updated: float
 

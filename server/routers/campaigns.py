@@ -44,21 +44,30 @@ async def start_campaign(body: schemas.CampaignIn, who: str = operator, svc: Ser
 
 @router.get("/api/campaigns", response_model=list[schemas.CampaignOut], dependencies=[viewer], responses=ERRORS)
 def list_campaigns(limit: int = Query(50, ge=1, le=500), svc: Services = Depends(services)):
-    """The newest campaigns, each with its latest joint identification job (or null)."""
+    """The newest campaigns, each with its latest joint identification job and explanation job (or null)."""
     campaigns = svc.catalog.list("campaigns", limit=limit)
-    joint = latest_joint_jobs(svc.catalog, [c["id"] for c in campaigns])
-    return [{**c, "joint_identification": joint.get(c["id"])} for c in campaigns]
+    return [{**c, **jobs} for c, jobs in zip(campaigns, campaign_jobs(svc.catalog, [c["id"] for c in campaigns]))]
 
 
-def latest_joint_jobs(catalog: Catalog, campaign_ids: list[str]) -> dict:
-    """{campaign id: its newest identify_joint job}, for these campaigns only (one query; every campaign's
-    jobs had been read for each list and each single campaign)."""
+#: CampaignOut's job fields and the job kind of each
+CAMPAIGN_JOBS = {"joint_identification": "identify_joint", "explanation": "explain_campaign"}
+
+
+def campaign_jobs(catalog: Catalog, campaign_ids: list[str]) -> list[dict]:
+    """Each campaign's CAMPAIGN_JOBS fields: its newest job of each kind (or None), in campaign_ids' order."""
+    latest = {field: latest_joint_jobs(catalog, campaign_ids, kind) for field, kind in CAMPAIGN_JOBS.items()}
+    return [{field: latest[field].get(cid) for field in CAMPAIGN_JOBS} for cid in campaign_ids]
+
+
+def latest_joint_jobs(catalog: Catalog, campaign_ids: list[str], kind: str = "identify_joint") -> dict:
+    """{campaign id: its newest job of kind (identify_joint: its joint model)}, for these campaigns only (one
+    query; every campaign's jobs had been read for each list and each single campaign)."""
     if not campaign_ids:
         return {}
     marks = ", ".join("?" * len(campaign_ids))
     out = {}
-    for j in catalog.list("jobs", f"kind = 'identify_joint' AND json_extract(options, '$.campaign_id') IN ({marks})",
-                          tuple(campaign_ids), limit=10_000):
+    for j in catalog.list("jobs", f"kind = ? AND json_extract(options, '$.campaign_id') IN ({marks})",
+                          (kind, *campaign_ids), limit=10_000):
         out.setdefault(j["options"]["campaign_id"], j)  # newest first
     return out
 
@@ -66,11 +75,12 @@ def latest_joint_jobs(catalog: Catalog, campaign_ids: list[str]) -> dict:
 @router.get("/api/campaigns/{campaign_id}", response_model=schemas.CampaignOut, dependencies=[viewer],
             responses={**ERRORS, 404: {"model": schemas.Problem}})
 async def get_campaign(campaign_id: str = Id(), svc: Services = Depends(services)):
-    """State, plan, each sweep with its recording and status, progress, and why it paused or aborted."""
+    """State, plan, each sweep with its recording and status, progress, why it paused or aborted, and its
+    latest joint identification and explanation jobs."""
     campaign = svc.catalog.get("campaigns", campaign_id)
     if campaign is None:
         raise HTTPException(404, f"no campaign {campaign_id}")
-    return {**campaign, "joint_identification": latest_joint_jobs(svc.catalog, [campaign_id]).get(campaign_id)}
+    return {**campaign, **campaign_jobs(svc.catalog, [campaign_id])[0]}
 
 
 def usable_recordings(svc: Services, campaign: dict, accept_faulty: bool) -> tuple[list[dict], list[str]]:

@@ -60,6 +60,8 @@ def test_a_completed_campaign_is_explained_over_its_up_and_down_sweeps(service):
     job = r.json()
     assert job["kind"] == "explain_campaign" and job["options"]["recording_ids"] == c["recording_ids"]
     assert job["options"]["campaign_id"] == cid
+    assert viewer.get(f"/api/campaigns/{cid}").json()["explanation"]["id"] == job["id"]  # in its status
+    assert viewer.get(f"/api/campaigns/{one}").json()["explanation"] is None
     job = wait_for(lambda: (j := op.get(f"/api/jobs/{job['id']}").json())["state"] not in ("queued", "running")
                    and j, timeout_s=600, what="the campaign's explanation")
     assert job["state"] == "completed", job["error"]
