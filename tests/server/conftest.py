@@ -97,6 +97,24 @@ def wait_for(fn, timeout_s: float = 60.0, what: str = "condition"):
         time.sleep(0.1)
 
 
+def wait_for_job(client, fetch, stall_s: float = 900.0, what: str = "the job") -> dict:
+    """Wait until fetch() (a job's JSON) has left queued/running, for as long as the service's job queue
+    moves: a service identifies every recording, so on a busy machine a job can wait behind many others for
+    longer than any fixed time, and the job workers run at nice +10 (server/worker.py), so a busy machine
+    starves them by design. Fails only when no job of the service changed state for stall_s (a stuck queue:
+    15 minutes with nothing started or finished), saying what it waited for."""
+    moved, seen = time.monotonic(), None
+    while True:
+        job = fetch()
+        if job["state"] not in ("queued", "running"):
+            return job
+        jobs = {(j["id"], j["state"]) for j in client.get("/api/jobs", params={"limit": 500}).json()}
+        if jobs != seen:
+            moved, seen = time.monotonic(), jobs
+        assert time.monotonic() - moved < stall_s, f"{what} is {job['state']} and no job moved for {stall_s:.0f} s"
+        time.sleep(1.0)
+
+
 @pytest.fixture
 def service(tmp_path):
     s = Service(tmp_path / "data").start()

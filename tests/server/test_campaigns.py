@@ -13,7 +13,7 @@ import h5py
 import numpy as np
 import pytest
 
-from .conftest import OPERATOR, SHAKEID, VIEWER, Service, wait_for
+from .conftest import OPERATOR, SHAKEID, VIEWER, Service, wait_for, wait_for_job
 pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 # 3-15 Hz over 4 s of rig time (0.4 s of wall time at 10x) per sweep
@@ -141,10 +141,8 @@ def test_a_completed_campaign_is_identified_jointly(service):
     assert c["state"] == "completed" and len(c["recording_ids"]) == 2, c
     joint = c["joint_identification"]
     assert joint["kind"] == "identify_joint" and joint["options"]["recording_ids"] == c["recording_ids"]
-    deadline = time.time() + 300
-    while joint["state"] in ("queued", "running") and time.time() < deadline:
-        time.sleep(1.0)
-        joint = _campaign(viewer, cid)["joint_identification"]
+    # behind every recording's own identification: as long as the queue moves (wait_for_job)
+    joint = wait_for_job(viewer, lambda: _campaign(viewer, cid)["joint_identification"], what="the joint model")
     assert joint["state"] == "completed", joint["error"]
     assert op.get(f"/api/jobs/{joint['id']}").json()["kind"] == "identify_joint"
     result = json.loads((service.data_dir / "results" / joint["id"] / "joint.json").read_text())
@@ -157,8 +155,7 @@ def test_a_completed_campaign_is_identified_jointly(service):
     assert viewer.post("/api/identify", json={"recording_ids": ids}).status_code == 403
     job = op.post("/api/identify", json={"recording_ids": ids, "placements": 0, "bias_replicates": 0})
     assert job.status_code == 202, job.text
-    job = wait_for(lambda: (j := op.get(f"/api/jobs/{job.json()['id']}").json())["state"] not in ("queued", "running")
-                   and j, timeout_s=300)
+    job = wait_for_job(op, lambda jid=job.json()["id"]: op.get(f"/api/jobs/{jid}").json(), what="the joint job")
     assert job["state"] == "completed", job["error"]
     again = op.get(f"/api/jobs/{job['id']}/joint").json()
     assert [s["source"] for s in again["recordings"]] == [f"{rid}.h5" for rid in ids]
