@@ -1,6 +1,7 @@
 // The predicted frequency response beside the measured sweeps (server/routers/frf.py): a recording's
 // section (its latest identification) and a campaign's page (#/campaign/<id>: its sweeps and its joint
-// model's response at every table amplitude). Uses dashboard.js's api, blobUrl, esc, when, fail, $.
+// model's response at every table amplitude, and its explanation over every sweep together). Uses dashboard.js's
+// api, blobUrl, esc, when, fail, session, $ and recording.js's explanationSummary.
 "use strict";
 const FRF_FIGURE = "frf_overlay.png";  // reports.frf_overlay.OVERLAY_FIGURE
 let openCampaign = null;
@@ -55,19 +56,33 @@ async function showCampaign(id) {
   try { c = await api("GET", `/api/campaigns/${id}`); }
   catch (e) { $("camp-body").textContent = e.status === 404 ? `no campaign ${id}` : e.message; return; }
   if (id !== openCampaign) return;
-  const j = c.joint_identification;
+  const j = c.joint_identification, x = c.explanation;
+  const busy = x && ["queued", "running"].includes(x.state);
+  const ask = session.role === "operator" && c.state === "completed" && !busy ?
+    ` <button id="camp-explain-go">${x ? "explain again" : "explain its sweeps together"}</button>` : "";
   $("camp-body").innerHTML = `<dl class="details"><dt>name</dt><dd>${esc(c.name)}</dd><dt>date</dt><dd>${when(c.created)}</dd>` +
     `<dt>state</dt><dd>${esc(c.state)}${c.reason ? ` <span class="muted">${esc(c.reason)}</span>` : ""}</dd>` +
-    `<dt>joint model</dt><dd id="camp-joint">${j ? esc(j.state) + (j.error ? `: ${esc(j.error)}` : "") : "not yet (queued when the campaign completes)"}</dd></dl>` +
+    `<dt>joint model</dt><dd id="camp-joint">${j ? esc(j.state) + (j.error ? `: ${esc(j.error)}` : "") : "not yet (queued when the campaign completes)"}</dd>` +
+    `<dt>explanation</dt><dd id="camp-explain-state">${x ? esc(x.state) + (x.error ? `: ${esc(x.error)}` : "") :
+      c.state === "completed" ? "not asked for" : "once the campaign completes"}${ask}</dd></dl>` +
+    `<div id="camp-explain"></div>` +
     `<table class="data" id="camp-sweeps"><tr><th>sweep</th><th class="num">amplitude, mm</th><th>direction</th><th>status</th></tr>` +
     c.sweeps.map((s, i) => `<tr><td>${s.recording_id ? `<a href="#/recording/${s.recording_id}">${i + 1}</a>` : i + 1}</td>` +
       `<td class="num">${s.amplitude_mm}</td><td>${esc(s.direction)}</td><td>${esc(s.status)}</td></tr>`).join("") + `</table>` +
     `<h3>Frequency response <span class="hint">(the joint model beside every sweep, per table amplitude)</span></h3><div id="camp-frf"></div>`;
+  const go = $("camp-explain-go");
+  if (go) go.onclick = () => api("POST", `/api/campaigns/${id}/explain`, {}).then(() => showCampaign(id)).catch(fail("not explained"));
+  if (x && x.state === "completed") {
+    api("GET", `/api/campaigns/${id}/explanation`).then(doc => { if (openCampaign === id) $("camp-explain").innerHTML = explanationSummary(doc, "camp"); })
+      .catch(e => { if (openCampaign === id) $("camp-explain").innerHTML = `<p class="muted">${esc(e.message)}</p>`; });
+  }
+  const later = () => setTimeout(() => { if (openCampaign === id && location.hash === `#/campaign/${id}`) showCampaign(id); }, 2000);
   if (j && j.state === "completed") await frfInto($("camp-frf"), "camp", `/api/campaigns/${id}/frf`, `/api/campaigns/${id}/frf.png`);
   else {
     $("camp-frf").innerHTML = `<p class="muted" id="camp-frf-none">after the joint identification</p>`;
-    setTimeout(() => { if (openCampaign === id && location.hash === `#/campaign/${id}`) showCampaign(id); }, 2000);
+    later();
   }
+  if (busy && j && j.state === "completed") later();  // the explanation's state, until it is done
 }
 
 // -- the campaign builder's proposal: amplitudes and band from the rig model's predicted folds (daq.plan)

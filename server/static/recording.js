@@ -134,11 +134,17 @@ function explainSection(r, x) {
   const pending = jobState(r, "explain", "explain");
   if (pending) return pending;
   if (!x) return `<p class="bad">the result could not be read</p>`;
-  const eff = x.effect ? `<b>${esc(String(x.effect).replace(/_/g, " "))}</b> (terms ${esc((x.terms || []).join(", "))}, confidence ${(x.confidence ?? 0).toFixed(3)})` : "<b>no effect found</b>";
-  return `<p id="rec-effect">Effect: ${eff}.</p><p>Gap (${esc(x.metric || "")}): ${num(x.gap_before, 3)} before, ${num(x.gap_after, 3)} after` +
-    (x.gap_closed != null ? ` (${pct(x.gap_closed)} closed)` : "") + (x.noise_floor != null ? `; noise floor ${num(x.noise_floor, 3)}` : "") + `.</p>` +
+  return explanationSummary(x, "rec") +
     `<p><a href="#" class="report" data-kind="explain" id="rec-explain-report">the whole report (index.html)</a> <span class="hint">opens in a new tab</span></p>` +
     `<div class="figures" id="rec-explain-figures"></div>`;
+}
+/** An explanation's answer (explain.json, of one recording or several together): the effect named and the gap
+ *  before and after; the recording's page and a campaign's page show it alike. */
+function explanationSummary(x, prefix) {
+  const eff = x.effect ? `<b>${esc(String(x.effect).replace(/_/g, " "))}</b> (terms ${esc((x.terms || []).join(", "))}, confidence ${(x.confidence ?? 0).toFixed(3)})` : "<b>no effect found</b>";
+  const over = (x.recordings || []).length > 1 ? ` <span class="hint">(over ${x.recordings.length} recordings together: ${esc(x.recordings.map(r => r.source).join(", "))})</span>` : "";
+  return `<p id="${prefix}-effect">Effect: ${eff}.${over}</p><p>Gap (${esc(x.metric || "")}): ${num(x.gap_before, 3)} before, ${num(x.gap_after, 3)} after` +
+    (x.gap_closed != null ? ` (${pct(x.gap_closed)} closed)` : "") + (x.noise_floor != null ? `; noise floor ${num(x.noise_floor, 3)}` : "") + `.</p>`;
 }
 async function figures(id, kind, into) {
   let names = [];

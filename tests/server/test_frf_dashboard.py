@@ -9,7 +9,7 @@ import json
 
 import pytest
 
-from .conftest import Service, wait_for
+from .conftest import Service, wait_for, wait_for_job
 from .test_dashboard import TIMEOUT_MS, browser, identified, page, sweep_body, wait_idle  # noqa: F401 (fixtures)
 pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
@@ -126,3 +126,18 @@ def test_campaign_page_shows_every_amplitude(page, service):  # noqa: F811
     assert page.locator("#campaign").is_hidden()
     page.go_back()
     page.wait_for_selector("#camp-frf-jumps")
+    # the operator asks for one explanation over both sweeps from the campaign's page (POST
+    # /api/campaigns/{id}/explain); the page follows the job and shows the same answer the API serves
+    page.click("#camp-explain-go")
+    with service.client() as api:  # the job behind the recordings' own: waited for while the queue moves
+        wait_for(lambda: api.get(f"/api/campaigns/{cid}").json()["explanation"], 30, "the explanation job")
+        job = wait_for_job(api, lambda: api.get(f"/api/campaigns/{cid}").json()["explanation"], what="the explanation")
+    assert job["state"] == "completed", job["error"]
+    page.wait_for_selector("#camp-effect")  # the page follows the job (every 2 s while it runs)
+    with service.client() as api:
+        doc = api.get(f"/api/campaigns/{cid}/explanation").json()
+    text = page.inner_text("#camp-effect")
+    assert [r["source"] for r in doc["recordings"]] and len(doc["recordings"]) == 2, doc.get("recordings")
+    assert "over 2 recordings together" in text
+    assert (doc["effect"] or "no effect").replace("_", " ") in text.replace("no effect found", "no effect")
+    assert page.locator("#camp-explain-go").inner_text() == "explain again"
