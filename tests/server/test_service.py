@@ -13,7 +13,7 @@ import numpy as np
 
 from sim.rig import RigParameters
 
-from .conftest import VIEWER, Service, wait_for
+from .conftest import VIEWER, Service, wait_for, wait_for_job
 pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 SWEEP = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 40.0, "amplitude_mm": 1.3, "settle_s": 2.0}
@@ -286,8 +286,7 @@ def test_explain_job_names_a_hidden_effect(service, tmp_path, make_run):
     rec = op.post("/api/recordings", params={"filename": "qd.csv"}, content=csv.read_bytes()).json()
     job = op.post(f"/api/recordings/{rec['id']}/explain", json={})
     assert job.status_code == 202 and job.json()["kind"] == "explain"
-    done = wait_for(lambda: (j := op.get(f"/api/jobs/{job.json()['id']}").json())["state"] in ("completed", "failed")
-                    and j, 300, "explain job")
+    done = wait_for_job(op, lambda jid=job.json()["id"]: op.get(f"/api/jobs/{jid}").json(), what="the explain job")
     assert done["state"] == "completed", done
     result = op.get(f"/api/recordings/{rec['id']}/explanation").json()
     assert result["effect"] == "quadratic_damping" and result["gap_after"] < 0.5 * result["gap_before"]
