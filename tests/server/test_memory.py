@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import gc
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -58,8 +59,13 @@ print(before, peak, rss_mb())
 
 
 def kept_share(program: str, mode: str) -> float:
-    """The share of the growth (peak - before) the process still holds after freeing it."""
-    out = subprocess.run([sys.executable, "-c", program, mode], capture_output=True, text=True, check=True).stdout
+    """The share of the growth (peak - before) the process still holds after freeing it, in glibc's own
+    defaults: the environment's malloc settings are not passed on (Dask's nanny puts MALLOC_TRIM_THRESHOLD_
+    into its parent's os.environ for good, `distributed.nanny.pre-spawn-environ`, so after the suite's Dask
+    tests every child process trimmed by itself and the "default" case showed nothing)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_") and k != "GLIBC_TUNABLES"}
+    out = subprocess.run([sys.executable, "-c", program, mode], capture_output=True, text=True, check=True,
+                         env=env).stdout
     before, peak, after = map(float, out.split())
     assert peak - before > 30, f"the case did not grow the process as meant: {out}"
     return (after - before) / (peak - before)
