@@ -8,14 +8,16 @@ import json
 
 import pytest
 
-from .conftest import VIEWER, Service, wait_for_job
-from .test_campaigns import ENDED, _wait_state
+from .conftest import VIEWER, Service, wait_for
 
 pytestmark = pytest.mark.slow  # two sweeps, their identifications, then the explanation
 
+ENDED = ("completed", "paused", "aborted")
+
 
 def _ended(client, cid: str) -> dict:
-    return _wait_state(client, cid, ENDED)
+    return wait_for(lambda: (c := client.get(f"/api/campaigns/{cid}").json())["state"] in ENDED and c, 180,
+                    f"campaign {cid} to end")
 
 
 def _start(client, plan: dict) -> str:
@@ -60,7 +62,8 @@ def test_a_completed_campaign_is_explained_over_its_up_and_down_sweeps(service):
     assert job["options"]["campaign_id"] == cid
     assert viewer.get(f"/api/campaigns/{cid}").json()["explanation"]["id"] == job["id"]  # in its status
     assert viewer.get(f"/api/campaigns/{one}").json()["explanation"] is None
-    job = wait_for_job(op, lambda jid=job["id"]: op.get(f"/api/jobs/{jid}").json(), what="the campaign's explanation")
+    job = wait_for(lambda: (j := op.get(f"/api/jobs/{job['id']}").json())["state"] not in ("queued", "running")
+                   and j, timeout_s=600, what="the campaign's explanation")
     assert job["state"] == "completed", job["error"]
 
     r = viewer.get(f"/api/campaigns/{cid}/explanation")
