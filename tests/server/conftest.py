@@ -97,22 +97,47 @@ def wait_for(fn, timeout_s: float = 60.0, what: str = "condition"):
         time.sleep(0.1)
 
 
+def wait_while_moving(done, progress, stall_s: float = 900.0, what: str = "the condition"):
+    """Wait until done() returns something true and return it, for as long as progress() keeps changing: on a
+    busy machine work takes as long as the machine gives it, so no fixed bound fits every load; a test fails
+    only when nothing moved for stall_s (a stuck queue or a stalled sweep), saying what it waited for."""
+    moved, seen = time.monotonic(), None
+    while True:
+        value = done()
+        if value:
+            return value
+        now = progress()
+        if now != seen:
+            moved, seen = time.monotonic(), now
+        assert time.monotonic() - moved < stall_s, f"{what}: nothing moved for {stall_s:.0f} s (last: {now})"
+        time.sleep(1.0)
+
+
+def job_ended(fetch):
+    """A done() for wait_while_moving: the job's JSON once it has left queued/running, else None."""
+    return lambda: (j := fetch())["state"] not in ("queued", "running") and j
+
+
 def wait_for_job(client, fetch, stall_s: float = 900.0, what: str = "the job") -> dict:
     """Wait until fetch() (a job's JSON) has left queued/running, for as long as the service's job queue
     moves: a service identifies every recording, so on a busy machine a job can wait behind many others for
     longer than any fixed time, and the job workers run at nice +10 (server/worker.py), so a busy machine
     starves them by design. Fails only when no job of the service changed state for stall_s (a stuck queue:
     15 minutes with nothing started or finished), saying what it waited for."""
-    moved, seen = time.monotonic(), None
-    while True:
-        job = fetch()
-        if job["state"] not in ("queued", "running"):
-            return job
-        jobs = {(j["id"], j["state"]) for j in client.get("/api/jobs", params={"limit": 500}).json()}
-        if jobs != seen:
-            moved, seen = time.monotonic(), jobs
-        assert time.monotonic() - moved < stall_s, f"{what} is {job['state']} and no job moved for {stall_s:.0f} s"
-        time.sleep(1.0)
+    return wait_while_moving(job_ended(fetch), lambda: jobs_seen(client), stall_s, what)
+
+
+def jobs_seen(client) -> set:
+    """What moves in a service's job queue: every job's state (a progress() for wait_while_moving)."""
+    return {(j["id"], j["state"]) for j in client.get("/api/jobs", params={"limit": 500}).json()}
+
+
+def wait_for_sweep(client, sweep_id: str, stall_s: float = 300.0, what: str = "the sweep to end") -> dict:
+    """Wait until a sweep has left queued/running, for as long as its progress moves (the simulated rig runs
+    at --sim-speed when the machine gives it the CPU, slower when it does not)."""
+    fetch = lambda: client.get(f"/api/sweeps/{sweep_id}").json()  # noqa: E731
+    return wait_while_moving(job_ended(fetch), lambda: (s := fetch())["state"] + str(s.get("progress")),
+                             stall_s, what)
 
 
 @pytest.fixture

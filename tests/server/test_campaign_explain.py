@@ -8,7 +8,7 @@ import json
 
 import pytest
 
-from .conftest import VIEWER, Service, wait_for
+from .conftest import VIEWER, Service, wait_for, wait_for_job
 
 pytestmark = pytest.mark.slow  # two sweeps, their identifications, then the explanation
 
@@ -62,8 +62,7 @@ def test_a_completed_campaign_is_explained_over_its_up_and_down_sweeps(service):
     assert job["options"]["campaign_id"] == cid
     assert viewer.get(f"/api/campaigns/{cid}").json()["explanation"]["id"] == job["id"]  # in its status
     assert viewer.get(f"/api/campaigns/{one}").json()["explanation"] is None
-    job = wait_for(lambda: (j := op.get(f"/api/jobs/{job['id']}").json())["state"] not in ("queued", "running")
-                   and j, timeout_s=600, what="the campaign's explanation")
+    job = wait_for_job(op, lambda jid=job["id"]: op.get(f"/api/jobs/{jid}").json(), what="the campaign's explanation")
     assert job["state"] == "completed", job["error"]
 
     r = viewer.get(f"/api/campaigns/{cid}/explanation")

@@ -12,7 +12,7 @@ from identify.data.recording import write_csv
 from server.catalog import Catalog
 from server.jobs import JobQueue
 
-from .conftest import wait_for
+from .conftest import job_ended, wait_for, wait_while_moving
 
 
 @pytest.fixture
@@ -42,7 +42,7 @@ def test_a_killed_worker_fails_its_job_with_the_reason_and_the_next_job_runs(que
     failed = wait_for(lambda: (j := cat.get("jobs", victim["id"]))["state"] != "running" and j, 120, "failure")
     assert failed["state"] == "failed" and "worker process died" in failed["error"]
     after = jobs.submit("identify", "0000000000aa", {})
-    done = wait_for(lambda: (j := cat.get("jobs", after["id"]))["state"] in ("completed", "failed") and j, 300, "job")
+    done = _completed(cat, after["id"])
     assert done["state"] == "completed", done
     assert cat.get("recordings", "0000000000aa")["info"]["identify"]["terms"]["q1_dot"]
 
@@ -63,8 +63,14 @@ def test_stopping_with_a_job_running_returns_and_leaves_it_for_the_next_start(qu
     assert cat.recover_after_restart() == []
 
 
+def _jobs_seen(cat):
+    """What moves in the queue: every job's state and attempts (a job that stays running moves nothing)."""
+    return {(j["id"], j["state"], j["attempts"]) for j in cat.list("jobs", limit=500)}
+
+
 def _completed(cat, job_id):
-    return wait_for(lambda: (j := cat.get("jobs", job_id))["state"] in ("completed", "failed") and j, 300, "job")
+    """The job once it has ended, waited for as long as the queue moves (conftest.wait_while_moving)."""
+    return wait_while_moving(job_ended(lambda: cat.get("jobs", job_id)), lambda: _jobs_seen(cat), what="the job")
 
 
 @pytest.mark.slow
@@ -126,8 +132,8 @@ def test_a_sweep_completed_while_the_web_server_was_down_is_identified_when_it_s
     jobs.start()
     try:
         try:
-            wait_for(lambda: cat.count("jobs", "state IN ('completed', 'failed')") == 3, timeout_s=600,
-                     what="the three owed jobs done")
+            wait_while_moving(lambda: cat.count("jobs", "state IN ('completed', 'failed')") == 3,
+                              lambda: _jobs_seen(cat), what="the three owed jobs done")
         except AssertionError:
             raise AssertionError([(j["kind"], j["recording_id"], j["state"], j["error"]) for j in cat.list("jobs")])
         jobs.recording_completed()  # a late event: nothing more is owed

@@ -7,7 +7,7 @@ import pytest
 
 from daq.recorder import read_h5_recording
 
-from .conftest import wait_for
+from .conftest import jobs_seen, wait_for, wait_for_sweep, wait_while_moving
 pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 #: the attack's sweep: on the embedded rig it clipped the mass accelerometer (0.09 % of the samples, the
@@ -93,8 +93,7 @@ def test_prediction_warns_near_the_travel_and_matches_the_recording(service, tmp
     assert r.status_code == 202, r.text
     predicted = r.json()["preflight"]
     assert predicted["source"] == "the rig's nominal parameters" and predicted["warnings"] == []
-    sweep = wait_for(lambda: (s := op.get(f"/api/sweeps/{r.json()['id']}").json())["state"] not in ("queued", "running")
-                     and s, 120, "the sweep's end")
+    sweep = wait_for_sweep(op, r.json()["id"], what="the sweep's end")
     assert sweep["state"] == "completed" and sweep["request"]["preflight"] == predicted
     rec_id = sweep["recording_id"]
     path = tmp_path / "rec.h5"
@@ -102,7 +101,8 @@ def test_prediction_warns_near_the_travel_and_matches_the_recording(service, tmp
     recorded = float(np.max(np.abs(read_h5_recording(path).output)))
     print(f"mass peak: predicted {predicted['mass_peak_ms2']} (nominal), recorded {recorded:.3f} m/s^2")
     assert predicted["mass_peak_ms2"] == pytest.approx(recorded, rel=RECORDED_TOLERANCE)
-    wait_for(lambda: op.get(f"/api/recordings/{rec_id}/model").status_code == 200, 300, "the model")
+    wait_while_moving(lambda: op.get(f"/api/recordings/{rec_id}/model").status_code == 200, lambda: jobs_seen(op),
+                      what="the model")
     again = op.post("/api/sweeps", json={**body, "duration_s": 30.0})
     assert again.status_code == 202, again.text
     identified = again.json()["preflight"]

@@ -12,7 +12,7 @@ import numpy as np
 
 from protocol.plc import Limits
 
-from .conftest import wait_for
+from .conftest import wait_for_job, wait_for_sweep
 pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 
@@ -34,8 +34,7 @@ def test_longest_sweep_at_the_largest_amplitude_the_limits_allow(service):
         r = op.post("/api/sweeps", json=sweep)
     assert r.status_code == 202, r.text
     assert op.post("/api/sweeps", json={**sweep, "amplitude_mm": amp_mm + 0.05}).status_code in (409, 422)
-    end = wait_for(lambda: (s := op.get(f"/api/sweeps/{r.json()['id']}").json())["state"] not in ("queued", "running")
-                   and s, 300, "the sweep to end")
+    end = wait_for_sweep(op, r.json()["id"])
     rec = op.get(f"/api/recordings/{end['recording_id']}").json()
     if end["state"] != "completed":  # ended by the PLC: the fault is named
         assert "PLC fault" in (end["error"] or ""), end
@@ -56,8 +55,7 @@ def test_longest_sweep_at_the_largest_amplitude_the_limits_allow(service):
     # a model only for data that can carry one
     jobs = [j for j in op.get("/api/jobs").json() if j["recording_id"] == rec["id"]]
     if end["state"] == "completed":
-        job = wait_for(lambda: (j := op.get(f"/api/jobs/{jobs[0]['id']}").json())["state"] in ("completed", "failed")
-                       and j, 120, "identification")
+        job = wait_for_job(op, lambda: op.get(f"/api/jobs/{jobs[0]['id']}").json(), what="identification")
         model = op.get(f"/api/recordings/{rec['id']}/model")
         if not quality["usable_for_identification"]:
             assert job["state"] == "failed" and model.status_code == 404, (job, quality)
