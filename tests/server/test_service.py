@@ -13,7 +13,7 @@ import numpy as np
 
 from sim.rig import RigParameters
 
-from .conftest import VIEWER, Service, wait_for, wait_for_job
+from .conftest import VIEWER, Service, jobs_seen, wait_for, wait_for_job, wait_while_moving
 pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 SWEEP = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 40.0, "amplitude_mm": 1.3, "settle_s": 2.0}
@@ -76,8 +76,8 @@ def test_sweep_live_model_and_the_rules_around_it(service):
     sweep = viewer.get(f"/api/sweeps/{sweep_id}").json()
     assert sweep["state"] == "completed" and sweep["progress"] == 1.0
     # the model appears with no further call: identification runs after every completed sweep
-    model = wait_for(lambda: (m := viewer.get(f"/api/recordings/{rec_id}/model")).status_code == 200 and m.json(),
-                     60, "model")
+    model = wait_while_moving(lambda: (m := viewer.get(f"/api/recordings/{rec_id}/model")).status_code == 200
+                              and m.json(), lambda: jobs_seen(viewer), what="model")
     truth = RigParameters.paper_table1().model().equations["q1_dot"]
     assert set(model["model"]["q1_dot"]) == set(truth)
     # the simulated rig's moving mass, recorded with the sweep, scales the physical parameters
@@ -85,8 +85,8 @@ def test_sweep_live_model_and_the_rules_around_it(service):
     assert model["physical"]["mass_source"] == "recording"
     for term, c in truth.items():
         assert abs(model["model"]["q1_dot"][term] / c - 1) < 0.03, term
-    plots = wait_for(lambda: (p := viewer.get(f"/api/recordings/{rec_id}/plots")).status_code == 200 and
-                     "validation.png" in p.json() and p.json(), 60, "plots")
+    plots = wait_while_moving(lambda: (p := viewer.get(f"/api/recordings/{rec_id}/plots")).status_code == 200 and
+                              "validation.png" in p.json() and p.json(), lambda: jobs_seen(viewer), what="plots")
     png = viewer.get(f"/api/recordings/{rec_id}/plots/validation.png")
     assert png.headers["content-type"] == "image/png" and png.content[:8] == b"\x89PNG\r\n\x1a\n" and plots
     f = viewer.get(f"/api/recordings/{rec_id}/file")
@@ -112,7 +112,7 @@ def test_abort_mid_sweep_leaves_an_aborted_recording(service):
     job = op.post(f"/api/recordings/{rec['id']}/identify").json()  # refused data: the job fails ...
     assert rec["info"]["quality"]["usable_for_identification"] is False  # as the job will find
     assert rec["info"]["quality"]["reasons"][0].startswith("status is aborted")
-    wait_for(lambda: op.get(f"/api/jobs/{job['id']}").json()["state"] == "failed", 60, "job")
+    assert wait_for_job(op, lambda: op.get(f"/api/jobs/{job['id']}").json())["state"] == "failed"
     failed = op.get(f"/api/recordings/{rec['id']}/model").json()["detail"]  # ... and the 404 gives its reason
     assert failed.startswith(f"no identify result for recording {rec['id']}: its latest identify job {job['id']} "
                              "failed: ") and "status is aborted" in failed, failed
@@ -158,8 +158,7 @@ def test_uploads_jobs_and_clear_errors(service, tmp_path, table1_run):
     rec = r.json()
     assert rec["origin"] == "upload" and rec["info"]["samples"] == table1_run.recording.n_samples
     job = op.post(f"/api/recordings/{rec['id']}/identify", json={"selection": "heldout", "max_terms": 8}).json()
-    done = wait_for(lambda: (j := viewer.get(f"/api/jobs/{job['id']}").json())["state"] in ("completed", "failed") and j,
-                    60, "job")
+    done = wait_for_job(viewer, lambda: viewer.get(f"/api/jobs/{job['id']}").json(), what="job")
     assert done["state"] == "completed", done
     model = viewer.get(f"/api/recordings/{rec['id']}/model").json()
     assert set(model["model"]["q1_dot"]) == {"q1", "q2", "q1*q2^2", "q2^3", "zdd"}
@@ -173,15 +172,13 @@ def test_uploads_jobs_and_clear_errors(service, tmp_path, table1_run):
     assert op.post(f"/api/recordings/{rec['id']}/identify", json={"selection": "magic"}).status_code == 422
     assert op.post(f"/api/recordings/{rec['id']}/identify", json={"budget_refit": "heldout"}).status_code == 422
     failing = op.post(f"/api/recordings/{rec['id']}/identify", json={"extra_terms": ["warp(q1)"]}).json()
-    failed = wait_for(lambda: (j := viewer.get(f"/api/jobs/{failing['id']}").json())["state"] in ("completed", "failed")
-                      and j, 60, "job")
+    failed = wait_for_job(viewer, lambda: viewer.get(f"/api/jobs/{failing['id']}").json(), what="job")
     assert failed["state"] == "failed" and "warp" in failed["error"]  # the user's mistake, named
     assert failed["error"].startswith(f"sweep.csv (recording {rec['id']}): "), failed["error"]  # and whose job
     # a read option that does not fit the file: the job names the recording as it was uploaded, with its
     # id, not by the server's own path to its store
     wrong = op.post(f"/api/recordings/{rec['id']}/identify", json={"input": "acc_base"}).json()
-    wrong = wait_for(lambda: (j := viewer.get(f"/api/jobs/{wrong['id']}").json())["state"] in ("completed", "failed")
-                     and j, 60, "job")
+    wrong = wait_for_job(viewer, lambda: viewer.get(f"/api/jobs/{wrong['id']}").json(), what="job")
     assert wrong["state"] == "failed" and wrong["error"].startswith(f"sweep.csv (recording {rec['id']}): missing "
                                                                     "column"), wrong
     assert str(service.data_dir) not in wrong["error"]
@@ -240,8 +237,7 @@ def test_queued_and_interrupted_jobs_run_after_a_restart(tmp_path, table1_run):
     try:
         op = svc.client()
         for jid in ("00000000000a", "00000000000b"):
-            job = wait_for(lambda: (j := op.get(f"/api/jobs/{jid}").json())["state"] in ("completed", "failed") and j,
-                           60, f"job {jid}")
+            job = wait_for_job(op, lambda: op.get(f"/api/jobs/{jid}").json(), what=f"job {jid}")
             assert job["state"] == "completed", job
         assert op.get("/api/jobs/00000000000b").json()["attempts"] == 2  # re-run, counted
         assert "re-queued" in svc.output()
@@ -347,8 +343,7 @@ def test_joint_and_job_requests_are_checked_when_made(service, tmp_path, table1_
     copy_id = op.post("/api/recordings", params={"filename": "again.csv"},
                       content=(tmp_path / "sweep.csv").read_bytes()).json()["id"]
     copied = op.post("/api/identify", json={"recording_ids": [csv_id, copy_id], "placements": 0}).json()
-    failed = wait_for(lambda: (j := op.get(f"/api/jobs/{copied['id']}").json())["state"] in ("completed", "failed")
-                      and j, 180, "joint job of a copy")
+    failed = wait_for_job(op, lambda: op.get(f"/api/jobs/{copied['id']}").json(), what="joint job of a copy")
     assert failed["state"] == "failed" and failed["error"].startswith(
         f"again.csv (recording {copy_id}) holds the same samples as sweep.csv (recording {csv_id}) (a copy?)"), failed
     for body in ({"band_hz": [20, 1]}, {"samples": [500, 100]}):
@@ -358,14 +353,13 @@ def test_joint_and_job_requests_are_checked_when_made(service, tmp_path, table1_
     assert explain.status_code == 202, explain.text
     joint = op.post("/api/identify", json={"recording_ids": [csv_id, mat_id], "placements": 0})
     assert joint.status_code == 202, joint.text
-    done = wait_for(lambda: (j := op.get(f"/api/jobs/{joint.json()['id']}").json())["state"] in ("completed", "failed")
-                    and j, 180, "joint job")
+    done = wait_for_job(op, lambda: op.get(f"/api/jobs/{joint.json()['id']}").json(), what="joint job")
     assert done["state"] == "completed", done  # the MAT file read with its own names, as uploaded
     listed = op.get("/api/dashboard/recordings").json()["items"]
     assert listed and all("path" not in r for r in listed)
     assert "path" not in op.get(f"/api/dashboard/recordings/{csv_id}").json()
-    wait_for(lambda: op.get(f"/api/jobs/{explain.json()['id']}").json()["state"] in ("completed", "failed"), 180,
-             "explain job")  # not left running into the next test
+    # not left running into the next test
+    wait_for_job(op, lambda: op.get(f"/api/jobs/{explain.json()['id']}").json(), what="explain job")
 
 
 def test_mat_and_hdf5_uploads(service, tmp_path, table1_run):
@@ -401,8 +395,7 @@ def test_mat_and_hdf5_uploads(service, tmp_path, table1_run):
     assert nomass.json()["detail"].count("/") == 0  # no path of the server's
     for rid in (mat.json()["id"], up.json()["id"]):
         job = op.post(f"/api/recordings/{rid}/identify", json={}).json()
-        done = wait_for(lambda: (j := op.get(f"/api/jobs/{job['id']}").json())["state"] in ("completed", "failed")
-                        and j, 60, "job")
+        done = wait_for_job(op, lambda: op.get(f"/api/jobs/{job['id']}").json(), what="job")
         assert done["state"] == "completed", done
         model = op.get(f"/api/recordings/{rid}/model").json()
         assert set(model["model"]["q1_dot"]) == {"q1", "q2", "q1*q2^2", "q2^3", "zdd"}
