@@ -43,7 +43,7 @@ from daq.plc import ModbusPLC  # noqa: E402
 from protocol.plc import State  # noqa: E402
 from daq.realtime import make_realtime  # noqa: E402
 from sim.server import free_port  # noqa: E402
-from server.controller import HEARTBEAT_BIN_MS  # noqa: E402
+from server.sweep_launch import HEARTBEAT_BIN_MS  # noqa: E402
 
 SHAKEID = str(Path(sys.executable).with_name("shakeid"))
 TOKEN = "benchmark-operator-token"
@@ -204,7 +204,7 @@ def _presses(client: httpx.Client, plc: ModbusPLC, n: int, routes: dict) -> tupl
 
 def pooled_p99_ms(histograms: list[dict]) -> tuple[float, int]:
     """The p99 of the heartbeat intervals of all the sweeps, from each recording's histogram
-    (server/controller.py HEARTBEAT_BIN_MS): the upper edge of the bin holding the 99th percentile."""
+    (server/sweep_launch.py HEARTBEAT_BIN_MS): the upper edge of the bin holding the 99th percentile."""
     counts: dict[float, int] = {}
     for hist in histograms:
         for edge, n in hist.items():

@@ -26,6 +26,7 @@ from daq.sweep import SweepRefused
 
 from .catalog import new_id
 from .preflight import predicted_body
+from .sweep_launch import Refused
 
 #: why a campaign a dead or stopped controller was running is paused after the restart
 RESTARTED = ("the rig controller stopped during the campaign (restart or crash); the table was stopped; "
@@ -87,7 +88,7 @@ class CampaignService:
         if problem:
             raise self._refused(422, f"campaign refused: {problem}")
         campaign = Campaign(parsed, state="running")
-        with self.ctl.starting:  # no single sweep slips in between the checks and the campaign's start
+        with self.ctl.sweeps.starting:  # no single sweep slips in between the checks and the campaign's start
             self._check_rig_free()
             cid, now = new_id(), time.time()
             self.catalog.insert("campaigns", id=cid, created=now, updated=now, name=parsed.name, state="running",
@@ -105,7 +106,7 @@ class CampaignService:
             return {"id": campaign_id, "state": act["campaign"].state}
 
     def resume(self, campaign_id: str, operator: str = "") -> dict:
-        with self.ctl.starting:
+        with self.ctl.sweeps.starting:
             row = self._row_or_404(campaign_id)
             if row["state"] != "paused":
                 raise self._refused(409, f"campaign {campaign_id} is {row['state']}, not paused")
@@ -175,13 +176,12 @@ class CampaignService:
                 "direction": planned.direction, "repeat": planned.repeat}
         note = (f"campaign {campaign.plan.name} ({act['id']}): {planned.label(campaign.total)}"
                 + (f"; {campaign.plan.note}" if campaign.plan.note else ""))
-        from .controller import Refused  # here: the controller module imports this one
 
         try:
             # predicted again right before it starts (a sweep of this campaign may have given a newer model),
             # the prediction kept in the sweep's request as a single sweep's
             body = predicted_body(self.catalog, self.ctl.settings.rig, {**planned.body(note), "campaign": info})
-            started = self.ctl.launch_sweep(body, act["operator"], after_end, held=control.held)
+            started = self.ctl.sweeps.launch(body, act["operator"], after_end, held=control.held)
         except Refused as exc:
             return {"status": "refused", "reason": exc.detail}
         except SweepRefused as exc:
@@ -257,6 +257,5 @@ class CampaignService:
 
     @staticmethod
     def _refused(status: int, detail: str):
-        from .controller import Refused  # here: the controller module imports this one
 
         return Refused(status, detail)

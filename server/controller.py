@@ -33,37 +33,25 @@ import socket
 import sys
 import threading
 import time
-from collections import Counter
 from pathlib import Path
 
 from daq.devices import DeviceError
 from daq.realtime import CONTROLLER_PRIORITY, ESTOP_PRIORITY, make_realtime
 from daq.recorder import recover_directory
-from daq.sweep import SweepRequest
 from protocol.plc import State
 
 from .campaign import CampaignService
-from .catalog import Catalog, new_id
+from .catalog import Catalog
 from .ipc import Line, parse_address
-from .rig import RigBusy, RigService
+from .rig import RigService
 from .settings import Settings
 from .stoplistener import StopListener, open_listener
+from .sweep_launch import Refused, SweepLauncher
 
 #: why a sweep ended when its web server died (session ended or its process gone, whichever is seen first)
 WEB_SERVER_GONE = "the web server went away during the sweep; the rig controller stopped the table"
 #: decimated points one live request returns at the most (~10 s at the live view's 200 per second)
 LIVE_BATCH = 2000
-#: a sweep's heartbeat intervals in recordings.info as counts per bin of this width (`heartbeat_histogram_ms`:
-#: {lower edge in ms: count}): those of many sweeps pool into one p99 (a short sweep's own p99 is its largest)
-HEARTBEAT_BIN_MS = 1
-
-
-class Refused(Exception):
-    """A request the controller turns down; status is the HTTP status the web server answers with."""
-
-    def __init__(self, status: int, detail: str):
-        super().__init__(detail)
-        self.status, self.detail = status, detail
 
 
 def default_address(data_dir: Path) -> str:
@@ -87,9 +75,7 @@ class RigController:
         self.stop_reason = "the rig controller is stopping"
         self._lock = threading.Lock()
         self._listener: socket.socket | None = None
-        # held while a sweep or a campaign is being started (checks, then the start): never by the estop path
-        self.starting = threading.RLock()
-        self._closed = False  # set once stopping: no sweep starts after the rig was stopped
+        self.sweeps = SweepLauncher(self.rig, self.catalog, settings.data_dir / "recordings", self.notify)
         self.campaigns = CampaignService(self)
         settings.resolve_stop()  # a web server that started this controller has filled it in already
         self.stop_listener: StopListener | None = None
@@ -129,8 +115,7 @@ class RigController:
         """Serve until stopped; then stop the table, close the recording, and release everything."""
         self.stopping.wait()
         self.campaigns.halt(self.stop_reason)  # no next sweep; the catalog says paused (resumable)
-        with self.starting:  # a sweep being started right now is active once this lock is free
-            self._closed = True
+        self.sweeps.close(self.stop_reason)  # a sweep being started right now is active once this returns
         self.rig.stop(self.stop_reason)  # aborts a running sweep (the table is commanded to stop) and waits
         self.campaigns.join()
         if self.stop_listener is not None:
@@ -286,11 +271,11 @@ class RigController:
     def op_start_sweep(self, body: dict, operator: str = "") -> dict:
         """Checked here, synchronously: limits (422), another sweep, a running campaign or a PLC in
         estop/fault (409)."""
-        with self.starting:
+        with self.sweeps.starting:
             busy = self.campaigns.busy()
             if busy:
                 raise Refused(409, f"sweep refused: {busy}")
-            return self.launch_sweep(body, operator)
+            return self.sweeps.launch(body, operator)
 
     # campaigns: server/campaign.py
     def op_start_campaign(self, plan: dict, operator: str = "") -> dict:
@@ -304,96 +289,6 @@ class RigController:
 
     def op_abort_campaign(self, campaign_id: str, operator: str = "") -> dict:
         return self.campaigns.abort(campaign_id, operator)
-
-    def launch_sweep(self, body: dict, operator: str = "", after_end=None, held=None) -> dict | None:
-        """Start one sweep (single or a campaign's): limits (422), another sweep or a PLC in estop/fault
-        (409), the rig unreachable (503). after_end(result, error) is called after the catalog has the
-        sweep's end; held() -> reason, asked last before the start: None is returned (nothing started)
-        if it gives one (a campaign paused or halted meanwhile)."""
-        with self.starting:
-            return self._launch_sweep(body, operator, after_end, held)
-
-    def _launch_sweep(self, body, operator, after_end, held) -> dict | None:
-        req = SweepRequest(float(body["f_start_hz"]), float(body["f_end_hz"]), float(body["duration_s"]),
-                           float(body["amplitude_mm"]), float(body.get("settle_s", 2.0)), operator=operator,
-                           note=str(body.get("note", "")))
-        problem = self.rig.check(req)
-        if problem:
-            raise Refused(422, f"sweep refused: {problem}")
-        act = self.rig.active
-        if act is not None and act.get("ending"):  # its end is in the catalog; its connections are closing
-            act["thread"].join(5.0)
-        if self.rig.active is not None:
-            raise Refused(409, f"another sweep is running ({self.rig.active['id']}); abort it or wait")
-        refusal = self.rig.not_ready()
-        if refusal:
-            raise Refused(409, f"sweep refused: {refusal}")
-        if self._closed:
-            raise Refused(503, f"sweep refused: {self.stop_reason}")
-        if held is not None and held():
-            return None
-        sweep_id, rec_id = new_id(), new_id()
-        path = self.settings.data_dir / "recordings" / f"{rec_id}.h5"
-        now = time.time()
-        last = {"t": 0.0}
-        cat = self.catalog
-
-        def on_progress(frac, st):
-            if time.monotonic() - last["t"] >= 0.2 or frac >= 1.0:
-                last["t"] = time.monotonic()
-                cat.update("sweeps", sweep_id, state="running", progress=round(frac, 4))
-
-        cat.insert("sweeps", id=sweep_id, created=now, updated=now, state="queued", progress=0.0, request=body,
-                   recording_id=rec_id, error=None, operator=operator)
-        # in the catalog before the sweep thread exists, so its end always finds both rows
-        cat.insert("recordings", id=rec_id, created=now, origin="sweep", filename=path.name, path=str(path),
-                   status="running", sweep_id=sweep_id, info={"sweep": body})
-        started: dict = {}  # the sweep's runner, for its heartbeat intervals
-
-        def on_end(result, error):
-            try:
-                runner = started.get("runner")
-                if result is not None and runner is not None:
-                    bins = Counter(str(int(gap * 1000 // HEARTBEAT_BIN_MS) * HEARTBEAT_BIN_MS)
-                                   for gap in runner.heartbeat_intervals)
-                    result = {**result, "heartbeat_histogram_ms": dict(bins)}
-                self._sweep_ended(sweep_id, rec_id, path, result, error)
-            finally:
-                if after_end is not None:
-                    after_end(result, error)
-
-        try:
-            self.rig.begin_sweep(sweep_id, req, path, on_progress, on_end)
-        except RigBusy as busy:  # lost a race with another request: as if it had come first
-            cat.delete("recordings", rec_id)
-            cat.delete("sweeps", sweep_id)
-            raise Refused(409, f"another sweep is running ({busy}); abort it or wait") from None
-        except DeviceError as exc:
-            cat.delete("recordings", rec_id)
-            cat.update("sweeps", sweep_id, state="failed", error=str(exc), recording_id=None)
-            raise Refused(503, f"rig not reachable: {exc}") from None
-        started["runner"] = (self.rig.active or {}).get("runner")  # ours: no other starts while `starting` is held
-        return {"id": sweep_id, "state": "queued", "recording_id": rec_id}
-
-    def _sweep_ended(self, sweep_id, rec_id, path, result, error) -> None:
-        cat = self.catalog
-        if result is None:  # refused at preflight (nothing recorded, no file) or failed before recording
-            if path.exists():  # an internal error after the file was opened: keep what it holds
-                cat.update("sweeps", sweep_id, state="failed", error=error)
-                cat.update("recordings", rec_id, status="failed")
-            else:
-                cat.update("sweeps", sweep_id, state="failed", error=error, recording_id=None)
-                cat.delete("recordings", rec_id)
-            return
-        sweep_state = {"complete": "completed"}.get(result["status"], "aborted")
-        cat.update("sweeps", sweep_id, state=sweep_state, error=result["reason"] or None,
-                   **({"progress": 1.0} if sweep_state == "completed" else {}))
-        # the outcome's keys added to info in one statement (the web server sets its own keys meanwhile),
-        # then the status: whoever sees the recording complete finds its outcome there
-        cat.set_info(rec_id, **{k: v for k, v in result.items() if k != "path"})
-        cat.update("recordings", rec_id, status=result["status"])
-        if sweep_state == "completed":  # the web server queues its identification (server/jobs.py)
-            self.notify({"event": "recording_complete", "recording_id": rec_id})
 
 
 def main(settings: Settings, address: str | None = None, parent_pid: int | None = None) -> int:

@@ -1,9 +1,9 @@
-"""A sweep's heartbeat intervals kept in its recording's info as a histogram (server/controller.py
+"""A sweep's heartbeat intervals kept in its recording's info as a histogram (server/sweep_launch.py
 HEARTBEAT_BIN_MS), so benchmarks/estop_latency.py pools the intervals of many sweeps into one p99.
 Real processes: `shakeid serve` with its controller and embedded simulated rig."""
 from __future__ import annotations
 
-from server.controller import HEARTBEAT_BIN_MS
+from server.sweep_launch import HEARTBEAT_BIN_MS
 
 from .conftest import wait_for
 
