@@ -11,10 +11,11 @@ from fastapi.concurrency import run_in_threadpool
 from pydantic import Field
 
 from .. import schemas
-from ..catalog import RESULT_FILES, Catalog, delivered
+from ..catalog import RESULT_FILES, Catalog
 from ..deps import ERRORS, Id, Services, operator, services, viewer
 from ..preflight import plan_refusal
 from .jobs import check_at_the_door
+from .results import newest_result
 
 router = APIRouter(tags=["campaigns"])
 CAMPAIGN_ERRORS = {**ERRORS, 404: {"model": schemas.Problem}, 409: {"model": schemas.Problem},
@@ -55,13 +56,13 @@ CAMPAIGN_JOBS = {"joint_identification": "identify_joint", "explanation": "expla
 
 def campaign_jobs(catalog: Catalog, campaign_ids: list[str]) -> list[dict]:
     """Each campaign's CAMPAIGN_JOBS fields: its newest job of each kind (or None), in campaign_ids' order."""
-    latest = {field: latest_joint_jobs(catalog, campaign_ids, kind) for field, kind in CAMPAIGN_JOBS.items()}
+    latest = {field: newest_campaign_jobs(catalog, campaign_ids, kind) for field, kind in CAMPAIGN_JOBS.items()}
     return [{field: latest[field].get(cid) for field in CAMPAIGN_JOBS} for cid in campaign_ids]
 
 
-def latest_joint_jobs(catalog: Catalog, campaign_ids: list[str], kind: str = "identify_joint") -> dict:
-    """{campaign id: its newest job of kind (identify_joint: its joint model)}, for these campaigns only (one
-    query; every campaign's jobs had been read for each list and each single campaign)."""
+def newest_campaign_jobs(catalog: Catalog, campaign_ids: list[str], kind: str) -> dict:
+    """{campaign id: its newest job of kind (CAMPAIGN_JOBS: its joint model, its explanation)}, for these
+    campaigns only (one query; every campaign's jobs had been read for each list and each single campaign)."""
     if not campaign_ids:
         return {}
     marks = ", ".join("?" * len(campaign_ids))
@@ -137,17 +138,9 @@ def campaign_explanation(campaign_id: str = Id(), svc: Services = Depends(servic
         raise HTTPException(404, f"no campaign {campaign_id}")
     jobs = svc.catalog.list("jobs", "kind = 'explain_campaign' AND json_extract(options, '$.campaign_id') = ?",
                             (campaign_id,))
-    for job in jobs:  # newest first; a queued job may hold a delivered result (parked by a stop)
-        if job["state"] != "failed" and delivered(job):
-            return json.loads((FsPath(job["result_dir"]) / RESULT_FILES["explain_campaign"]).read_text())
-    if not jobs:
-        raise HTTPException(404, f"no explanation of campaign {campaign_id}: none was asked for "
-                                 f"(POST /api/campaigns/{campaign_id}/explain)")
-    job = jobs[0]
-    if job["state"] == "failed":
-        raise HTTPException(404, f"no explanation of campaign {campaign_id}: its latest explain job {job['id']} "
-                                 f"failed: {job['error']}")
-    raise HTTPException(404, f"no explanation of campaign {campaign_id} yet: job {job['id']} is {job['state']}")
+    path = newest_result(jobs, RESULT_FILES["explain_campaign"], f"no explanation of campaign {campaign_id}", "explain",
+                         f": none was asked for (POST /api/campaigns/{campaign_id}/explain)")
+    return json.loads(path.read_text())
 
 
 @router.post("/api/campaigns/{campaign_id}/{action}", status_code=202, response_model=schemas.Accepted,

@@ -24,7 +24,7 @@ from ..catalog import ID_PATTERN
 from ..deps import ERRORS, Id, Services, services, viewer
 from ..preflight import rig_limits, rig_response
 from ..worker import FRF_FILE
-from .campaigns import latest_joint_jobs
+from .campaigns import newest_campaign_jobs
 from .results import latest_result
 
 router = APIRouter(tags=["frequency response"], dependencies=[viewer],
@@ -58,7 +58,7 @@ def _campaign_file(svc: Services, campaign_id: str, name: str) -> FsPath:
     """`name` in the result folder of the campaign's newest joint identification; 404 saying why not."""
     if svc.catalog.get("campaigns", campaign_id) is None:
         raise HTTPException(404, f"no campaign {campaign_id}")
-    job = latest_joint_jobs(svc.catalog, [campaign_id]).get(campaign_id)
+    job = newest_campaign_jobs(svc.catalog, [campaign_id], "identify_joint").get(campaign_id)
     if job is None:
         raise HTTPException(404, f"no frequency response for campaign {campaign_id} yet: its joint identification "
                                  "is queued when the campaign completes")

@@ -18,27 +18,27 @@ router = APIRouter(tags=["jobs"], dependencies=[viewer], responses={**ERRORS, 40
 def latest_result(svc: Services, rec_id: str, kind: str, name: str) -> FsPath:
     """The file or folder `name` of the recording's newest job of `kind` that has one; 404 saying why not."""
     rec = svc.recording_or_404(rec_id)
-    # a queued job may hold a delivered result too (parked by a stop, or re-queued to adopt it)
-    for job in svc.catalog.list("jobs", "recording_id = ? AND kind = ? AND state != 'failed'", (rec_id, kind)):
-        path = FsPath(job["result_dir"]) / name
-        if path.exists():
-            return path
-    raise HTTPException(404, why_no_result(svc, rec, kind))
-
-
-def why_no_result(svc: Services, rec: dict, kind: str) -> str:
-    """Why a recording has no result of `kind`: its latest job's state (failed: with the reason), or,
-    with no job, whether one will come by itself (a completed sweep is identified automatically)."""
-    rec_id = rec["id"]
-    latest = svc.catalog.list("jobs", "recording_id = ? AND kind = ?", (rec_id, kind), limit=1)
-    if latest:
-        job = latest[0]
-        if job["state"] == "failed":
-            return f"no {kind} result for recording {rec_id}: its latest {kind} job {job['id']} failed: {job['error']}"
-        return f"no {kind} result for recording {rec_id} yet: job {job['id']} is {job['state']}"
+    jobs = svc.catalog.list("jobs", "recording_id = ? AND kind = ?", (rec_id, kind))
     auto = kind == "identify" and rec.get("origin") == "sweep" and rec.get("status") in ("complete", "running")
-    return (f"no {kind} result for recording {rec_id} yet: it is identified when its sweep completes" if auto else
-            f"no {kind} result for recording {rec_id}: none was asked for (POST /api/recordings/{rec_id}/{kind})")
+    return newest_result(jobs, name, f"no {kind} result for recording {rec_id}", kind,
+                         " yet: it is identified when its sweep completes" if auto else
+                         f": none was asked for (POST /api/recordings/{rec_id}/{kind})")
+
+
+def newest_result(jobs: list[dict], name: str, what: str, kind: str, none_yet: str) -> FsPath:
+    """The file or folder `name` of the newest of `jobs` (newest first) that has it, for a recording's or a
+    campaign's results alike; else 404 saying why: "{what}" and the newest job's state (failed: with its
+    reason), or, with no job, none_yet (whether one will come by itself)."""
+    for job in jobs:  # a queued job may hold a delivered result too (parked by a stop, or re-queued to adopt it)
+        path = FsPath(job["result_dir"] or "") / name
+        if job["state"] != "failed" and job["result_dir"] and path.exists():
+            return path
+    if not jobs:
+        raise HTTPException(404, what + none_yet)
+    job = jobs[0]
+    if job["state"] == "failed":
+        raise HTTPException(404, f"{what}: its latest {kind} job {job['id']} failed: {job['error']}")
+    raise HTTPException(404, f"{what} yet: job {job['id']} is {job['state']}")
 
 
 @router.get("/api/recordings/{rec_id}/model")
