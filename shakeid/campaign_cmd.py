@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import sys
 import time
 from pathlib import Path
 
@@ -210,10 +209,7 @@ def _remote(args, plan) -> int:
     """The same plan through a running service: started, followed sweep by sweep, aborted on Ctrl-C."""
     from .remote import ServiceClient
 
-    token = args.token or os.environ.get("SHAKEID_TOKEN", "")
-    if not token:
-        raise ShakeidError("--server needs a token: --token or SHAKEID_TOKEN (an operator's)")
-    client = ServiceClient(args.server, token)
+    client = ServiceClient.for_args(args, "an operator's")
     started = client.request("POST", "/api/campaigns", plan.to_dict())
     cid = started["id"]
     print(f"campaign {plan.name} ({cid}) started on {args.server}", flush=True)

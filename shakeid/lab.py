@@ -204,17 +204,13 @@ def cmd_sim(args) -> int:
 
 def _recordings_of_service(args) -> int:
     """`shakeid recordings --server URL`: the service's recordings, newest first (GET /api/recordings)."""
-    import os
     import time
 
     from .remote import ServiceClient
 
     if args.files or args.recover or args.process:
         raise ShakeidError("--server lists the service's recordings; FILE.h5, --recover and --process are for local files")
-    token = args.token or os.environ.get("SHAKEID_TOKEN", "")
-    if not token:
-        raise ShakeidError("--server needs a token: --token or SHAKEID_TOKEN (a viewer's is enough)")
-    recs = ServiceClient(args.server, token).request("GET", f"/api/recordings?limit={args.limit}")
+    recs = ServiceClient.for_args(args, "a viewer's is enough").request("GET", f"/api/recordings?limit={args.limit}")
     for rec in recs:
         if args.json:
             print(json.dumps({k: v for k, v in rec.items() if k != "path"}))

@@ -32,6 +32,15 @@ class ServiceClient:
             raise ShakeidError(f"--server {url}: give the service's URL with its scheme, e.g. http://{url}")
         self.url, self.token, self.timeout_s = url.rstrip("/"), token, timeout_s
 
+    @classmethod
+    def for_args(cls, args, whose: str = "") -> "ServiceClient":
+        """The client of a command's --server and --token (or $SHAKEID_TOKEN): refused before anything is
+        sent when there is no token, saying whose it needs."""
+        token = args.token or os.environ.get("SHAKEID_TOKEN", "")
+        if not token:
+            raise ShakeidError("--server needs a token: --token or SHAKEID_TOKEN" + (f" ({whose})" if whose else ""))
+        return cls(args.server, token)
+
     def request(self, method: str, path: str, body: dict | None = None, raw: bool = False):
         """JSON (or bytes with raw=True) of a 2xx answer; ShakeidError with the service's detail otherwise."""
         data = json.dumps(body).encode() if body is not None else None
@@ -72,12 +81,9 @@ def cmd_sweep_remote(args) -> int:
 
     from .progress import Progress
 
-    token = args.token or os.environ.get("SHAKEID_TOKEN", "")
-    if not token:
-        raise ShakeidError("--server needs a token: --token or SHAKEID_TOKEN (an operator's)")
+    client = ServiceClient.for_args(args, "an operator's")
     if args.out and Path(args.out).exists():  # before the table moves: the download would replace it
         raise ShakeidError(f"{args.out}: exists already; a recording is never overwritten (give --out a new name)")
-    client = ServiceClient(args.server, token)
     body = {"f_start_hz": args.f_start_hz, "f_end_hz": args.f_end_hz, "duration_s": args.duration_s,
             "amplitude_mm": args.amplitude_mm, "settle_s": args.settle_s, "note": args.note}
     started = client.request("POST", "/api/sweeps", body)

@@ -78,14 +78,9 @@ def cmd_rig(args) -> int:
 
 def _through_service(args) -> int:
     """The action through `shakeid serve` (GET /api/rig, POST /api/rig/reset, POST /api/rig/estop)."""
-    import os
-
     from .remote import ServiceClient
 
-    token = args.token or os.environ.get("SHAKEID_TOKEN", "")
-    if not token:
-        raise ShakeidError("--server needs a token: --token or SHAKEID_TOKEN")
-    client = ServiceClient(args.server, token)
+    client = ServiceClient.for_args(args)
     message = ""
     if args.action == "estop":
         out, via = _estop(client, args.stop_url)

@@ -5,10 +5,11 @@ both is asked for (POST /api/campaigns/{id}/explain), run by the service's job m
 from __future__ import annotations
 
 import json
+import subprocess
 
 import pytest
 
-from .conftest import VIEWER, Service, wait_for, wait_for_job
+from .conftest import OPERATOR, SHAKEID, VIEWER, Service, wait_for
 
 pytestmark = pytest.mark.slow  # two sweeps, their identifications, then the explanation
 
@@ -55,16 +56,15 @@ def test_a_completed_campaign_is_explained_over_its_up_and_down_sweeps(service):
     assert viewer.post(f"/api/campaigns/{cid}/explain").status_code == 403  # an operator's request
     assert op.post("/api/campaigns/0123456789ab/explain").status_code == 404
 
-    r = op.post(f"/api/campaigns/{cid}/explain")
-    assert r.status_code == 202, r.text
-    job = r.json()
+    # asked for from the command line (`shakeid explain --server --campaign`): queued, followed, printed
+    cli = _explain_cli(service, cid)
+    assert cli.returncode == 0, cli.stdout + cli.stderr
+    assert "2 recordings explained together:" in cli.stdout and "missing effect:" in cli.stdout, cli.stdout
+    assert "asked for: job" in cli.stdout, cli.stdout
+    job = viewer.get(f"/api/campaigns/{cid}").json()["explanation"]  # in its status
     assert job["kind"] == "explain_campaign" and job["options"]["recording_ids"] == c["recording_ids"]
-    assert job["options"]["campaign_id"] == cid
-    assert viewer.get(f"/api/campaigns/{cid}").json()["explanation"]["id"] == job["id"]  # in its status
+    assert job["options"]["campaign_id"] == cid and job["state"] == "completed", job
     assert viewer.get(f"/api/campaigns/{one}").json()["explanation"] is None
-    job = wait_for_job(op, lambda jid=job["id"]: op.get(f"/api/jobs/{jid}").json(), what="the campaign's explanation")
-    assert job["state"] == "completed", job["error"]
-
     r = viewer.get(f"/api/campaigns/{cid}/explanation")
     assert r.status_code == 200, r.text
     result = r.json()
@@ -78,3 +78,17 @@ def test_a_completed_campaign_is_explained_over_its_up_and_down_sweeps(service):
     # the single recording's own explanation is not this one
     r = viewer.get(f"/api/recordings/{c['recording_ids'][0]}/explanation")
     assert r.status_code == 404, r.text
+    # asked again: the delivered explanation, as JSON, and no new job
+    again = _explain_cli(service, cid, "--json")
+    assert again.returncode == 0 and json.loads(again.stdout) == result, again.stderr
+    assert viewer.get(f"/api/campaigns/{cid}").json()["explanation"]["id"] == job["id"]
+    # refusals in one line, exit 2: a campaign of one recording, no such campaign, a viewer asking for one
+    for campaign, token, said in ((one, OPERATOR, "has 1 usable recording(s)"), ("0123456789ab", OPERATOR,
+                                  "no campaign 0123456789ab"), (one, VIEWER, "403")):
+        refused = _explain_cli(service, campaign, token=token)
+        assert refused.returncode == 2 and said in refused.stderr and refused.stderr.count("\n") == 1, refused.stderr
+
+
+def _explain_cli(service, campaign_id: str, *extra, token: str = OPERATOR):
+    return subprocess.run([SHAKEID, "explain", "--server", service.url, "--token", token, "--campaign", campaign_id,
+                           *extra], capture_output=True, text=True, timeout=3600)
