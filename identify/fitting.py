@@ -157,11 +157,12 @@ def fit_sources(ident, sources: list, timings: dict) -> list:
     ident.blocks_ = blocks
     coefs = _budget_by_free_run(ident, each, train, held, coefs, timings)
     t0 = time.perf_counter()
-    # the selection-time fit (training blocks only) is what the held-out validation scores; the
-    # reported coefficients are the kept terms refit on all rows, less the chain's bias
-    # (identify.trust.uncertainty, docs/identification.md section 5)
-    ident.training_model_ = SparseModel(coefs, STATES, (input_name,))
+    # the reported coefficients are the kept terms refit on all rows, less the chain's bias; a kept term
+    # most held-out placements leave out is reported apart (identify.trust.uncertainty, docs/identification.md
+    # section 5). The selection-time fit (training blocks only) of the terms left is what the held-out
+    # validation scores.
     reported, ident.standard_errors_, ident.uncertainty_ = trust(ident, sources, blocks, gram, held, n_eff)
+    ident.training_model_ = SparseModel(_named(ident.selections_, lib.names), STATES, (input_name,))
     timings["refit_uncertainty"] = time.perf_counter() - t0
     ident.model_ = SparseModel(reported, STATES, (input_name,), ident.standard_errors_)
     validated = _free_run_choice(ident, each, timings)
@@ -226,7 +227,11 @@ def _free_run_choice(ident, sig, timings: dict) -> SparseModel:
 
 def trust(ident, sources: list, blocks: list, gram: BlockGram, held, n_eff: float) -> tuple[dict, dict, dict]:
     """Reported coefficients, standard errors and inclusion probabilities (identify.trust.uncertainty), the
-    chain bias from the sources (closed form where every source can give it, SIMEX in core otherwise)."""
+    chain bias from the sources (closed form where every source can give it, SIMEX in core otherwise).
+    Kept terms with an inclusion probability below unc.MIN_INCLUSION_PROBABILITY leave the selection (its
+    support and training fit) and the reported model; ident.uncertain_terms_ lists them with the all-rows
+    coefficient, standard error and probability they had. Not with a free-run budget: its placements rerun
+    the rule, not the budget's choice (reports.text.budget_dropped)."""
     names, eqs = ident.library_.names, list(ident.selections_)
     sups = {e: s.support for e, s in enumerate(ident.selections_.values())}
     bias_of = None
@@ -244,6 +249,7 @@ def trust(ident, sources: list, blocks: list, gram: BlockGram, held, n_eff: floa
         return placement_supports(ident, ident.path_, trains, heldouts, n_eff)
 
     coefs, var, info = unc.assess(gram, held, sups, bias_of, fit_and_select, ident.placements)
+    coefs, var, info = _leave_out_uncertain(ident, gram, held, sups, (coefs, var, info), bias_of)
     named = {eqs[e]: {names[j]: j for j in np.flatnonzero(sups[e])} for e in sups}
     info = unc.name_info(info, eqs, names, sups)
     if bias_of is not None and info["chain_bias"] is None:
@@ -261,3 +267,25 @@ def trust(ident, sources: list, blocks: list, gram: BlockGram, held, n_eff: floa
     return ({eq: {n: float(coefs[e][j]) for n, j in named[eq].items()} for e, eq in enumerate(eqs)},
             {eq: {n: float(np.sqrt(var[e][j])) for n, j in named[eq].items()} for e, eq in enumerate(eqs)},
             info)
+
+
+def _leave_out_uncertain(ident, gram: BlockGram, held, sups: dict, assessed: tuple, bias_of) -> tuple:
+    """trust's kept terms below unc.MIN_INCLUSION_PROBABILITY: listed in ident.uncertain_terms_ (coefficient and
+    standard error of the full support's refit, probability), taken out of `sups` and the selections (support
+    and training fit), the rest refit and assessed again (the probabilities stay those of the decision made).
+    Returns assess's (coefs, var, info) for the terms left."""
+    coefs, var, info = assessed
+    names, eqs = ident.library_.names, list(ident.selections_)
+    uncertain = unc.uncertain_supports(info["inclusion"], sups) if ident.budget_ is None else {}
+    ident.uncertain_terms_ = {
+        eq: {names[j]: {"coefficient": float(coefs[e][j]), "standard_error": float(np.sqrt(var[e][j])),
+                        "inclusion_probability": float(info["inclusion"][e, j])}
+             for j in np.flatnonzero(uncertain.get(e, ()))} for e, eq in enumerate(eqs)}
+    if not any(u.any() for u in uncertain.values()):
+        return coefs, var, info
+    train = gram.equations(~held)
+    for e, sel in enumerate(ident.selections_.values()):
+        sel.support = sups[e] = sups[e] & ~uncertain[e]
+        sel.coef = least_squares(train.G, train.B[:, e], sel.support)
+    coefs, var, again = unc.assess(gram, held, sups, bias_of)
+    return coefs, var, {**again, "inclusion": info["inclusion"], "placements": info["placements"]}
