@@ -228,10 +228,11 @@ def _free_run_choice(ident, sig, timings: dict) -> SparseModel:
 def trust(ident, sources: list, blocks: list, gram: BlockGram, held, n_eff: float) -> tuple[dict, dict, dict]:
     """Reported coefficients, standard errors and inclusion probabilities (identify.trust.uncertainty), the
     chain bias from the sources (closed form where every source can give it, SIMEX in core otherwise).
-    Kept terms with an inclusion probability below unc.MIN_INCLUSION_PROBABILITY leave the selection (its
-    support and training fit) and the reported model; ident.uncertain_terms_ lists them with the all-rows
-    coefficient, standard error and probability they had. Not with a free-run budget: its placements rerun
-    the rule, not the budget's choice (reports.text.budget_dropped)."""
+    Kept terms with an inclusion probability below unc.MIN_INCLUSION_PROBABILITY and a coefficient within
+    unc.SIGNIFICANT_Z standard errors of zero leave the selection (its support and training fit) and the
+    reported model; ident.uncertain_terms_ lists them with the all-rows coefficient, standard error and
+    probability they had. Not with a free-run budget: its placements rerun the rule, not the budget's
+    choice (reports.text.budget_dropped)."""
     names, eqs = ident.library_.names, list(ident.selections_)
     sups = {e: s.support for e, s in enumerate(ident.selections_.values())}
     bias_of = None
@@ -270,13 +271,13 @@ def trust(ident, sources: list, blocks: list, gram: BlockGram, held, n_eff: floa
 
 
 def _leave_out_uncertain(ident, gram: BlockGram, held, sups: dict, assessed: tuple, bias_of) -> tuple:
-    """trust's kept terms below unc.MIN_INCLUSION_PROBABILITY: listed in ident.uncertain_terms_ (coefficient and
+    """trust's kept terms below unc.MIN_INCLUSION_PROBABILITY and within unc.SIGNIFICANT_Z of zero: listed in ident.uncertain_terms_ (coefficient and
     standard error of the full support's refit, probability), taken out of `sups` and the selections (support
     and training fit), the rest refit and assessed again (the probabilities stay those of the decision made).
     Returns assess's (coefs, var, info) for the terms left."""
     coefs, var, info = assessed
     names, eqs = ident.library_.names, list(ident.selections_)
-    uncertain = unc.uncertain_supports(info["inclusion"], sups) if ident.budget_ is None else {}
+    uncertain = unc.uncertain_supports(info["inclusion"], sups, coefs, var) if ident.budget_ is None else {}
     ident.uncertain_terms_ = {
         eq: {names[j]: {"coefficient": float(coefs[e][j]), "standard_error": float(np.sqrt(var[e][j])),
                         "inclusion_probability": float(info["inclusion"][e, j])}

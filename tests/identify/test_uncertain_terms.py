@@ -1,6 +1,7 @@
 """A term the selection kept but most random held-out placements leave out (P(kept) below
-MIN_INCLUSION_PROBABILITY) is reported apart, as an uncertain term, and is not in the model, its refit or
-its simulation (issue 30's "term lottery"). Real fits on the simulated Table 1 rig."""
+MIN_INCLUSION_PROBABILITY) and whose coefficient is within SIGNIFICANT_Z standard errors of zero is reported
+apart, as an uncertain term, and is not in the model, its refit or its simulation (issue 30's "term
+lottery"). Real fits on simulated rigs."""
 import numpy as np
 
 import identify.trust.uncertainty as unc
@@ -43,13 +44,30 @@ def test_a_kept_term_most_placements_leave_out_is_reported_apart():
 
 
 def test_no_reported_term_is_one_most_placements_leave_out():
-    """Fresh draw (seed printed): whatever is selected, every term in the model has P(kept) >= the bound and
-    every uncertain term is below it and absent from the model."""
+    """Fresh draw (seed printed): whatever is selected, every term in the model has P(kept) >= the bound or a
+    coefficient beyond SIGNIFICANT_Z standard errors, and every uncertain term has neither and is absent
+    from the model."""
     seed = int(np.random.SeedSequence().generate_state(1)[0])
     print(f"seed {seed}")
     res = SparseIdentifier().fit(_record(seed, 20.0)).result()
     for eq, terms in res["model"].items():
-        probs = res["inclusion_probability"][eq]
-        assert all(probs[t] >= unc.MIN_INCLUSION_PROBABILITY for t in terms), (eq, terms, probs)
+        probs, se = res["inclusion_probability"][eq], res["standard_errors"][eq]
+        for t, c in terms.items():
+            assert probs[t] >= unc.MIN_INCLUSION_PROBABILITY or abs(c) > unc.SIGNIFICANT_Z * se[t], (eq, t, probs)
         for t, entry in res["uncertain_terms"][eq].items():
             assert t not in terms and entry["inclusion_probability"] < unc.MIN_INCLUSION_PROBABILITY
+            assert abs(entry["coefficient"]) <= unc.SIGNIFICANT_Z * entry["standard_error"]
+
+
+def test_a_term_the_data_carry_stays_whatever_its_probability():
+    """Design rig beyond the jump (3.5 mm, no end stops), 2 % noise, seed 0 (tests/identify/
+    test_beyond_the_jump.py's case): the placements keep the damping q1 in 9 of 24, yet it is -3.72 +- 0.39,
+    far beyond SIGNIFICANT_Z standard errors from zero. It stays: left out, the refit lost the input
+    (zdd -0.10 for -1)."""
+    sensors = dict(table_sensor=Accelerometer(0.02), mass_sensor=Accelerometer(0.02))
+    rec = run_sweep(RigParameters.design(end_stop_travel_mm=None), SineSweep(1.0, 20.0, 30.0, 3.5), seed=0,
+                    **sensors).recording
+    res = SparseIdentifier().fit(rec).result()
+    assert res["inclusion_probability"]["q1_dot"]["q1"] < unc.MIN_INCLUSION_PROBABILITY
+    c, se = res["model"]["q1_dot"]["q1"], res["standard_errors"]["q1_dot"]["q1"]
+    assert abs(c) > unc.SIGNIFICANT_Z * se and res["uncertain_terms"] == {"q1_dot": {}, "q2_dot": {}}
