@@ -35,7 +35,9 @@ class PLCConfig:
     ramp_s: float = 0.2
     estop_ramp_s: float = 0.05
     substeps: int = 8
-    seed: int = 0
+    # the sensors' noise seed; None: a fresh one at every power-on (RigPLC.seed says which), so sweeps after
+    # two fresh starts are independent draws (with 0, every `shakeid serve` repeated one noise stream)
+    seed: int | None = None
 
 
 class RigPLC:
@@ -50,7 +52,9 @@ class RigPLC:
                              f"and inputs {self.physics.inputs} (drift, hysteresis, absorber, free play, two "
                              "different end-stop travels): simulate it with sim.synth.run_sweep")
         self.contact_samples = 0     # samples in contact with an end stop since power-on
-        self.rng = np.random.default_rng(self.config.seed)
+        seed = self.config.seed
+        self.seed = int(np.random.SeedSequence().entropy if seed is None else seed)  # reproduces this power-on
+        self.rng = np.random.default_rng(self.seed)
         self.setpoints = {"f_start_hz": 1.0, "f_end_hz": 20.0, "duration_s": 60.0, "amplitude_mm": 1.0}
         self.state = State.IDLE
         self.fault = Fault.NONE
