@@ -18,6 +18,9 @@ OPERATOR, VIEWER = "operator-token-for-tests", "viewer-token-for-tests"
 #: how long a start may take before it counts as hung: a hang guard, not a speed target (at load 15-20 on 2 cores
 #: starts took over 60 s)
 START_TIMEOUT_S = 240
+#: how long a test's request may wait for its answer: a hang guard too (an upload is checked by a process at
+#: nice +10, which a machine at load 10 starves: a 10 s bound timed out there)
+REQUEST_TIMEOUT_S = 120
 
 
 class Service:
@@ -74,7 +77,9 @@ class Service:
 
     def client(self, token: str | None = OPERATOR) -> httpx.Client:
         headers = {"Authorization": f"Bearer {token}"} if token else {}
-        return httpx.Client(base_url=self.url, headers=headers, timeout=10)
+        client = httpx.Client(base_url=self.url, headers=headers, timeout=REQUEST_TIMEOUT_S)
+        client.service_pid = self.proc.pid  # whose job workers jobs_seen watches
+        return client
 
     def stop(self, sig=signal.SIGTERM) -> None:
         if self.proc is not None and self.proc.poll() is None:
@@ -122,14 +127,42 @@ def wait_for_job(client, fetch, stall_s: float = 900.0, what: str = "the job") -
     """Wait until fetch() (a job's JSON) has left queued/running, for as long as the service's job queue
     moves: a service identifies every recording, so on a busy machine a job can wait behind many others for
     longer than any fixed time, and the job workers run at nice +10 (server/worker.py), so a busy machine
-    starves them by design. Fails only when no job of the service changed state for stall_s (a stuck queue:
-    15 minutes with nothing started or finished), saying what it waited for."""
+    starves them by design. Fails only when for stall_s no job of the service changed state and its job
+    workers used no CPU (a stuck queue: 15 minutes with nothing started, finished or computed), saying what it
+    waited for."""
     return wait_while_moving(job_ended(fetch), lambda: jobs_seen(client), stall_s, what)
 
 
-def jobs_seen(client) -> set:
-    """What moves in a service's job queue: every job's state (a progress() for wait_while_moving)."""
-    return {(j["id"], j["state"]) for j in client.get("/api/jobs", params={"limit": 500}).json()}
+def jobs_seen(client) -> tuple:
+    """What moves in a service's job queue (a progress() for wait_while_moving): every job's state, and the
+    CPU seconds its job workers have used (a job can run for many minutes without a state change where
+    the machine starves the workers at nice +10; a stuck worker uses none)."""
+    states = frozenset((j["id"], j["state"]) for j in client.get("/api/jobs", params={"limit": 500}).json())
+    pid = getattr(client, "service_pid", None)
+    return states, (int(workers_cpu_s(pid)) if pid else None)
+
+
+def workers_cpu_s(service_pid: int) -> float:
+    """CPU seconds (user + system) of the job workers below a service process: its descendants started by
+    multiprocessing's spawn (the process pool), read from /proc."""
+    children: dict = {}
+    stats: dict = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+                cmdline = (entry / "cmdline").read_bytes()
+            except OSError:  # gone meanwhile
+                continue
+            children.setdefault(int(fields[1]), []).append(int(entry.name))
+            stats[int(entry.name)] = (float(fields[11]) + float(fields[12]), b"spawn_main" in cmdline)
+    tick, total, todo = os.sysconf("SC_CLK_TCK"), 0.0, list(children.get(service_pid, []))
+    while todo:
+        pid = todo.pop()
+        ticks, worker = stats.get(pid, (0.0, False))
+        total += ticks / tick if worker else 0.0
+        todo.extend(children.get(pid, []))
+    return total
 
 
 def wait_for_sweep(client, sweep_id: str, stall_s: float = 300.0, what: str = "the sweep to end") -> dict:

@@ -12,7 +12,7 @@ from identify.data.recording import write_csv
 from server.catalog import Catalog
 from server.jobs import JobQueue
 
-from .conftest import job_ended, wait_for, wait_while_moving
+from .conftest import job_ended, wait_for, wait_while_moving, workers_cpu_s
 
 
 @pytest.fixture
@@ -64,8 +64,9 @@ def test_stopping_with_a_job_running_returns_and_leaves_it_for_the_next_start(qu
 
 
 def _jobs_seen(cat):
-    """What moves in the queue: every job's state and attempts (a job that stays running moves nothing)."""
-    return {(j["id"], j["state"], j["attempts"]) for j in cat.list("jobs", limit=500)}
+    """What moves in the queue: every job's state and attempts, and the CPU its workers (this process's
+    pool) have used: a job starved at nice +10 on a busy machine runs long without a state change."""
+    return {(j["id"], j["state"], j["attempts"]) for j in cat.list("jobs", limit=500)}, int(workers_cpu_s(os.getpid()))
 
 
 def _completed(cat, job_id):
