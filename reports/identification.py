@@ -27,7 +27,7 @@ from identify.export.latex import latex_equations  # noqa: E402
 from .frf_overlay import OVERLAY_FIGURE, add_side_by_side, overlay_figure  # noqa: E402
 from .html import IDENTIFICATION_DOCUMENTS, IDENTIFICATION_FIGURES, Page, report_folder  # noqa: E402
 from .text import (DESIGN_K3_NOTE, coefficient_rows, coefficient_table, fit_text, mass_text,  # noqa: E402
-                   physical_rows, plural, unit)
+                   physical_rows, plural, unit, unsettled_lines)
 
 FIGURES, DOCUMENTS = IDENTIFICATION_FIGURES, IDENTIFICATION_DOCUMENTS
 RESIDUAL = "#c0392b"  # the residual traces' colour, the same in every panel
@@ -215,6 +215,8 @@ def _index_html(out: Path, ident, result: dict) -> str:
                   "q2 the relative displacement (m), zdd the table acceleration (m/s²). " if base else "")
                + "P(kept): the share of random held-out placements"
                + (f" ({n_place})" if n_place else "") + " whose selection kept the term.")
+    for line in unsettled_lines(result):  # uncertain terms left out, an unsettled selection, a budget's drops
+        page.paragraph(line)
     page.code(latex_equations(ident.model_), "The model's equations in the paper's notation, LaTeX for a paper "
               "(amsmath's align; `shakeid export model.json --format latex` writes the same as a file):")
     val = result.get("validation")

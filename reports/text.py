@@ -138,11 +138,27 @@ def summary(result: dict, source: str) -> str:
     return "\n".join(lines)
 
 
+def _min_inclusion() -> float:
+    """identify.trust.uncertainty.MIN_INCLUSION_PROBABILITY, read when needed (this module loads no engine)."""
+    from identify.trust.uncertainty import MIN_INCLUSION_PROBABILITY
+
+    return MIN_INCLUSION_PROBABILITY
+
+
 def unsettled_lines(result: dict) -> list[str]:
-    """The line saying which terms the selection decided against most held-out placements (unsettled_terms),
-    and the one naming the terms a free-run budget dropped (budget_dropped), or none: under the coefficient
-    table of one recording's and of a joint fit's summary."""
+    """The lines under the coefficient table of one recording's and of a joint fit's summary: the uncertain
+    terms left out of the model (uncertain_terms), the terms the selection decided against most held-out
+    placements (unsettled_terms), and the terms a free-run budget dropped (budget_dropped); or none."""
     lines = []
+    uncertain = [(eq, term, u) for eq, terms in (result.get("uncertain_terms") or {}).items()
+                 for term, u in terms.items()]
+    if uncertain:
+        from identify.trust.uncertainty import SIGNIFICANT_Z
+
+        lines.append(f"uncertain terms, left out of the model (P(kept) < {_min_inclusion():g} and within "
+                     f"{SIGNIFICANT_Z:g} standard errors of zero): " + "; ".join(
+                         f"{term} ({eq}) {u['coefficient']:.4g} ± {u['standard_error']:.2g}, P(kept) "
+                         f"{u['inclusion_probability']:.2f}" for eq, term, u in uncertain))
     unsettled = unsettled_terms(result)
     if unsettled:
         lines.append("unsettled selection: " + "; ".join(
@@ -169,19 +185,23 @@ def budget_dropped(result: dict) -> list[tuple[str, float]]:
     but a free-run budget left out (the placements rerun the rule, not the budget, which runs once)."""
     probs = (result.get("inclusion_probability") or {}).get("q1_dot", {})
     dropped = _dropped_by_budget(result)
-    return [(term, float(p)) for term, p in probs.items() if term in dropped and p >= 0.5]
+    return [(term, float(p)) for term, p in probs.items() if term in dropped and p >= _min_inclusion()]
 
 
 def unsettled_terms(result: dict) -> list[tuple[str, str, bool, float]]:
     """(equation, term, kept, inclusion probability) of every term the selection decided against most of
-    its held-out placements: kept with P(kept) < 0.5, or left out with P(kept) >= 0.5 (not a q1_dot term
-    a free-run budget left out of the rule's choice: budget_dropped)."""
-    out, dropped = [], _dropped_by_budget(result)
+    its held-out placements: kept with P(kept) < MIN_INCLUSION_PROBABILITY (0.5; kept since its coefficient is
+    significant, else it is an uncertain term, left out), or left out with P(kept) >= it (not a q1_dot term
+    a free-run budget left out of the rule's choice: budget_dropped; not an uncertain term)."""
+    out, dropped, p_min = [], _dropped_by_budget(result), _min_inclusion()
+    uncertain = result.get("uncertain_terms") or {}
     for eq, probs in (result.get("inclusion_probability") or {}).items():
         model = result["model"].get(eq, {})
         for term, p in probs.items():
             kept = term in model
-            if (kept and p < 0.5) or (not kept and p >= 0.5 and not (eq == "q1_dot" and term in dropped)):
+            if term in uncertain.get(eq, {}):
+                continue
+            if (kept and p < p_min) or (not kept and p >= p_min and not (eq == "q1_dot" and term in dropped)):
                 out.append((eq, term, kept, float(p)))
     return out
 

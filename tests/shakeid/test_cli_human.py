@@ -244,23 +244,40 @@ def test_explain_warns_of_a_baseline_whose_identification_failed(tmp_path, capsy
 
 
 @pytest.mark.slow
-def test_a_selection_the_placements_disagree_with_is_said_to_be_unsettled(make_run):
-    """3.9 s cut from the middle of a sweep (7-10 Hz of it) carries no settled model: the fit keeps q2^2
-    and q2^4, which most held-out placements leave out (P(kept) ~0.3), and drops terms most keep. The
-    summary says the selection is unsettled, term by term; a full sweep's summary does not."""
+def test_a_selection_the_placements_disagree_with_is_said_to_be_unsettled(make_run, tmp_path):
+    """3.9 s cut from the middle of a sweep (7-10 Hz of it) carries no settled model: the selection keeps
+    q2^2 and q2^4, which most held-out placements leave out (P(kept) ~0.3) and whose coefficients are within
+    SIGNIFICANT_Z standard errors of zero: uncertain terms, said apart and left out of the model; terms
+    most placements keep but the selection left out are unsettled. The summary says both, term by term; a
+    full sweep's summary says neither."""
     from identify.identifier import SparseIdentifier
+    from identify.trust.uncertainty import MIN_INCLUSION_PROBABILITY, SIGNIFICANT_Z
     from reports.text import summary, unsettled_terms
     from protocol.sweep import SineSweep
 
     rec = make_run(sweep=SineSweep(1, 20, 30, 1.3), noise=0.005, seed=0).recording
-    short = SparseIdentifier().fit(rec.slice(20000, 28000)).result()
+    fitted = SparseIdentifier().fit(rec.slice(20000, 28000))
+    short = fitted.result()
+    uncertain = short["uncertain_terms"]["q1_dot"]
+    assert {"q2^2", "q2^4"} <= set(uncertain) and not set(uncertain) & set(short["model"]["q1_dot"])
+    for u in uncertain.values():
+        assert u["inclusion_probability"] < MIN_INCLUSION_PROBABILITY
+        assert abs(u["coefficient"]) < SIGNIFICANT_Z * u["standard_error"]
+    text = summary(short, "short.csv")
+    u = uncertain["q2^2"]
+    assert (f"q2^2 (q1_dot) {u['coefficient']:.4g} ± {u['standard_error']:.2g}, P(kept) "
+            f"{u['inclusion_probability']:.2f}") in text and "uncertain terms, left out of the model" in text
     flagged = {(eq, term): (kept, p) for eq, term, kept, p in unsettled_terms(short)}
-    assert flagged[("q1_dot", "q2^2")][0] and flagged[("q1_dot", "q2^2")][1] < 0.5
-    assert all(kept == (term in short["model"][eq]) for (eq, term), (kept, _) in flagged.items())
-    assert "unsettled selection: " in summary(short, "short.csv") and "q2^2 (q1_dot) kept though P(kept) 0.33" in \
-        summary(short, "short.csv")
+    assert flagged and all(kept == (term in short["model"][eq]) for (eq, term), (kept, _) in flagged.items())
+    assert not set(flagged) & {("q1_dot", t) for t in uncertain}  # said once, as uncertain
+    assert "unsettled selection: " in text
+    from reports.identification import write_report  # the report's page says the same under its table
+
+    page = (write_report(fitted, tmp_path / "report", short) / "index.html").read_text()
+    assert "uncertain terms, left out of the model" in page and "unsettled selection: " in page
     full = SparseIdentifier().fit(rec).result()
-    assert unsettled_terms(full) == [] and "unsettled" not in summary(full, "sweep.csv")
+    assert unsettled_terms(full) == [] and full["uncertain_terms"] == {"q1_dot": {}, "q2_dot": {}}
+    assert "unsettled" not in summary(full, "sweep.csv") and "uncertain" not in summary(full, "sweep.csv")
 
 
 @pytest.mark.slow
