@@ -30,6 +30,9 @@ SENSITIVITY = 32767 / 50.0
 #: Ports free_port draws from: below Linux's default ephemeral range (32768-60999), where the kernel
 #: never puts the local end of an outgoing connection.
 PORT_RANGE = (10000, 32767)
+#: how long start() waits for the servers to listen, s: a hang guard (idle it takes well under a second; at
+#: load 10 on 2 cores a CAN-remote rig's start took over 10 s, the bound it had)
+START_TIMEOUT_S = 60.0
 
 
 def _ephemeral_low() -> int:
@@ -143,10 +146,12 @@ class SimulatedRig:
                 "channels": ["table_acc", "mass_acc"] + (["table_acc_2", "mass_acc_2"] if self.redundant_sensors else [])}
 
     # -- lifecycle ------------------------------------------------------------------------------------
-    def start(self, timeout: float = 10.0) -> "SimulatedRig":
+    def start(self, timeout: float = START_TIMEOUT_S) -> "SimulatedRig":
         self._thread = threading.Thread(target=self._run, name="simulated-rig", daemon=True)
         self._thread.start()
-        if not self._ready.wait(timeout) or self.error is not None:
+        if not self._ready.wait(timeout):
+            raise RuntimeError(f"simulated rig did not start: its servers did not listen within {timeout:g} s")
+        if self.error is not None:
             raise RuntimeError(f"simulated rig did not start: {self.error}")
         return self
 
