@@ -378,6 +378,16 @@ def spurious_measurement_names(truth_effects: list[str], effects: list[dict], nu
             and not is_nuisance(e, nuisances)]
 
 
+def gap_closed_enough(result: dict) -> bool:
+    """Whether the explanation closed the gap: half of it at least (gap_closed >= 0.5), or down to the
+    sensor-noise floor (gap_after <= noise_floor), which no model can go below: a rig whose gap before was
+    already within twice the floor cannot close half of it (seen: the right effect named, the gap taken
+    from 1.2-1.5x the floor to 0.6-0.9x of it, gap_closed 0.42-0.49)."""
+    closed, after, floor = result.get("gap_closed"), result.get("gap_after"), result.get("noise_floor")
+    return (closed is not None and closed >= 0.5) or (
+        closed is not None and closed > 0 and after is not None and floor is not None and after <= floor)
+
+
 def score(category: str, truth_effects: list[str], result: dict, nuisances=()) -> dict:
     """Whether a result is right for the scenario (contract rules), its wrong physical names and its
     measurement names where no fault exists. `nuisances` (sim.wide: "hum", "quantisation") are measurement
@@ -387,8 +397,7 @@ def score(category: str, truth_effects: list[str], result: dict, nuisances=()) -
     if result.get("effect") not in ("none", "unexplained") and all_effects and not effects:
         result = {**result, "effect": "none"}  # only nuisances named: nothing else is missing
     names = [e["name"] for e in effects]
-    closed = result.get("gap_closed")
-    closed_half = closed is not None and closed >= 0.5
+    closed_half = gap_closed_enough(result)
     wrong = wrong_physical_names(truth_effects, effects)
     if category == "none":
         right = result.get("effect") == "none"

@@ -96,6 +96,13 @@ def entry(name, confidence=0.9, kind="physics", surrogate_for=()):
     ("none", [], {"effect": "coulomb_friction", "confidence": 0.8, "gap_closed": 0.6}, False, ["coulomb_friction"]),
     ("single", ["cubic_damping"], {"effect": "cubic_damping", "confidence": 0.9, "gap_closed": 0.7}, True, []),
     ("single", ["cubic_damping"], {"effect": "cubic_damping", "confidence": 0.9, "gap_closed": 0.4}, False, []),
+    # less than half closed, but down to the sensor-noise floor (seed 3145012448 case 12): nothing left to close
+    ("single", ["cubic_damping"], {"effect": "cubic_damping", "confidence": 0.9, "gap_closed": 0.42,
+                                   "gap_after": 0.0017, "noise_floor": 0.0020}, True, []),
+    ("single", ["cubic_damping"], {"effect": "cubic_damping", "confidence": 0.9, "gap_closed": 0.42,
+                                   "gap_after": 0.0025, "noise_floor": 0.0020}, False, []),
+    ("single", ["cubic_damping"], {"effect": "cubic_damping", "confidence": 0.9, "gap_closed": 0.0,
+                                   "gap_after": 0.0017, "noise_floor": 0.0020}, False, []),
     ("single", ["cubic_damping"], {"effect": "quadratic_damping", "confidence": 0.9, "gap_closed": 0.7}, False, []),
     ("single", ["stiffness_drift"], {"effect": "coulomb_friction", "confidence": 0.4, "gap_closed": 0.7}, False, []),
     ("two_effects", ["hysteresis", "end_stop"],
