@@ -108,7 +108,7 @@ function modelSection(r, m) {
     `<p class="bad" id="rec-faulty">identified although refused at first (accept_faulty): ${esc(m.accepted_faulty.join("; "))}; read it with care</p>` : "";
   let html = faulty + `<p>${m.status === "ok" ? "" : `<b>${esc(m.status)}</b>: `}${esc(m.reason || "")}</p>` +
     `<table class="data" id="rec-terms"><tr><th>equation</th><th>term</th><th class="num">coefficient</th><th class="num">standard error</th>` +
-    `<th class="num">inclusion probability</th></tr>${rows.join("")}</table>` +
+    `<th class="num">inclusion probability</th></tr>${rows.join("")}</table>` + uncertainTerms(m) +
     `<p id="rec-export">the model as a file: ${EXPORTS.map(([s, label]) => `<button data-export="${s}">${label}</button>`).join(" ")} ` +
     `<span class="hint">(as <code>shakeid export</code> writes it, docs/export.md)</span></p>`;
   const p = m.physical;
@@ -129,6 +129,14 @@ function modelSection(r, m) {
     Object.entries(v).map(([k, x]) => `<tr><td>${esc(k)}</td><td class="num">${x.fit_percent == null ? "diverged" : x.fit_percent.toFixed(2) + " %"}</td><td class="num">${num(x.nrmse, 3)}</td></tr>`).join("") + `</table>`;
   return html + `<p><a href="#" class="report" data-kind="identify" id="rec-report">the whole report (index.html)</a> <span class="hint">opens in a new tab</span></p>` +
     `<div class="figures" id="rec-model-figures"></div>`;
+}
+// kept terms most held-out placements left out and within SIGNIFICANT_Z standard errors of zero: left out of
+// the model and said apart (docs/identification.md, "Uncertain terms")
+function uncertainTerms(m) {
+  const said = Object.entries(m.uncertain_terms || {}).flatMap(([eq, terms]) => Object.entries(terms).map(([t, u]) =>
+    `${esc(t)} (${esc(eq)}) ${num(u.coefficient)} ± ${num(u.standard_error, 2)}, P(kept) ${u.inclusion_probability.toFixed(2)}`));
+  return said.length ? `<p class="hint" id="rec-uncertain">uncertain terms, left out of the model (most held-out ` +
+    `placements left them out, and zero is within a few standard errors of each): ${said.join("; ")}</p>` : "";
 }
 function explainSection(r, x) {
   const pending = jobState(r, "explain", "explain");

@@ -17,7 +17,7 @@ import pytest
 from identify.data.recording import write_csv
 from protocol.sweep import SineSweep
 
-from .conftest import OPERATOR, VIEWER, Service, wait_for
+from .conftest import OPERATOR, VIEWER, Service, jobs_seen, wait_for, wait_while_moving
 pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 
@@ -89,7 +89,7 @@ def identified(api, rec_id: str) -> dict:
     def done():
         rec = api.get(f"/api/recordings/{rec_id}").json()
         return rec if "identify" in rec["info"] else None
-    return wait_for(done, 120, "the identification")
+    return wait_while_moving(done, lambda: jobs_seen(api), what="the identification")
 
 
 @pytest.fixture(scope="module")
@@ -369,3 +369,27 @@ def test_failed_fit_is_not_not_yet_and_can_be_forced(page, service):
     assert page.locator(f"#history g.point[data-rec='{rec_id}']").count() == 0
     page.check("#history-faulty")
     assert page.locator(f"#history g.point[data-rec='{rec_id}'] circle.faulty").count() == 4  # c, k, k3, b
+
+
+def test_uncertain_terms_are_said_under_the_model(page, service, make_run, tmp_path):
+    """A 3.9 s cut of a sweep (tests/shakeid/test_cli_human.py's case) keeps terms most held-out placements
+    leave out: the recording page lists each one left out of the model with its coefficient, standard error
+    and P(kept) as model.json stores them, and not in the model's table."""
+    run = make_run(sweep=SineSweep(1, 20, 30, 1.3), noise=0.005, seed=0)
+    path = tmp_path / "short-cut.csv"
+    write_csv(path, run.recording.slice(20000, 28000))
+    with service.client() as api:
+        rec_id = api.post("/api/recordings", params={"filename": path.name}, content=path.read_bytes()).json()["id"]
+        assert api.post(f"/api/recordings/{rec_id}/identify", json={}).status_code == 202
+        identified(api, rec_id)
+        model = api.get(f"/api/recordings/{rec_id}/model").json()
+    uncertain = [(eq, term, u) for eq, terms in model["uncertain_terms"].items() for term, u in terms.items()]
+    assert uncertain, model["uncertain_terms"]  # the case has them (q2^2 and q2^4 of q1_dot)
+    page.goto(f"{service.url}/#/recording/{rec_id}")
+    page.wait_for_selector("#rec-uncertain")
+    said = page.inner_text("#rec-uncertain")
+    assert said.startswith("uncertain terms, left out of the model")
+    for eq, term, u in uncertain:
+        assert f"{term} ({eq}) " in said and f"P(kept) {js_fixed(u['inclusion_probability'], 2)}" in said
+    shown = {tuple(r.split("\t")[:2]) for r in page.locator("#rec-terms tr").all_inner_texts()[1:]}
+    assert not shown & {(eq, term) for eq, term, _ in uncertain}
