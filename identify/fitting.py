@@ -271,9 +271,10 @@ def trust(ident, sources: list, blocks: list, gram: BlockGram, held, n_eff: floa
 
 
 def _leave_out_uncertain(ident, gram: BlockGram, held, sups: dict, assessed: tuple, bias_of) -> tuple:
-    """trust's kept terms below unc.MIN_INCLUSION_PROBABILITY and within unc.SIGNIFICANT_Z of zero: listed in ident.uncertain_terms_ (coefficient and
-    standard error of the full support's refit, probability), taken out of `sups` and the selections (support
-    and training fit), the rest refit and assessed again (the probabilities stay those of the decision made).
+    """trust's kept terms below unc.MIN_INCLUSION_PROBABILITY and within unc.SIGNIFICANT_Z of zero: listed in
+    ident.uncertain_terms_ (coefficient and standard error of the full support's refit, probability), taken
+    out of `sups` and the selections (support and training fit), the rest refit and assessed again (the
+    probabilities stay those of the decision made).
     Returns assess's (coefs, var, info) for the terms left."""
     coefs, var, info = assessed
     names, eqs = ident.library_.names, list(ident.selections_)

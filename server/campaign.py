@@ -83,10 +83,10 @@ class CampaignService:
         try:
             parsed = parse_plan(plan)
         except PlanError as exc:
-            raise self._refused(422, f"campaign refused: {exc}") from None
+            raise Refused(422, f"campaign refused: {exc}") from None
         problem = plan_violation(self.ctl.rig.cfg.limits, parsed)
         if problem:
-            raise self._refused(422, f"campaign refused: {problem}")
+            raise Refused(422, f"campaign refused: {problem}")
         campaign = Campaign(parsed, state="running")
         with self.ctl.sweeps.starting:  # no single sweep slips in between the checks and the campaign's start
             self._check_rig_free()
@@ -109,7 +109,7 @@ class CampaignService:
         with self.ctl.sweeps.starting:
             row = self._row_or_404(campaign_id)
             if row["state"] != "paused":
-                raise self._refused(409, f"campaign {campaign_id} is {row['state']}, not paused")
+                raise Refused(409, f"campaign {campaign_id} is {row['state']}, not paused")
             self._check_rig_free()
             campaign = Campaign(parse_plan(row["plan"]), state="running", items=row["sweeps"])
             self.catalog.update("campaigns", campaign_id, state="running", reason=None)
@@ -128,7 +128,7 @@ class CampaignService:
                 return {"id": campaign_id, "state": "aborting"}
             row = self._row_or_404(campaign_id)
             if row["state"] != "paused":
-                raise self._refused(409, f"campaign {campaign_id} is {row['state']}: nothing to abort")
+                raise Refused(409, f"campaign {campaign_id} is {row['state']}: nothing to abort")
             self.catalog.update("campaigns", campaign_id, state="aborted", reason=reason)
             return {"id": campaign_id, "state": "aborted"}
 
@@ -176,7 +176,6 @@ class CampaignService:
                 "direction": planned.direction, "repeat": planned.repeat}
         note = (f"campaign {campaign.plan.name} ({act['id']}): {planned.label(campaign.total)}"
                 + (f"; {campaign.plan.note}" if campaign.plan.note else ""))
-
         try:
             # predicted again right before it starts (a sweep of this campaign may have given a newer model),
             # the prediction kept in the sweep's request as a single sweep's
@@ -224,13 +223,13 @@ class CampaignService:
         if act is not None and act["campaign"].state not in ("running", "pausing"):
             act["thread"].join(5.0)  # it has ended and is writing its last word
         if (act := self.active) is not None:
-            raise self._refused(409, self.busy() or f"campaign {act['id']} is ending; try again")
+            raise Refused(409, self.busy() or f"campaign {act['id']} is ending; try again")
         sweep = self.ctl.rig.active
         if sweep is not None and not sweep.get("ending"):
-            raise self._refused(409, f"a sweep is running ({sweep['id']}); abort it or wait")
+            raise Refused(409, f"a sweep is running ({sweep['id']}); abort it or wait")
         refusal = self.ctl.rig.not_ready()
         if refusal:
-            raise self._refused(409, f"campaign refused: {refusal}")
+            raise Refused(409, f"campaign refused: {refusal}")
 
     def _running(self, campaign_id: str, what: str, states: tuple[str, ...]) -> dict:
         """The active campaign if it is campaign_id and in one of states; else 409 (404 if unknown)."""
@@ -238,13 +237,13 @@ class CampaignService:
         if act is None or act["id"] != campaign_id or act["campaign"].state not in states:
             state = act["campaign"].state if act is not None and act["id"] == campaign_id else \
                 self._row_or_404(campaign_id)["state"]
-            raise self._refused(409, f"campaign {campaign_id} is {state}, not running: nothing to {what}")
+            raise Refused(409, f"campaign {campaign_id} is {state}, not running: nothing to {what}")
         return act
 
     def _row_or_404(self, campaign_id: str) -> dict:
         row = self.catalog.get("campaigns", campaign_id)
         if row is None:
-            raise self._refused(404, f"no campaign {campaign_id}")
+            raise Refused(404, f"no campaign {campaign_id}")
         return row
 
     def _row(self, campaign: Campaign) -> dict:
@@ -254,8 +253,3 @@ class CampaignService:
     def _save(self, act: dict) -> None:
         c = act["campaign"]
         self.catalog.update("campaigns", act["id"], state=c.state, reason=c.reason, **self._row(c))
-
-    @staticmethod
-    def _refused(status: int, detail: str):
-
-        return Refused(status, detail)

@@ -315,7 +315,7 @@ def main(settings: Settings, address: str | None = None, parent_pid: int | None 
     gc.freeze()
     print(f"shakeid controller: pid {os.getpid()}, {'real-time (SCHED_RR)' if realtime else 'normal'} scheduling, "
           f"listening on {ctl.address}"
-          f" ({'embedded simulated rig' if ctl.rig.sim is not None else 'rig of ' + str(settings.rig.source)})"
+          f" ({f'embedded simulated rig, sensor-noise seed {ctl.rig.sim.plc.seed}' if ctl.rig.sim is not None else 'rig of ' + str(settings.rig.source)})"
           + (f"; stop listener on {settings.stop_host}:{ctl.stop_listener.port}" if ctl.stop_listener else ""),
           flush=True)
     ctl.run()

@@ -73,8 +73,8 @@ class SweepLauncher:
         refusal = self.rig.not_ready()
         if refusal:
             raise Refused(409, f"sweep refused: {refusal}")
-        if self.closed_reason:
-            raise Refused(503, f"sweep refused: {self.closed_reason}")
+        if self.closed_reason is not None:
+            raise Refused(503, f"sweep refused: {self.closed_reason or 'the rig controller is stopping'}")
 
     def _start(self, req: SweepRequest, body: dict, operator: str, after_end) -> dict:
         sweep_id, rec_id = new_id(), new_id()

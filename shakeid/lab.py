@@ -191,7 +191,7 @@ def cmd_sim(args) -> int:
           f"{ep['sensitivity_counts_per_ms2']:.2f} counts per m/s^2)"
           + (f"; PLC ADS {ep['ads'][2]} net id {ep['ads'][0]} port {ep['ads'][1]}" if ep["ads"] else "")
           + (f"; CAN {rig.can_interface} {rig.can_channel}" if rig.can_interface else "")
-          + ". Ctrl-C stops.", flush=True)
+          + f"; sensor-noise seed {rig.plc.seed} (sim.plc.PLCConfig.seed reproduces it). Ctrl-C stops.", flush=True)
     try:
         while not done.wait(0.5):
             pass

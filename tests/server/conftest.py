@@ -102,11 +102,18 @@ def wait_for(fn, timeout_s: float = 60.0, what: str = "condition"):
         time.sleep(0.1)
 
 
+#: the longest any wait_while_moving lasts, moving or not: a worker that computes without end (its CPU
+#: always moving) fails here instead of holding the suite until CI's own limit
+WAIT_CEILING_S = 5400.0
+
+
 def wait_while_moving(done, progress, stall_s: float = 900.0, what: str = "the condition"):
     """Wait until done() returns something true and return it, for as long as progress() keeps changing: on a
     busy machine work takes as long as the machine gives it, so no fixed bound fits every load; a test fails
-    only when nothing moved for stall_s (a stuck queue or a stalled sweep), saying what it waited for."""
-    moved, seen = time.monotonic(), None
+    when nothing moved for stall_s (a stuck queue or a stalled sweep), or after WAIT_CEILING_S in all, saying
+    what it waited for."""
+    start = moved = time.monotonic()
+    seen = None
     while True:
         value = done()
         if value:
@@ -115,6 +122,7 @@ def wait_while_moving(done, progress, stall_s: float = 900.0, what: str = "the c
         if now != seen:
             moved, seen = time.monotonic(), now
         assert time.monotonic() - moved < stall_s, f"{what}: nothing moved for {stall_s:.0f} s (last: {now})"
+        assert time.monotonic() - start < WAIT_CEILING_S, f"{what}: not done after {WAIT_CEILING_S:.0f} s (last: {now})"
         time.sleep(1.0)
 
 
@@ -127,9 +135,9 @@ def wait_for_job(client, fetch, stall_s: float = 900.0, what: str = "the job") -
     """Wait until fetch() (a job's JSON) has left queued/running, for as long as the service's job queue
     moves: a service identifies every recording, so on a busy machine a job can wait behind many others for
     longer than any fixed time, and the job workers run at nice +10 (server/worker.py), so a busy machine
-    starves them by design. Fails only when for stall_s no job of the service changed state and its job
-    workers used no CPU (a stuck queue: 15 minutes with nothing started, finished or computed), saying what it
-    waited for."""
+    starves them by design. Fails when for stall_s no job of the service changed state and its job workers
+    used no CPU (a stuck queue: 15 minutes with nothing started, finished or computed), or after
+    WAIT_CEILING_S in all (a worker computing without end), saying what it waited for."""
     return wait_while_moving(job_ended(fetch), lambda: jobs_seen(client), stall_s, what)
 
 

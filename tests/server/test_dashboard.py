@@ -392,4 +392,5 @@ def test_uncertain_terms_are_said_under_the_model(page, service, make_run, tmp_p
     for eq, term, u in uncertain:
         assert f"{term} ({eq}) " in said and f"P(kept) {js_fixed(u['inclusion_probability'], 2)}" in said
     shown = {tuple(r.split("\t")[:2]) for r in page.locator("#rec-terms tr").all_inner_texts()[1:]}
+    assert shown == {(eq, t) for eq, terms in model["model"].items() for t in terms}  # the model's, read back
     assert not shown & {(eq, term) for eq, term, _ in uncertain}
