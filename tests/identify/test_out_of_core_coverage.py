@@ -14,8 +14,17 @@ from identify.data.recording import Recording
 from sim.synth import noise_free_sweep
 pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
-#: Coverage: the truth within Z_COVER standard errors for at least COVERED of the q1_dot terms x seeds.
-Z_COVER, COVERED = 3.0, 0.95
+#: Coverage, counted by record: a record misses when one of its q1_dot terms lies more than Z_COVER standard
+#: errors from the truth. q2, q2^3 and zdd are estimated together and their errors are correlated (-0.74,
+#: 0.51, -0.64 over 29 fresh records), so misses come in twos and threes: the per-term count this test
+#: used (one miss of 20) failed CI on an honest record (seed 4253729712: z -3.68, 3.07, 3.75; 29 other
+#: records had mean z^2 0.84 and max |z| 2.7). With honest standard errors a record misses with probability
+#: <= 5 x 0.27 % = 1.35 % whatever the correlation (Bonferroni), so MISSED_RECORDS of RECORDS fails an honest
+#: estimator with probability <= 1.5e-4.
+RECORDS, MISSED_RECORDS, Z_COVER = 8, 2, 3.0
+#: ... and on average: the mean z^2 over all terms x records is ~1 with honest standard errors (sd ~0.27 for
+#: 8 records of 5 correlated terms); over MEAN_Z2 it says they are too small by more than 1.5x overall.
+MEAN_Z2 = 2.25
 
 
 def _fresh_seeds(k: int) -> list[int]:
@@ -52,14 +61,13 @@ def test_in_core_and_out_of_core_agree_on_a_million_samples(tmp_path):
 
 @pytest.mark.slow
 def test_out_of_core_standard_errors_cover_the_truth_at_ten_million_samples(tmp_path):
-    """Four records of 1e7 samples (81 min at 2048 Hz each, Table 1 rig, 0.5 % noise), identified out of
-    core from HDF5 with the defaults: the true coefficient within 3 standard errors for >= 95 % of the
-    q1_dot terms x records (one miss of 20 allowed; honest standard errors miss 3 SE 0.3 % of the time).
-    Before the chain bias was removed out of core, 1e7 samples gave |z| up to 45 (issue 30, on records that
-    also repeated their noise); measured now |z| <= 1.47 (docs/out-of-core.md)."""
+    """RECORDS records of 1e7 samples (81 min at 2048 Hz each, Table 1 rig, 0.5 % noise), identified out of
+    core from HDF5 with the defaults: at most MISSED_RECORDS with a q1_dot term more than 3 standard errors
+    from the truth, and the mean z^2 under MEAN_Z2. Before the chain bias was removed out of core, 1e7
+    samples gave |z| up to 45 (issue 30, on records that also repeated their noise)."""
     zs = {}
     run = noise_free_sweep()
-    for seed in _fresh_seeds(4):
+    for seed in _fresh_seeds(RECORDS):
         path = tmp_path / f"long_{seed}.h5"
         write_long_record(path, 10_000_000, run.recording, seed=seed)
         truth = run.recording.metadata["truth"]["model"]["q1_dot"]
@@ -69,5 +77,7 @@ def test_out_of_core_standard_errors_cover_the_truth_at_ten_million_samples(tmp_
         assert res["status"] == "ok" and set(coefs) == set(truth), (seed, res["reason"], coefs)
         zs[seed] = {t: (coefs[t] - truth[t]) / ses[t] for t in truth}
         print(seed, {t: round(z, 2) for t, z in zs[seed].items()})
-    flat = [abs(z) for by_term in zs.values() for z in by_term.values()]
-    assert np.mean(np.array(flat) <= Z_COVER) >= COVERED, zs
+    z = np.array([list(by_term.values()) for by_term in zs.values()])
+    missed = [seed for seed, row in zip(zs, z) if np.abs(row).max() > Z_COVER]
+    assert len(missed) <= MISSED_RECORDS, (missed, zs)
+    assert np.mean(z ** 2) <= MEAN_Z2, (np.mean(z ** 2), zs)
