@@ -138,11 +138,21 @@ def summary(result: dict, source: str) -> str:
     return "\n".join(lines)
 
 
-def _min_inclusion() -> float:
-    """identify.trust.uncertainty.MIN_INCLUSION_PROBABILITY, read when needed (this module loads no engine)."""
-    from identify.trust.uncertainty import MIN_INCLUSION_PROBABILITY
+def uncertain_rule(result: dict) -> dict:
+    """The rule that set the result's uncertain terms apart, as the result states it
+    (result["uncertainty"]["uncertain_terms_rule"]: min_inclusion_probability, significant_z); a result
+    written before it was stated gets identify.trust.uncertainty's constants, read when needed (this module
+    loads no engine)."""
+    rule = (result.get("uncertainty") or {}).get("uncertain_terms_rule")
+    if rule:
+        return rule
+    from identify.trust.uncertainty import MIN_INCLUSION_PROBABILITY, SIGNIFICANT_Z
 
-    return MIN_INCLUSION_PROBABILITY
+    return {"min_inclusion_probability": MIN_INCLUSION_PROBABILITY, "significant_z": SIGNIFICANT_Z}
+
+
+def _min_inclusion(result: dict) -> float:
+    return float(uncertain_rule(result)["min_inclusion_probability"])
 
 
 def unsettled_lines(result: dict) -> list[str]:
@@ -153,10 +163,9 @@ def unsettled_lines(result: dict) -> list[str]:
     uncertain = [(eq, term, u) for eq, terms in (result.get("uncertain_terms") or {}).items()
                  for term, u in terms.items()]
     if uncertain:
-        from identify.trust.uncertainty import SIGNIFICANT_Z
-
-        lines.append(f"uncertain terms, left out of the model (P(kept) < {_min_inclusion():g} and within "
-                     f"{SIGNIFICANT_Z:g} standard errors of zero): " + "; ".join(
+        rule = uncertain_rule(result)
+        lines.append(f"uncertain terms, left out of the model (P(kept) < {rule['min_inclusion_probability']:g} and "
+                     f"within {rule['significant_z']:g} standard errors of zero): " + "; ".join(
                          f"{term} ({eq}) {u['coefficient']:.4g} ± {u['standard_error']:.2g}, P(kept) "
                          f"{u['inclusion_probability']:.2f}" for eq, term, u in uncertain))
     unsettled = unsettled_terms(result)
@@ -185,7 +194,7 @@ def budget_dropped(result: dict) -> list[tuple[str, float]]:
     but a free-run budget left out (the placements rerun the rule, not the budget, which runs once)."""
     probs = (result.get("inclusion_probability") or {}).get("q1_dot", {})
     dropped = _dropped_by_budget(result)
-    return [(term, float(p)) for term, p in probs.items() if term in dropped and p >= _min_inclusion()]
+    return [(term, float(p)) for term, p in probs.items() if term in dropped and p >= _min_inclusion(result)]
 
 
 def unsettled_terms(result: dict) -> list[tuple[str, str, bool, float]]:
@@ -193,7 +202,7 @@ def unsettled_terms(result: dict) -> list[tuple[str, str, bool, float]]:
     its held-out placements: kept with P(kept) < MIN_INCLUSION_PROBABILITY (0.5; kept since its coefficient is
     significant, else it is an uncertain term, left out), or left out with P(kept) >= it (not a q1_dot term
     a free-run budget left out of the rule's choice: budget_dropped; not an uncertain term)."""
-    out, dropped, p_min = [], _dropped_by_budget(result), _min_inclusion()
+    out, dropped, p_min = [], _dropped_by_budget(result), _min_inclusion(result)
     uncertain = result.get("uncertain_terms") or {}
     for eq, probs in (result.get("inclusion_probability") or {}).items():
         model = result["model"].get(eq, {})

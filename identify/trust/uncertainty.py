@@ -401,6 +401,9 @@ def name_info(info: dict, eqs, names, supports: dict) -> dict:
                              **{eqs[e]: {names[j]: float(b[j]) for j in np.flatnonzero(supports[e])}
                                 for e, b in bias["bias"].items()}}
     if p_in is not None:  # every kept term, and every term some placement kept
+        # the rule uncertain_supports applied, with the result (reports and the dashboard say it from here)
+        out["uncertain_terms_rule"] = {"min_inclusion_probability": MIN_INCLUSION_PROBABILITY,
+                                       "significant_z": SIGNIFICANT_Z}
         out["inclusion_probability"] = {eq: {n: float(p_in[e, j]) for j, n in enumerate(names)
                                              if p_in[e, j] > 0 or supports[e][j]} for e, eq in enumerate(eqs)}
     return out
