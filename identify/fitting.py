@@ -228,10 +228,10 @@ def _free_run_choice(ident, sig, timings: dict) -> SparseModel:
 def trust(ident, sources: list, blocks: list, gram: BlockGram, held, n_eff: float) -> tuple[dict, dict, dict]:
     """Reported coefficients, standard errors and inclusion probabilities (identify.trust.uncertainty), the
     chain bias from the sources (closed form where every source can give it, SIMEX in core otherwise).
-    Kept terms with an inclusion probability below unc.MIN_INCLUSION_PROBABILITY and a coefficient within
-    unc.SIGNIFICANT_Z standard errors of zero leave the selection (its support and training fit) and the
-    reported model; ident.uncertain_terms_ lists them with the all-rows coefficient, standard error and
-    probability they had. Not with a free-run budget: its placements rerun the rule, not the budget's
+    Kept terms with a coefficient within unc.SIGNIFICANT_Z standard errors of zero (when the inclusion
+    probabilities were computed) leave the selection (its support and training fit) and the reported
+    model; ident.uncertain_terms_ lists them with the all-rows coefficient, standard error and probability
+    they had. Not with a free-run budget: its placements rerun the rule, not the budget's
     choice (reports.text.budget_dropped)."""
     names, eqs = ident.library_.names, list(ident.selections_)
     sups = {e: s.support for e, s in enumerate(ident.selections_.values())}
@@ -271,7 +271,7 @@ def trust(ident, sources: list, blocks: list, gram: BlockGram, held, n_eff: floa
 
 
 def _leave_out_uncertain(ident, gram: BlockGram, held, sups: dict, assessed: tuple, bias_of) -> tuple:
-    """trust's kept terms below unc.MIN_INCLUSION_PROBABILITY and within unc.SIGNIFICANT_Z of zero: listed in
+    """trust's kept terms within unc.SIGNIFICANT_Z standard errors of zero: listed in
     ident.uncertain_terms_ (coefficient and standard error of the full support's refit, probability), taken
     out of `sups` and the selections (support and training fit), the rest refit and assessed again (the
     probabilities stay those of the decision made).

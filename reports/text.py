@@ -138,21 +138,20 @@ def summary(result: dict, source: str) -> str:
     return "\n".join(lines)
 
 
-def uncertain_rule(result: dict) -> dict:
-    """The rule that set the result's uncertain terms apart, as the result states it
-    (result["uncertainty"]["uncertain_terms_rule"]: min_inclusion_probability, significant_z); a result
-    written before it was stated gets identify.trust.uncertainty's constants, read when needed (this module
-    loads no engine)."""
-    rule = (result.get("uncertainty") or {}).get("uncertain_terms_rule")
-    if rule:
-        return rule
+def term_rules(result: dict) -> dict:
+    """The bounds the result's terms were judged by, as the result states them (result["uncertainty"]
+    ["term_rules"]: significant_z, min_inclusion_probability); a result written before it stated them gets
+    identify.trust.uncertainty's constants, read when needed (this module loads no engine)."""
+    rules = (result.get("uncertainty") or {}).get("term_rules")
+    if rules:
+        return rules
     from identify.trust.uncertainty import MIN_INCLUSION_PROBABILITY, SIGNIFICANT_Z
 
-    return {"min_inclusion_probability": MIN_INCLUSION_PROBABILITY, "significant_z": SIGNIFICANT_Z}
+    return {"significant_z": SIGNIFICANT_Z, "min_inclusion_probability": MIN_INCLUSION_PROBABILITY}
 
 
 def _min_inclusion(result: dict) -> float:
-    return float(uncertain_rule(result)["min_inclusion_probability"])
+    return float(term_rules(result)["min_inclusion_probability"])
 
 
 def unsettled_lines(result: dict) -> list[str]:
@@ -163,9 +162,8 @@ def unsettled_lines(result: dict) -> list[str]:
     uncertain = [(eq, term, u) for eq, terms in (result.get("uncertain_terms") or {}).items()
                  for term, u in terms.items()]
     if uncertain:
-        rule = uncertain_rule(result)
-        lines.append(f"uncertain terms, left out of the model (P(kept) < {rule['min_inclusion_probability']:g} and "
-                     f"within {rule['significant_z']:g} standard errors of zero): " + "; ".join(
+        lines.append(f"uncertain terms, left out of the model (within {term_rules(result)['significant_z']:g} "
+                     "standard errors of zero): " + "; ".join(
                          f"{term} ({eq}) {u['coefficient']:.4g} ± {u['standard_error']:.2g}, P(kept) "
                          f"{u['inclusion_probability']:.2f}" for eq, term, u in uncertain))
     unsettled = unsettled_terms(result)
@@ -200,7 +198,7 @@ def budget_dropped(result: dict) -> list[tuple[str, float]]:
 def unsettled_terms(result: dict) -> list[tuple[str, str, bool, float]]:
     """(equation, term, kept, inclusion probability) of every term the selection decided against most of
     its held-out placements: kept with P(kept) < MIN_INCLUSION_PROBABILITY (0.5; kept since its coefficient is
-    significant, else it is an uncertain term, left out), or left out with P(kept) >= it (not a q1_dot term
+    beyond SIGNIFICANT_Z standard errors, else it is an uncertain term, left out), or left out with P(kept) >= it (not a q1_dot term
     a free-run budget left out of the rule's choice: budget_dropped; not an uncertain term)."""
     out, dropped, p_min = [], _dropped_by_budget(result), _min_inclusion(result)
     uncertain = result.get("uncertain_terms") or {}

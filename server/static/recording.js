@@ -130,15 +130,13 @@ function modelSection(r, m) {
   return html + `<p><a href="#" class="report" data-kind="identify" id="rec-report">the whole report (index.html)</a> <span class="hint">opens in a new tab</span></p>` +
     `<div class="figures" id="rec-model-figures"></div>`;
 }
-// kept terms most held-out placements left out and within a few standard errors of zero: left out of the
-// model and said apart with the rule model.json states (uncertainty.uncertain_terms_rule; docs/identification.md,
-// "Uncertain terms")
+// kept terms within SIGNIFICANT_Z standard errors of zero: left out of the model and said apart with the bound
+// model.json states (uncertainty.term_rules; docs/identification.md, "Uncertain terms")
 function uncertainTerms(m) {
   const said = Object.entries(m.uncertain_terms || {}).flatMap(([eq, terms]) => Object.entries(terms).map(([t, u]) =>
     `${esc(t)} (${esc(eq)}) ${num(u.coefficient)} ± ${num(u.standard_error, 2)}, P(kept) ${u.inclusion_probability.toFixed(2)}`));
-  const rule = (m.uncertainty || {}).uncertain_terms_rule;
-  const why = rule ? `P(kept) < ${rule.min_inclusion_probability} and within ${rule.significant_z} standard errors of zero`
-    : "most held-out placements left them out, and zero is within a few standard errors of each";
+  const rules = (m.uncertainty || {}).term_rules;
+  const why = rules ? `within ${rules.significant_z} standard errors of zero` : "within a few standard errors of zero";
   return said.length ? `<p class="hint" id="rec-uncertain">uncertain terms, left out of the model (${esc(why)}): ${said.join("; ")}</p>` : "";
 }
 function explainSection(r, x) {

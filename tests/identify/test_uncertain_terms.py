@@ -1,7 +1,7 @@
-"""A term the selection kept but most random held-out placements leave out (P(kept) below
-MIN_INCLUSION_PROBABILITY) and whose coefficient is within SIGNIFICANT_Z standard errors of zero is reported
+"""A term the selection kept whose coefficient is within SIGNIFICANT_Z standard errors of zero is reported
 apart, as an uncertain term, and is not in the model, its refit or its simulation (issue 30's "term
-lottery"). Real fits on simulated rigs."""
+lottery"), whatever its inclusion probability; a term beyond it stays, whatever its probability. Real fits
+on simulated rigs."""
 import numpy as np
 
 import identify.trust.uncertainty as unc
@@ -44,19 +44,18 @@ def test_a_kept_term_most_placements_leave_out_is_reported_apart():
 
 
 def test_no_reported_term_is_one_most_placements_leave_out():
-    """Fresh draw (seed printed): whatever is selected, every term in the model has P(kept) >= the bound or a
-    coefficient beyond SIGNIFICANT_Z standard errors, and every uncertain term has neither and is absent
-    from the model."""
+    """Fresh draw (seed printed): whatever is selected, every term in the model has a coefficient beyond
+    SIGNIFICANT_Z standard errors (but q2_dot = q1, exact by construction), and every uncertain term is
+    within them and absent from the model."""
     seed = int(np.random.SeedSequence().generate_state(1)[0])
     print(f"seed {seed}")
     res = SparseIdentifier().fit(_record(seed, 20.0)).result()
     for eq, terms in res["model"].items():
-        probs, se = res["inclusion_probability"][eq], res["standard_errors"][eq]
+        se = res["standard_errors"][eq]
         for t, c in terms.items():
-            assert probs[t] >= unc.MIN_INCLUSION_PROBABILITY or abs(c) > unc.SIGNIFICANT_Z * se[t], (eq, t, probs)
+            assert abs(c) > unc.SIGNIFICANT_Z * se[t] or (eq, t, c, se[t]) == ("q2_dot", "q1", 1.0, 0.0), (eq, t)
         for t, entry in res["uncertain_terms"][eq].items():
-            assert t not in terms and entry["inclusion_probability"] < unc.MIN_INCLUSION_PROBABILITY
-            assert abs(entry["coefficient"]) <= unc.SIGNIFICANT_Z * entry["standard_error"]
+            assert t not in terms and abs(entry["coefficient"]) <= unc.SIGNIFICANT_Z * entry["standard_error"]
 
 
 def test_a_term_the_data_carry_stays_whatever_its_probability():
@@ -71,3 +70,28 @@ def test_a_term_the_data_carry_stays_whatever_its_probability():
     assert res["inclusion_probability"]["q1_dot"]["q1"] < unc.MIN_INCLUSION_PROBABILITY
     c, se = res["model"]["q1_dot"]["q1"], res["standard_errors"]["q1_dot"]["q1"]
     assert abs(c) > unc.SIGNIFICANT_Z * se and res["uncertain_terms"] == {"q1_dot": {}, "q2_dot": {}}
+
+
+def test_a_kept_term_within_a_few_standard_errors_is_left_out_whatever_its_probability():
+    """A 60 s record of 2-20 Hz noise on the Table 1 rig (tests/identify/test_band.py's recording), seed
+    1380107564: the selection keeps q1^2 and q2^2, at P(kept) 0.58 and 0.71 but 1.9 and 2.5 standard errors
+    from zero (a rule that also asked P(kept) < 0.5 kept them). Both are reported apart; the model is the
+    true one, each coefficient within 3 standard errors of the truth."""
+    from scipy.signal import butter, sosfiltfilt
+    from identify.data.recording import Recording
+    from identify.simulation.simulate import equation_rows, simulate
+
+    fs, rng = 1024.0, np.random.default_rng(1380107564)
+    model = RigParameters.paper_table1().model()
+    zdd = sosfiltfilt(butter(4, [2.0, 20.0], "bandpass", fs=fs, output="sos"), rng.standard_normal(int(60 * fs))) * 5
+    run = simulate(model, 1 / fs, [0.0, 0.0], zdd[:, None], state_scale=np.array([0.1, 0.01]))
+    mass = equation_rows(model, run.states, zdd) + zdd
+    rec = Recording(zdd + 0.005 * np.std(zdd) * rng.standard_normal(zdd.size),
+                    mass + 0.005 * np.std(mass) * rng.standard_normal(zdd.size), fs)
+    res = SparseIdentifier().fit(rec).result()
+    apart = res["uncertain_terms"]["q1_dot"]
+    assert set(apart) == {"q1^2", "q2^2"}, apart
+    assert all(u["inclusion_probability"] >= unc.MIN_INCLUSION_PROBABILITY for u in apart.values()), apart
+    assert set(res["model"]["q1_dot"]) == set(TRUTH)
+    for t, c in TRUTH.items():
+        assert abs(res["model"]["q1_dot"][t] - c) < 3 * res["standard_errors"]["q1_dot"][t], t

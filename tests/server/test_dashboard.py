@@ -388,9 +388,8 @@ def test_uncertain_terms_are_said_under_the_model(page, service, make_run, tmp_p
     page.goto(f"{service.url}/#/recording/{rec_id}")
     page.wait_for_selector("#rec-uncertain")
     said = page.inner_text("#rec-uncertain")
-    rule = model["uncertainty"]["uncertain_terms_rule"]  # the rule, as the model states it
-    assert said.startswith(f"uncertain terms, left out of the model (P(kept) < {rule['min_inclusion_probability']:g} "
-                           f"and within {rule['significant_z']:g} standard errors of zero)")  # JS's String(x) here
+    z = model["uncertainty"]["term_rules"]["significant_z"]  # the bound, as the model states it
+    assert said.startswith(f"uncertain terms, left out of the model (within {z:g} standard errors of zero)")  # JS String(x)
     for eq, term, u in uncertain:
         assert f"{term} ({eq}) " in said and f"P(kept) {js_fixed(u['inclusion_probability'], 2)}" in said
     shown = {tuple(r.split("\t")[:2]) for r in page.locator("#rec-terms tr").all_inner_texts()[1:]}
