@@ -16,7 +16,7 @@ sized as in sim/scenarios.py. The categories follow PATTERN (12 slots: 4 single,
 2 sensor_fault, 1 out_of_catalog); single, sensor_fault and out_of_catalog cycle through their names.
 
 Each case runs the public call, `DiscrepancyAnalysis().fit(recording).result()`, and is scored by the
-contract (sim.scenarios.score): none -> `none`; single -> the first effect is the truth and the gap is at
+contract (sim.scoring.score): none -> `none`; single -> the first effect is the truth and the gap is at
 least halved; two_effects -> both named and no wrong physical name; sensor_fault -> the first effect is the
 fault; out_of_catalog -> `unexplained` or a first effect flagged as a surrogate that halves the gap.
 Entries naming a nuisance the recording has (hum, quantisation) are passed over. Counted apart: wrong
@@ -43,8 +43,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from identify.explain.workflow import DiscrepancyAnalysis  # noqa: E402
-from sim.scenarios import (MEASUREMENT, OUT_OF_CATALOG, PHYSICS, SURROGATE_GROUPS, make_scenario,  # noqa: E402
-                           result_effects, score, spurious_measurement_names)
+from sim.scenarios import MEASUREMENT, OUT_OF_CATALOG, PHYSICS, SURROGATE_GROUPS, make_scenario  # noqa: E402
+from sim.scoring import result_effects, score, spurious_measurement_names  # noqa: E402
 
 PATTERN = ("single", "none", "two_effects", "single", "sensor_fault", "two_effects", "single", "none",
            "out_of_catalog", "single", "sensor_fault", "two_effects")

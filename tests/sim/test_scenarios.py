@@ -8,8 +8,8 @@ import pytest
 
 from sim.rig import RigParameters
 from sim.scenarios import (CATEGORIES, DETECTABLE, GAP_PER_SIZE, MAX_RESPONSE_MM, MEASUREMENT, NOISE_FLOOR_PER_NOISE,
-                           OUT_OF_CATALOG, PHYSICS, RELATIVE_FORCE, SURROGATE_GROUPS, _draw_names, make_scenario,
-                           result_effects, score)
+                           OUT_OF_CATALOG, PHYSICS, RELATIVE_FORCE, SURROGATE_GROUPS, _draw_names, make_scenario)
+from sim.scoring import result_effects, score
 
 SHORT = dict(duration_s=12.0, fs_hz=1000.0)
 CASES = ([("none", None)] + [("single", [p]) for p in PHYSICS] + [("sensor_fault", [p]) for p in MEASUREMENT]
