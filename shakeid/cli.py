@@ -14,10 +14,11 @@ from daq.formats import NAMES as FORMAT_NAMES
 from identify.errors import IdentificationError, ShakeidError
 from reports.text import summary
 
-from .argtypes import file_and_samples, int_in, non_negative, positive
+from .argtypes import file_and_samples, non_negative, positive
 from .batch_cmd import add_batch_parser
 from .campaign_cmd import add_campaign_parser
 from .explain_cmd import add_explain_parser
+from .files import add_layout_options, naming, read_recording, write_report
 from .export_cmd import add_export_parser
 from .frf_cmd import add_frf_parser
 from .helpformat import Parser
@@ -29,30 +30,8 @@ from .plan_cmd import add_plan_parser
 EXIT_USAGE = 2
 
 
-def _add_layout_options(p: argparse.ArgumentParser) -> None:
-    """Which columns of the file are the input, the output and the time (identify, batch, explain)."""
-    g = p.add_argument_group("recording layout")
-    g.add_argument("--layout", choices=("base", "force"), default="base",
-                   help="base: table and mass accelerations in m/s²; force: an input u and a displacement-like "
-                        "output y (e.g. Silverbox, volts)")
-    g.add_argument("--input", metavar="NAME", help="input channel by name, in any format: a column, a variable, a "
-                   "TDMS channel (GROUP/NAME when in two groups), a UFF id1, an MDF channel (default: table_acc, or u "
-                   "with --layout force)")
-    g.add_argument("--output", metavar="NAME", help="output channel by name, as --input (default: mass_acc, or y with "
-                   "--layout force)")
-    g.add_argument("--time", metavar="NAME", help="time column, s (default: t)")
-    g.add_argument("--fs", type=positive, metavar="HZ",
-                   help="sample rate in Hz for a file without a clock, or the exact rate of a clock the file stores "
-                        "coarsely (UFF's 6-digit increment) (default: from the file)")
-    g.add_argument("--samples", type=int_in(0), nargs=2, metavar=("START", "STOP"),
-                   help="use samples [START, STOP) only (0-based), e.g. Silverbox's estimation range "
-                        "(default: all)")
-    g.add_argument("--band", type=float, nargs=2, metavar=("F_LO", "F_HI"),
-                   help="integration band in Hz (default: the excited band, found from the table's spectrum)")
-
-
 def _add_identify_options(p: argparse.ArgumentParser) -> None:
-    _add_layout_options(p)
+    add_layout_options(p)
     g = p.add_argument_group("identification")
     add_estimator_options(g)  # identify.params.PARAMS: one declaration for CLI, API, estimator, docs
 
@@ -65,19 +44,6 @@ def _identifier(args):
     return SparseIdentifier(**estimator_kwargs(args), band_hz=tuple(args.band) if args.band else None)
 
 
-def _read(args):
-    """The recording named on the command line (any format daq.formats reads), cut to --samples if given;
-    what the reader noticed (a unit converted, a sample rate stored coarsely) is printed to stderr."""
-    from daq.formats import open_recording
-
-    samples = getattr(args, "samples", None)
-    rec = open_recording(args.file, args.layout, args.input, args.output, args.time, args.fs,
-                         tuple(samples) if samples else None)
-    for note in rec.metadata.get("warnings", ()):
-        print(f"shakeid: warning: {args.file}: {note}", file=sys.stderr)
-    return rec
-
-
 def cmd_identify(args) -> int:
     """Exit 0 with a model; 2 for data that cannot carry one (refused before fitting, unless
     --accept-faulty); 1 when the fitted model fails its validation (identify/simulation/validation.py)."""
@@ -86,7 +52,7 @@ def cmd_identify(args) -> int:
     if len(args.files) > 1:
         from .joint_cmd import cmd_identify_joint
 
-        return cmd_identify_joint(args, _identifier, _read)
+        return cmd_identify_joint(args, _identifier, read_recording)
     args.file, args.samples = file_and_samples(args.files[0], getattr(args, "samples", None))
     ident = _identifier(args)  # option errors first, before any file is read
     from .ooc_cmd import identify_out_of_core, wants_out_of_core
@@ -97,18 +63,18 @@ def cmd_identify(args) -> int:
         from reports.html import check_report_folder
 
         check_report_folder(args.report, "identification")  # before the fit: a mistyped --report costs nothing
-    rec = _read(args)
+    rec = read_recording(args)
     data = check_identifiable(rec, args.file, args.accept_faulty)
     try:
         ident.fit(rec)
     except ValueError as exc:  # library/term specification problems
         raise ShakeidError(str(exc)) from None
     except IdentificationError as exc:  # what the data cannot give (no excited band, too short): name the file
-        raise _naming(args.file, exc) from None
+        raise naming(args.file, exc) from None
     from identify.frf.side_by_side import identification_document  # with the predicted jumps (docs/frf.md)
 
     result = identification_document(ident, [rec], data)
-    replaced = _write_report("identification", ident, args.report, result)
+    replaced = write_report("identification", ident, args.report, result)
     if args.json:
         print(json.dumps(result))
     else:
@@ -122,32 +88,6 @@ def cmd_identify(args) -> int:
               "looks for the effect the library misses)", file=sys.stderr)
         return 1
     return 0
-
-
-def _naming(path, exc: Exception) -> ShakeidError:
-    """The error with the file it is about in front, unless it names it already."""
-    text = str(exc)
-    return ShakeidError(text if str(path) in text else f"{path}: {text}")
-
-
-def _write_report(kind: str, fitted, out_dir, result: dict | None = None) -> str:
-    """Write the identification or explain report of `fitted` into out_dir (nothing when it is None;
-    `result`: the identification's document as --json prints it, for model.json); returns what the
-    operator is told it replaced: " (replaces the report written there at ...)" or ""."""
-    if not out_dir:
-        return ""
-    from reports.html import earlier_report
-
-    earlier = earlier_report(out_dir)
-    if kind == "identification":
-        from reports.identification import write_report
-
-        write_report(fitted, out_dir, result)
-    else:
-        from reports.explain import write_explain_report
-
-        write_explain_report(fitted, out_dir, (result or {}).get("frf"))
-    return f" (replaces {earlier})" if earlier else ""
 
 
 def _add_sweep_options(p: argparse.ArgumentParser) -> None:
@@ -242,8 +182,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--accept-faulty", action="store_true",
                    help="identify a recording that is not complete or whose quality flags make it unusable")
     q.set_defaults(func=cmd_identify)
-    add_batch_parser(sub, _add_identify_options, _identifier, _read)
-    add_explain_parser(sub, _add_layout_options, read=_read, naming=_naming, write_report=_write_report)
+    add_batch_parser(sub, _add_identify_options, _identifier, read_recording)
+    add_explain_parser(sub)
     add_lab_parsers(sub)
     add_campaign_parser(sub)
     add_export_parser(sub)

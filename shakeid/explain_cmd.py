@@ -14,17 +14,13 @@ from identify.errors import IdentificationError, ShakeidError
 from reports.text import gap_closed_text, model_text, p_value_text
 
 from .argtypes import file_and_samples
+from .files import add_layout_options, naming, read_recording, write_report
 
-#: the identify command's file reading, error naming and report writing (shakeid/cli.py), shared
-_HOOKS: dict = {}
 #: how often the state of the service's explanation job is asked for, s
 POLL_S = 1.0
 
 
-def add_explain_parser(sub, add_layout_options, **hooks) -> None:
-    """hooks: read(args) -> Recording, naming(path, exc) -> ShakeidError, write_report(kind, fitted, dir,
-    result) -> str (shakeid/cli.py's, as identify uses them)."""
-    _HOOKS.update(hooks)
+def add_explain_parser(sub) -> None:
     q = sub.add_parser("explain", help="where a model misses the rig, which effect is missing, and the fix")
     q.add_argument("files", nargs="*", metavar="FILE",
                    help=f"the recording ({FORMAT_NAMES}); FILE[START:STOP]: its samples [START, STOP) only; several "
@@ -67,7 +63,7 @@ def cmd_explain(args) -> int:
         _refuse_twice(names, cuts)
     recs, data = [], None
     for name, (args.file, args.samples) in zip(names, cuts):  # several: one explanation (identify.explain.several)
-        rec = _HOOKS["read"](args)
+        rec = read_recording(args)
         if len(names) > 1:
             rec.source = name  # as the operator named it (FILE[START:STOP] included)
         quality = check_identifiable(rec, args.file, args.accept_faulty,  # as identify: no analysis of unusable data
@@ -77,12 +73,12 @@ def cmd_explain(args) -> int:
     try:
         analysis = DiscrepancyAnalysis(baseline=baseline, band_hz=tuple(args.band) if args.band else None).fit(recs)
     except IdentificationError as exc:
-        raise (_HOOKS["naming"](args.file, exc) if len(recs) == 1 else ShakeidError(str(exc))) from None
+        raise (naming(args.file, exc) if len(recs) == 1 else ShakeidError(str(exc))) from None
     result = {**analysis.result(), **data}
     from identify.frf.side_by_side import for_explanation  # the jumps before/after beside the sweep's
 
     result["frf"] = for_explanation(result, analysis.baseline_model_, analysis.model_, recs)
-    replaced = _HOOKS["write_report"]("explain", analysis, args.report, result)
+    replaced = write_report("explain", analysis, args.report, result)
     if args.json:
         print(json.dumps(result))
         return 0
