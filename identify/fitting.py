@@ -158,8 +158,8 @@ def fit_sources(ident, sources: list, timings: dict) -> list:
     coefs = _budget_by_free_run(ident, each, train, held, coefs, timings)
     t0 = time.perf_counter()
     # the reported coefficients are the kept terms refit on all rows, less the chain's bias; a kept term
-    # most held-out placements leave out is reported apart (identify.trust.uncertainty, docs/identification.md
-    # section 5). The selection-time fit (training blocks only) of the terms left is what the held-out
+    # within SIGNIFICANT_Z standard errors of zero is reported apart (identify.trust.uncertainty,
+    # docs/identification.md section 5). The selection-time fit (training blocks only) of the terms left is what the held-out
     # validation scores.
     reported, ident.standard_errors_, ident.uncertainty_ = trust(ident, sources, blocks, gram, held, n_eff)
     ident.training_model_ = SparseModel(_named(ident.selections_, lib.names), STATES, (input_name,))
@@ -228,10 +228,9 @@ def _free_run_choice(ident, sig, timings: dict) -> SparseModel:
 def trust(ident, sources: list, blocks: list, gram: BlockGram, held, n_eff: float) -> tuple[dict, dict, dict]:
     """Reported coefficients, standard errors and inclusion probabilities (identify.trust.uncertainty), the
     chain bias from the sources (closed form where every source can give it, SIMEX in core otherwise).
-    Kept terms with a coefficient within unc.SIGNIFICANT_Z standard errors of zero (when the inclusion
-    probabilities were computed) leave the selection (its support and training fit) and the reported
-    model; ident.uncertain_terms_ lists them with the all-rows coefficient, standard error and probability
-    they had. Not with a free-run budget: its placements rerun the rule, not the budget's
+    Kept terms within unc.SIGNIFICANT_Z standard errors of zero leave the selection (its support and
+    training fit) and the reported model one at a time (_leave_out_uncertain); ident.uncertain_terms_ lists
+    them with the all-rows coefficient, standard error and probability they had. Not with a free-run budget: its placements rerun the rule, not the budget's
     choice (reports.text.budget_dropped)."""
     names, eqs = ident.library_.names, list(ident.selections_)
     sups = {e: s.support for e, s in enumerate(ident.selections_.values())}
@@ -271,23 +270,28 @@ def trust(ident, sources: list, blocks: list, gram: BlockGram, held, n_eff: floa
 
 
 def _leave_out_uncertain(ident, gram: BlockGram, held, sups: dict, assessed: tuple, bias_of) -> tuple:
-    """trust's kept terms within unc.SIGNIFICANT_Z standard errors of zero: listed in
-    ident.uncertain_terms_ (coefficient and standard error of the full support's refit, probability), taken
-    out of `sups` and the selections (support and training fit), the rest refit and assessed again (the
-    probabilities stay those of the decision made).
-    Returns assess's (coefs, var, info) for the terms left."""
+    """Backward elimination on trust's kept terms: while a kept term is within unc.SIGNIFICANT_Z standard
+    errors of zero, the least significant one per equation (unc.least_significant) leaves `sups` and the
+    selections (support and training fit), listed in ident.uncertain_terms_ with the coefficient and
+    standard error of the last refit that held it and its inclusion probability (None when none were
+    computed); the rest are refit and assessed again, so two terms significant only together stay. The
+    probabilities stay those of the decision made. Returns assess's (coefs, var, info) for the terms left."""
     coefs, var, info = assessed
     names, eqs = ident.library_.names, list(ident.selections_)
-    uncertain = unc.uncertain_supports(info["inclusion"], sups, coefs, var) if ident.budget_ is None else {}
-    ident.uncertain_terms_ = {
-        eq: {names[j]: {"coefficient": float(coefs[e][j]), "standard_error": float(np.sqrt(var[e][j])),
-                        "inclusion_probability": float(info["inclusion"][e, j])}
-             for j in np.flatnonzero(uncertain.get(e, ()))} for e, eq in enumerate(eqs)}
-    if not any(u.any() for u in uncertain.values()):
-        return coefs, var, info
+    ident.uncertain_terms_ = {eq: {} for eq in eqs}
+    p_in = info["inclusion"]
     train = gram.equations(~held)
-    for e, sel in enumerate(ident.selections_.values()):
-        sel.support = sups[e] = sups[e] & ~uncertain[e]
-        sel.coef = least_squares(train.G, train.B[:, e], sel.support)
-    coefs, var, again = unc.assess(gram, held, sups, bias_of)
-    return coefs, var, {**again, "inclusion": info["inclusion"], "placements": info["placements"]}
+    while ident.budget_ is None:
+        drop = unc.least_significant(sups, coefs, var)
+        if not drop:
+            break
+        for e, j in drop.items():
+            ident.uncertain_terms_[eqs[e]][names[j]] = {
+                "coefficient": float(coefs[e][j]), "standard_error": float(np.sqrt(var[e][j])),
+                "inclusion_probability": None if p_in is None else float(p_in[e, j])}
+            sel = ident.selections_[eqs[e]]
+            sel.support = sups[e] = sups[e] & (np.arange(sups[e].size) != j)
+            sel.coef = least_squares(train.G, train.B[:, e], sel.support)
+        coefs, var, again = unc.assess(gram, held, sups, bias_of)
+        info = {**again, "inclusion": p_in, "placements": info["placements"]}
+    return coefs, var, info

@@ -191,7 +191,7 @@ class SparseIdentifier:
             "model": self.model_.to_dict()["model"],
             "standard_errors": self.standard_errors_,
             "inclusion_probability": self.uncertainty_["inclusion_probability"],
-            # kept terms most held-out placements leave out: not in the model (identify.fitting.trust)
+            # kept terms within SIGNIFICANT_Z standard errors of zero: not in the model (identify.fitting.trust)
             "uncertain_terms": self.uncertain_terms_,
             "uncertainty": {k: v for k, v in self.uncertainty_.items() if k != "inclusion_probability"},
             "states": {"q1": "relative velocity" if sig.input_name == "zdd" else "output derivative",

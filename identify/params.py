@@ -99,7 +99,7 @@ PARAMS: tuple[Param, ...] = (
           "by the record's length, 64 up to 250 000 samples, 16 from 1 000 000)", low=0, high=200,
           nullable=True, metavar="N"),
     Param("placements", int, N_PLACEMENTS, "random held-out placements for the inclusion probabilities (0: none, "
-          "faster)", low=0, high=500, metavar="N"),
+          "faster; the model is the same)", low=0, high=500, metavar="N"),
     Param("mass_kg", float, None, "moving mass for the physical parameters (none: the recording's, which a "
           "sweep takes from its rig configuration, else 0.49, the paper's rig, said to be assumed)", "kg",
           low=0, low_open=True, nullable=True, metavar="KG"),

@@ -151,7 +151,13 @@ def term_rules(result: dict) -> dict:
 
 
 def _min_inclusion(result: dict) -> float:
+    """The inclusion probability under which a kept term is unsettled (term_rules)."""
     return float(term_rules(result)["min_inclusion_probability"])
+
+
+def _p_kept(p: float | None) -> str:
+    """", P(kept) 0.58", or nothing where the inclusion probabilities were not computed (placements=0)."""
+    return "" if p is None else f", P(kept) {p:.2f}"
 
 
 def unsettled_lines(result: dict) -> list[str]:
@@ -164,8 +170,8 @@ def unsettled_lines(result: dict) -> list[str]:
     if uncertain:
         lines.append(f"uncertain terms, left out of the model (within {term_rules(result)['significant_z']:g} "
                      "standard errors of zero): " + "; ".join(
-                         f"{term} ({eq}) {u['coefficient']:.4g} ± {u['standard_error']:.2g}, P(kept) "
-                         f"{u['inclusion_probability']:.2f}" for eq, term, u in uncertain))
+                         f"{term} ({eq}) {u['coefficient']:.4g} ± {u['standard_error']:.2g}"
+                         + _p_kept(u['inclusion_probability']) for eq, term, u in uncertain))
     unsettled = unsettled_terms(result)
     if unsettled:
         lines.append("unsettled selection: " + "; ".join(

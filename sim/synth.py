@@ -92,6 +92,27 @@ def noise_free_sweep(sweep: SineSweep | None = None, fs_hz: float = PAPER_FS_HZ)
                      mass_sensor=quiet, seed=0)
 
 
+def noise_input_recording(seed: int, rig: RigParameters | None = None, duration_s: float = 60.0,
+                          fs_hz: float = 1024.0, band_hz: tuple = (2.0, 20.0), rms_scale: float = 5.0,
+                          noise: float = 0.005) -> Recording:
+    """A recording of the rig (default: Table 1) under random table acceleration: white noise through a
+    4th-order Butterworth band-pass over band_hz, forward and back (zero phase), times rms_scale (m/s^2 per
+    unit of filtered noise), with sensor noise of `noise` x each channel's std. Not a sweep: what a lab's
+    random-excitation test records (tests/identify/test_band.py, test_uncertain_terms.py, the FRF job)."""
+    from scipy.signal import butter, sosfiltfilt
+
+    from identify.simulation.simulate import equation_rows
+
+    model = (rig or RigParameters.paper_table1()).model()
+    rng = np.random.default_rng(seed)
+    sos = butter(4, list(band_hz), "bandpass", fs=fs_hz, output="sos")
+    zdd = sosfiltfilt(sos, rng.standard_normal(int(duration_s * fs_hz))) * rms_scale
+    run = simulate(model, 1 / fs_hz, [0.0, 0.0], zdd[:, None], state_scale=np.array([0.1, 0.01]))
+    mass = equation_rows(model, run.states, zdd) + zdd
+    return Recording(zdd + noise * np.std(zdd) * rng.standard_normal(zdd.size),
+                     mass + noise * np.std(mass) * rng.standard_normal(zdd.size), fs_hz)
+
+
 def _integrate(rig, model, sweep, fs_hz, n, substeps, late_s: float = 0.0):
     """The rig's states at n samples and the inputs there, driven by the sweep delayed by `late_s` s."""
     dt = 1.0 / fs_hz

@@ -50,18 +50,13 @@ from ..chain.spectral import welch_psd, welch_segments
 
 #: Random held-out placements for the inclusion probabilities (a probability to +-0.1 at worst).
 N_PLACEMENTS = 24
-#: A kept term whose coefficient is within SIGNIFICANT_Z standard errors of zero is an uncertain term: the
-#: data do not establish it, so it is reported apart (result()["uncertain_terms"], with its coefficient,
-#: standard error and inclusion probability) and left out of the model, its refit and its simulation
-#: (identify.fitting.trust; docs/identification.md section 5). Only when the inclusion probabilities were
-#: computed (placements > 0: otherwise the selection is reported as made). Table 1 rig, 60 fresh sweeps at
-#: 1-5 % noise: the only spurious terms kept were 0.5-1.6 standard errors from zero (P(kept) 0.00-0.21);
-#: 80 more at 0.5-5 % noise, 20-60 s, and 39 wide-draw plain rigs: every true term beyond 5 standard errors.
-#: 2-20 Hz noise input, 40 fresh draws: 7 kept spurious even terms (q1^2, q2^2, q2^4) 0.9-3.1 standard
-#: errors from zero at P(kept) 0.50-0.92, which a rule that also asked P(kept) < 0.5 kept in the model.
-#: A kept term beyond it stays whatever its probability: the data carry it, the placements only disagree
-#: on the path (design rig beyond the jump, 2 % noise: the damping q1 at P(kept) 0.38 but -3.72 +- 0.39;
-#: without it the refit lost the input, zdd -0.10 for -1).
+#: A kept term within SIGNIFICANT_Z standard errors of zero is an uncertain term: the data do not establish
+#: it, so it leaves the model, its refit and its simulation, least significant first (least_significant),
+#: and is reported apart (result()["uncertain_terms"]; identify.fitting.trust, docs/identification.md
+#: section 5). Noise-input records (Table 1 rig): spurious even terms at 0.9-3.1 SE and P(kept) 0.50-0.92,
+#: which a bound that also asked P(kept) < 0.5 kept; fresh sweeps and plain rigs: every true term beyond 5
+#: SE. A term beyond it stays whatever its probability (design rig beyond the jump, 2 % noise: the damping
+#: q1 at P(kept) 0.38 but -3.72 +- 0.39; left out, the refit lost the input, zdd -0.10 for -1).
 SIGNIFICANT_Z = 3.0
 #: An inclusion probability below this marks a kept term (beyond SIGNIFICANT_Z) as unsettled, at or above
 #: it a term the selection left out (reports.text.unsettled_terms): the placements disagree with the fit.
@@ -360,12 +355,20 @@ def inclusion_probabilities(gram: BlockGram, held: np.ndarray, fit_and_select, n
     return counts / n
 
 
-def uncertain_supports(p_in: np.ndarray | None, supports: dict, coefs: dict, var: dict) -> dict:
-    """{equation index: (m,) the kept terms whose coefficient is within SIGNIFICANT_Z standard errors (var:
-    variances) of zero} (none without inclusion probabilities: the selection as made)."""
-    if p_in is None:
-        return {e: np.zeros_like(s) for e, s in supports.items()}
-    return {e: s & (coefs[e] ** 2 <= SIGNIFICANT_Z ** 2 * var[e]) for e, s in supports.items()}
+def least_significant(supports: dict, coefs: dict, var: dict) -> dict:
+    """{equation index: the kept term with the smallest |coefficient| / standard error (var: variances), for
+    the equations of two terms or more where it is within SIGNIFICANT_Z standard errors of zero}: one
+    backward-elimination step
+    (identify.fitting: each step refits and assesses the rest, so terms significant only together stay)."""
+    out = {}
+    for e, s in supports.items():
+        kept = np.flatnonzero(s)
+        if kept.size > 1:  # an equation keeps one term at least (a model of nothing simulates nothing)
+            z2 = coefs[e][kept] ** 2 / np.maximum(var[e][kept], np.finfo(float).tiny)
+            j = int(np.argmin(z2))
+            if z2[j] <= SIGNIFICANT_Z ** 2:
+                out[e] = int(kept[j])
+    return out
 
 
 def assess(gram: BlockGram, held: np.ndarray, supports: dict, bias_of=None, fit_and_select=None,

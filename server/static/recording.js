@@ -134,7 +134,8 @@ function modelSection(r, m) {
 // model.json states (uncertainty.term_rules; docs/identification.md, "Uncertain terms")
 function uncertainTerms(m) {
   const said = Object.entries(m.uncertain_terms || {}).flatMap(([eq, terms]) => Object.entries(terms).map(([t, u]) =>
-    `${esc(t)} (${esc(eq)}) ${num(u.coefficient)} ± ${num(u.standard_error, 2)}, P(kept) ${u.inclusion_probability.toFixed(2)}`));
+    `${esc(t)} (${esc(eq)}) ${num(u.coefficient)} ± ${num(u.standard_error, 2)}` +
+    (u.inclusion_probability == null ? "" : `, P(kept) ${u.inclusion_probability.toFixed(2)}`)));
   const rules = (m.uncertainty || {}).term_rules;
   const why = rules ? `within ${rules.significant_z} standard errors of zero` : "within a few standard errors of zero";
   return said.length ? `<p class="hint" id="rec-uncertain">uncertain terms, left out of the model (${esc(why)}): ${said.join("; ")}</p>` : "";

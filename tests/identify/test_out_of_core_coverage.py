@@ -19,8 +19,8 @@ pytestmark = pytest.mark.slow  # every test here (make check leaves them to make
 #: 0.51, -0.64 over 29 fresh records), so misses come in twos and threes: the per-term count this test
 #: used (one miss of 20) failed CI on an honest record (seed 4253729712: z -3.68, 3.07, 3.75; 29 other
 #: records had mean z^2 0.84 and max |z| 2.7). With honest standard errors a record misses with probability
-#: <= 5 x 0.27 % = 1.35 % whatever the correlation (Bonferroni), so MISSED_RECORDS of RECORDS fails an honest
-#: estimator with probability <= 1.5e-4.
+#: <= 5 x 0.27 % = 1.35 % whatever the correlation (Bonferroni), so more than MISSED_RECORDS of RECORDS
+#: miss with probability <= 1.5e-4.
 RECORDS, MISSED_RECORDS, Z_COVER = 8, 2, 3.0
 #: ... and on average: the mean z^2 over all terms x records is ~1 with honest standard errors (sd ~0.27 for
 #: 8 records of 5 correlated terms); over MEAN_Z2 it says they are too small by more than 1.5x overall.

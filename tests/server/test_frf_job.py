@@ -5,26 +5,18 @@ import pytest
 import json
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
-from identify.data.recording import Recording, write_csv
-from identify.simulation.simulate import equation_rows, simulate
+from identify.data.recording import write_csv
 from server.worker import FRF_FILE, run_job
-from sim.rig import RigParameters
+from sim.synth import noise_input_recording
 pytestmark = pytest.mark.slow  # every test here (make check leaves them to make test)
 
 
 def test_a_recording_that_is_not_a_sweep_is_identified_and_its_frf_says_why(tmp_path):
-    model, fs = RigParameters.paper_table1().model(), 1024.0
     seed = int(np.random.SeedSequence().entropy % 2**31)
     print(f"seed {seed}")
-    rng = np.random.default_rng(seed)
-    zdd = sosfiltfilt(butter(4, [2.0, 20.0], "bandpass", fs=fs, output="sos"), rng.standard_normal(int(60 * fs))) * 5
-    run = simulate(model, 1 / fs, [0.0, 0.0], zdd[:, None], state_scale=np.array([0.1, 0.01]))
-    mass = equation_rows(model, run.states, zdd) + zdd
     path = tmp_path / "random.csv"
-    write_csv(path, Recording(zdd + 0.005 * np.std(zdd) * rng.standard_normal(zdd.size),
-                              mass + 0.005 * np.std(mass) * rng.standard_normal(zdd.size), fs))
+    write_csv(path, noise_input_recording(seed))
     summary = run_job("identify", str(path), {}, str(tmp_path / "job"))
     assert "q2^3" in summary["terms"]["q1_dot"]
     frf = json.loads((tmp_path / "job" / FRF_FILE).read_text())
