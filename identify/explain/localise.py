@@ -87,16 +87,23 @@ def excitation_hz(u: np.ndarray, a: int, b: int, fs_hz: float, f_lo_hz: float) -
     """The input's dominant frequency (Hz) at rows [a, b) of u: the peak of the Hann-windowed, zero-padded
     spectrum of a stretch centred on them and at least PERIODS_FOR_FREQUENCY periods of f_lo long (the
     whole record when shorter). 0 for fewer than 3 samples."""
+    return excitation_peak(u, a, b, fs_hz, f_lo_hz)[0]
+
+
+def excitation_peak(u: np.ndarray, a: int, b: int, fs_hz: float, f_lo_hz: float) -> tuple[float, float]:
+    """excitation_hz's frequency and the height of its spectral peak (the transform's magnitude, in the
+    input's units x samples; (0, 0) for fewer than 3 samples): how strongly the input was driven there."""
     need = int(np.ceil(PERIODS_FOR_FREQUENCY * fs_hz / f_lo_hz)) if f_lo_hz > 0 else b - a
     mid, half = (a + b) // 2, max(b - a, need) // 2
     lo = max(0, min(mid - half, u.size - 2 * half))
     seg = u[lo:lo + 2 * half] if 2 * half <= u.size else u
     if seg.size < 3:
-        return 0.0
+        return 0.0, 0.0
     seg = seg - seg.mean()
     n = max(seg.size, FREQUENCY_PADDING * min(need, seg.size))
     spec = np.abs(np.fft.rfft(seg * np.hanning(seg.size), n))
-    return float(np.argmax(spec[1:]) + 1) * fs_hz / n
+    k = int(np.argmax(spec[1:])) + 1
+    return float(k * fs_hz / n), float(spec[k])
 
 
 def _nan_to_none(a: np.ndarray) -> list:

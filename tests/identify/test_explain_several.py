@@ -129,3 +129,23 @@ def test_cli_refuses_one_file_named_twice(tmp_path, capsys):
                        ([str(a), f"{a}[0:100]"], f"{a}[0:100]: the same recording as {a}")):
         assert main(["explain", *names]) == 2
         assert why in capsys.readouterr().err
+
+
+def test_a_window_at_rest_is_not_ranked_as_an_excitation_frequency():
+    """A down-sweep (20 -> 1 Hz, 30 s, 1 mm, 2048 Hz, 0.02 m/s^2 sensor noise, as the service's simulated rig
+    records) followed by 1.5 s at rest with a faint 82 Hz tone on both channels (the stray peak a rest window
+    of a service recording showed): the rest window's peak is far below MIN_PEAK_SHARE of the sweep's, so it is
+    not ranked and the record reads as one down-sweep (rho -1). Ranked, its 82 Hz made the rho of such a
+    recording -0.71 and, in one CI run, -0.46 (tests/server/test_campaign_explain.py)."""
+    from identify.chain.states import reconstruct_states
+    from identify.explain.effects.stiffness_drift import sweep_direction
+
+    sensor = dict(table_sensor=Accelerometer(noise_fraction=0, noise_ms2=0.02),
+                  mass_sensor=Accelerometer(noise_fraction=0, noise_ms2=0.02))
+    rec = run_sweep(RigParameters(), SineSweep(20.0, 1.0, 30.0, 1.0), 2048.0, 1.0, seed=3, **sensor).recording
+    n_rest = int(1.5 * rec.fs_hz)
+    rng = np.random.default_rng(3)
+    tone = 1e-3 * np.sin(2 * np.pi * 82.0 * np.arange(n_rest) / rec.fs_hz)
+    rest = [tone + 0.02 * rng.standard_normal(n_rest) for _ in range(2)]
+    down = Recording(np.concatenate([rec.input, rest[0]]), np.concatenate([rec.output, rest[1]]), rec.fs_hz)
+    assert sweep_direction(reconstruct_states(down)) == pytest.approx(-1.0)
