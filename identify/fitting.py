@@ -159,8 +159,8 @@ def fit_sources(ident, sources: list, timings: dict) -> list:
     t0 = time.perf_counter()
     # the reported coefficients are the kept terms refit on all rows, less the chain's bias; a kept term
     # within SIGNIFICANT_Z standard errors of zero is reported apart (identify.trust.uncertainty,
-    # docs/identification.md section 5). The selection-time fit (training blocks only) of the terms left is what the held-out
-    # validation scores.
+    # docs/identification.md section 5). The selection-time fit (training blocks only) of the terms left is
+    # what the held-out validation scores.
     reported, ident.standard_errors_, ident.uncertainty_ = trust(ident, sources, blocks, gram, held, n_eff)
     ident.training_model_ = SparseModel(_named(ident.selections_, lib.names), STATES, (input_name,))
     timings["refit_uncertainty"] = time.perf_counter() - t0
@@ -230,8 +230,8 @@ def trust(ident, sources: list, blocks: list, gram: BlockGram, held, n_eff: floa
     chain bias from the sources (closed form where every source can give it, SIMEX in core otherwise).
     Kept terms within unc.SIGNIFICANT_Z standard errors of zero leave the selection (its support and
     training fit) and the reported model one at a time (_leave_out_uncertain); ident.uncertain_terms_ lists
-    them with the all-rows coefficient, standard error and probability they had. Not with a free-run budget: its placements rerun the rule, not the budget's
-    choice (reports.text.budget_dropped)."""
+    them with the all-rows coefficient, standard error and probability they had. Not with a free-run budget:
+    its placements rerun the rule, not the budget's choice (reports.text.budget_dropped)."""
     names, eqs = ident.library_.names, list(ident.selections_)
     sups = {e: s.support for e, s in enumerate(ident.selections_.values())}
     bias_of = None
@@ -279,12 +279,11 @@ def _leave_out_uncertain(ident, gram: BlockGram, held, sups: dict, assessed: tup
     coefs, var, info = assessed
     names, eqs = ident.library_.names, list(ident.selections_)
     ident.uncertain_terms_ = {eq: {} for eq in eqs}
-    p_in = info["inclusion"]
-    train = gram.equations(~held)
-    while ident.budget_ is None:
-        drop = unc.least_significant(sups, coefs, var)
-        if not drop:
-            break
+    if ident.budget_ is not None:
+        return coefs, var, info
+    p_in, train = info["inclusion"], None
+    while drop := unc.least_significant(sups, coefs, var):
+        train = gram.equations(~held) if train is None else train  # summed only when a term leaves
         for e, j in drop.items():
             ident.uncertain_terms_[eqs[e]][names[j]] = {
                 "coefficient": float(coefs[e][j]), "standard_error": float(np.sqrt(var[e][j])),

@@ -101,14 +101,12 @@ def noise_input_recording(seed: int, rig: RigParameters | None = None, duration_
     random-excitation test records (tests/identify/test_band.py, test_uncertain_terms.py, the FRF job)."""
     from scipy.signal import butter, sosfiltfilt
 
-    from identify.simulation.simulate import equation_rows
-
     model = (rig or RigParameters.paper_table1()).model()
     rng = np.random.default_rng(seed)
     sos = butter(4, list(band_hz), "bandpass", fs=fs_hz, output="sos")
     zdd = sosfiltfilt(sos, rng.standard_normal(int(duration_s * fs_hz))) * rms_scale
     run = simulate(model, 1 / fs_hz, [0.0, 0.0], zdd[:, None], state_scale=np.array([0.1, 0.01]))
-    mass = equation_rows(model, run.states, zdd) + zdd
+    mass = _mass_acc(model, run.states, zdd[:, None])
     return Recording(zdd + noise * np.std(zdd) * rng.standard_normal(zdd.size),
                      mass + noise * np.std(mass) * rng.standard_normal(zdd.size), fs_hz)
 

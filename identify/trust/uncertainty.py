@@ -407,9 +407,10 @@ def name_info(info: dict, eqs, names, supports: dict) -> dict:
                              "method": bias["method"], "replicates": bias["replicates"],
                              **{eqs[e]: {names[j]: float(b[j]) for j in np.flatnonzero(supports[e])}
                                 for e, b in bias["bias"].items()}}
+    # the bounds the result's terms were judged by (reports and the dashboard say them from here): the
+    # significance bound holds with or without inclusion probabilities
+    out["term_rules"] = {"significant_z": SIGNIFICANT_Z, "min_inclusion_probability": MIN_INCLUSION_PROBABILITY}
     if p_in is not None:  # every kept term, and every term some placement kept
-        # the bounds the result's terms were judged by (reports and the dashboard say them from here)
-        out["term_rules"] = {"significant_z": SIGNIFICANT_Z, "min_inclusion_probability": MIN_INCLUSION_PROBABILITY}
         out["inclusion_probability"] = {eq: {n: float(p_in[e, j]) for j, n in enumerate(names)
                                              if p_in[e, j] > 0 or supports[e][j]} for e, eq in enumerate(eqs)}
     return out

@@ -89,4 +89,7 @@ def test_a_kept_term_within_a_few_standard_errors_is_left_out_whatever_its_proba
     bare = SparseIdentifier(placements=0).fit(rec).result()
     assert set(bare["uncertain_terms"]["q1_dot"]) == {"q1^2", "q2^2"} and set(bare["model"]["q1_dot"]) == set(TRUTH)
     assert all(u["inclusion_probability"] is None for u in bare["uncertain_terms"]["q1_dot"].values())
-    assert "q2^2 (q1_dot) " in summary(bare, "noise.csv")  # said without a probability
+    assert bare["uncertainty"]["term_rules"]["significant_z"] == unc.SIGNIFICANT_Z  # the bound stated all the same
+    said = summary(bare, "noise.csv")
+    assert f"(within {unc.SIGNIFICANT_Z:g} standard errors of zero)" in said and "q2^2 (q1_dot) " in said
+    assert "P(kept)" not in said.split("uncertain terms")[1].split("\n")[0]  # said without a probability
