@@ -204,8 +204,8 @@ def budget_dropped(result: dict) -> list[tuple[str, float]]:
 def unsettled_terms(result: dict) -> list[tuple[str, str, bool, float]]:
     """(equation, term, kept, inclusion probability) of every term the selection decided against most of
     its held-out placements: kept with P(kept) < MIN_INCLUSION_PROBABILITY (0.5; kept since its coefficient is
-    beyond SIGNIFICANT_Z standard errors, else it is an uncertain term, left out), or left out with P(kept) >= it (not a q1_dot term
-    a free-run budget left out of the rule's choice: budget_dropped; not an uncertain term)."""
+    beyond SIGNIFICANT_Z standard errors, else it is an uncertain term, left out), or left out with P(kept) >= it
+    (not a q1_dot term a free-run budget left out of the rule's choice: budget_dropped; not an uncertain term)."""
     out, dropped, p_min = [], _dropped_by_budget(result), _min_inclusion(result)
     uncertain = result.get("uncertain_terms") or {}
     for eq, probs in (result.get("inclusion_probability") or {}).items():

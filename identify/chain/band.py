@@ -14,10 +14,11 @@ EXCITATION_MARGIN_DB = 8.0  # over the noise level: the old rule's 10 dB over a 
 MAX_GAP_BINS = 8
 #: A fragment at the bottom of a band (excited bins cut off from the rest by a gap) counts only when it
 #: holds at least this share of the band's power. The bin just above the skipped lowest ones carries the
-#: Welch detrend's and window's leakage, 5e-8 to 8e-7 of the power of a 2-20 Hz noise input: the input's
-#: crosses the threshold on every draw, the response's on 11 of 201 (the band's bottom follows the higher of
-#: the two): merged into the band it moved f_lo from ~1.1 Hz to 0.2 Hz, cost the record 15 s of live-edge guard at each end and integrated noise below 1 Hz into the
-#: displacement (the cubic term was lost; tests/identify/test_band.py). 1e-4 (40 dB under the band) keeps
+#: Welch detrend's and window's leakage, 5e-8 to 8e-7 of the power of a 2-20 Hz noise input: over 201 fresh
+#: draws the input's crossed the threshold within the gap rule's reach in 183, the response's in 9 (the
+#: band's bottom follows the higher of the two): merged into the band it moved f_lo from ~1.1 Hz to 0.2 Hz, cost the record 15 s of live-edge
+#: guard at each end and integrated noise below 1 Hz into the displacement (the cubic term was lost;
+#: tests/identify/test_band.py). 1e-4 (40 dB under the band) keeps
 #: every line of a multisine of up to 10^4 lines and a sweep's lowest bin (~1 % of its power). The top
 #: edge is left as found: it is widened for harmonics anyway and costs no guard nor integrated noise.
 EDGE_FRAGMENT_SHARE = 1e-4
