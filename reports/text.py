@@ -145,9 +145,9 @@ def term_rules(result: dict) -> dict:
     rules = (result.get("uncertainty") or {}).get("term_rules")
     if rules:
         return rules
-    from identify.trust.uncertainty import MIN_INCLUSION_PROBABILITY, SIGNIFICANT_Z
+    from identify.trust import uncertainty
 
-    return {"significant_z": SIGNIFICANT_Z, "min_inclusion_probability": MIN_INCLUSION_PROBABILITY}
+    return uncertainty.term_rules()
 
 
 def _min_inclusion(result: dict) -> float:

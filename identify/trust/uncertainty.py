@@ -355,11 +355,14 @@ def inclusion_probabilities(gram: BlockGram, held: np.ndarray, fit_and_select, n
     return counts / n
 
 
+def term_rules() -> dict:
+    """The bounds a result's terms are judged by, as results state them (result["uncertainty"]["term_rules"])."""
+    return {"significant_z": SIGNIFICANT_Z, "min_inclusion_probability": MIN_INCLUSION_PROBABILITY}
+
+
 def least_significant(supports: dict, coefs: dict, var: dict) -> dict:
-    """{equation index: the kept term with the smallest |coefficient| / standard error (var: variances), for
-    the equations of two terms or more where it is within SIGNIFICANT_Z standard errors of zero}: one
-    backward-elimination step
-    (identify.fitting: each step refits and assesses the rest, so terms significant only together stay)."""
+    """{equation index: its least significant kept term (var: variances), where it is within SIGNIFICANT_Z
+    standard errors of zero and the equation keeps two terms or more}: one backward-elimination step."""
     out = {}
     for e, s in supports.items():
         kept = np.flatnonzero(s)
@@ -407,9 +410,7 @@ def name_info(info: dict, eqs, names, supports: dict) -> dict:
                              "method": bias["method"], "replicates": bias["replicates"],
                              **{eqs[e]: {names[j]: float(b[j]) for j in np.flatnonzero(supports[e])}
                                 for e, b in bias["bias"].items()}}
-    # the bounds the result's terms were judged by (reports and the dashboard say them from here): the
-    # significance bound holds with or without inclusion probabilities
-    out["term_rules"] = {"significant_z": SIGNIFICANT_Z, "min_inclusion_probability": MIN_INCLUSION_PROBABILITY}
+    out["term_rules"] = term_rules()  # with or without inclusion probabilities: reports quote it
     if p_in is not None:  # every kept term, and every term some placement kept
         out["inclusion_probability"] = {eq: {n: float(p_in[e, j]) for j, n in enumerate(names)
                                              if p_in[e, j] > 0 or supports[e][j]} for e, eq in enumerate(eqs)}
