@@ -12,8 +12,9 @@ Categories (CATEGORIES): "none" (the textbook Duffing rig), "single" (one catalo
 The rig: mass 0.3-1.5 kg, natural frequency 3-9 Hz, damping ratio 2-6 %, cubic stiffness such that
 k3 Q^2 / k = 0.2-1 at a target amplitude Q of 4-11 mm; the sweep covers (0.3-0.6) fn to (2.5-4) fn
 (at most 40 Hz) in 30-60 s with 2 s of settling; 1000 or 2048 Hz; sensor noise 0.2-3 % of each
-channel's std, drawn per channel and then lowered, if need be, until each effect's expected gap stands
-DETECTABLE = 4x above the noise floor (GAP_PER_SIZE). The table amplitude is set from a pilot run of the
+channel's std, drawn per channel and then lowered, if need be, until each effect's own gap, measured by
+running it alone (sim.detectability), stands DETECTABLE x the noise floor; a scenario whose effect cannot,
+even at MIN_NOISE, is redrawn. The table amplitude is set from a pilot run of the
 plain rig (no noise, at the scenario's sample rate: near the hardening rig's jump the response depends on
 the last digits of the integration, so a pilot at another rate can peak elsewhere) so its response peaks
 near the target amplitude.
@@ -51,6 +52,8 @@ import numpy as np
 
 from protocol.sweep import SineSweep
 
+from . import detectability
+from .detectability import DETECTABLE, MIN_NOISE  # noqa: F401 (DETECTABLE: part of this module's contract)
 from . import wide as wide_draws
 from .rig import RigParameters
 from .sensors import Accelerometer
@@ -81,22 +84,9 @@ RELATIVE_FORCE = {
     "quadratic_stiffness": (0.03, 0.08), "quadratic_damping": (0.02, 0.06), "cubic_damping": (0.02, 0.06),
     "asymmetric_stiffness": (0.04, 0.10), "hysteresis": (0.03, 0.08), "free_play": (0.02, 0.06),
 }
-#: Detectability. The discrepancy workflow's held-out gap (NRMSE of q'') per unit of relative size, the
-#: smallest seen per effect over the 90 cases of explain_robustness (seed 12, before issue 12's explain):
-#: the baseline refit absorbs much of a stiffness-like effect (0.17) and little of Coulomb friction (2.2).
-#: The noise floor of that gap is at most NOISE_FLOOR_PER_NOISE x the noise fraction (0.2-0.43 seen). A
-#: scenario's noise is lowered, if need be, until each effect's expected gap is DETECTABLE x that floor, so
-#: the gap can be halved above the floor ("none" is right only within ~2x the floor). bias_drift is absent:
-#: the gap does not see it at all (0.8-1.0 of the floor); a trend test on the raw channels must.
-GAP_PER_SIZE = {
-    "coulomb_friction": 2.2, "displacement_dependent_damping": 0.3, "quadratic_stiffness": 0.17,
-    "quadratic_damping": 0.38, "cubic_damping": 0.67, "asymmetric_stiffness": 0.18, "end_stop": 0.09,
-    "stiffness_drift": 0.15, "hysteresis": 0.47, "second_mode": 0.6, "free_play": 1.6,
-    "mass_acc_gain": 0.29, "table_acc_gain": 0.34, "channel_delay": 0.5,
-}
-NOISE_FLOOR_PER_NOISE = 0.43
-DETECTABLE = 4.0
-MIN_NOISE, MAX_NOISE = 0.002, 0.03
+#: Largest sensor noise a narrow draw starts from (fraction of each channel's std); the quietest is
+#: sim.detectability.MIN_NOISE, where every effect's own gap is measured.
+MAX_NOISE = 0.03
 #: Largest response allowed without end stops as the effect: under the rig's 17.5 mm travel with margin.
 MAX_RESPONSE_MM = 14.0
 #: Smallest response allowed, over the plain rig's: an effect that kills the resonance is not "a few %".
@@ -151,17 +141,20 @@ class Scenario:
 
 
 def make_scenario(rng: np.random.Generator, category: str, effects: list[str] | None = None, *,
-                  duration_s: float | None = None, fs_hz: float | None = None, wide: bool = False) -> Scenario:
+                  duration_s: float | None = None, fs_hz: float | None = None, wide: bool = False,
+                  detectable: bool = True) -> Scenario:
     """A random scenario of `category` (CATEGORIES); `effects` fixes the truth names instead of drawing
     them (e.g. ["end_stop"] for "single"); `duration_s` and `fs_hz` fix the sweep's length and the sample
-    rate (tests use short records); `wide` draws rig, sweep and recording from sim/wide.py's distributions.
+    rate (tests use short records); `wide` draws rig, sweep and recording from sim/wide.py's distributions;
+    `detectable=False` skips the measured detectability (sim.detectability: noise as drawn, no redraw for an
+    effect the plain model hides), to reproduce a case drawn before it.
     Redraws until the physics checks (module docstring)."""
     if category not in CATEGORIES:
         raise ValueError(f"unknown category {category!r}; known: {CATEGORIES}")
     for _ in range(MAX_TRIES):
         names = list(effects) if effects is not None else _draw_names(rng, category)
         try:
-            sc = _draw(rng, category, names, duration_s, fs_hz, wide)
+            sc = _draw(rng, category, names, duration_s, fs_hz, wide, detectable)
         except ValueError:  # the pilot or the physics diverged: an unlucky draw
             continue
         if sc is not None:
@@ -217,7 +210,7 @@ def _pilot(rig, sweep, fs, q_target):
     return sweep, q, v, rig.stiffness_n_per_m * q + rig.cubic_stiffness_n_per_m3 * q**3
 
 
-def _draw(rng, category, names, duration_s=None, fs_hz=None, wide=False) -> Scenario | None:
+def _draw(rng, category, names, duration_s=None, fs_hz=None, wide=False, detectable=True) -> Scenario | None:
     rig, sweep, fs, (table, mass), q_target = (wide_draws.draw_base if wide else _base)(rng, duration_s, fs_hz)
     sweep, Q, V, Fs = _pilot(rig, sweep, fs, q_target)
     if wide and Q >= MAX_RESPONSE_MM * 1e-3:
@@ -228,7 +221,9 @@ def _draw(rng, category, names, duration_s=None, fs_hz=None, wide=False) -> Scen
     def rho(name):
         return rng.uniform(*RELATIVE_FORCE[name])
 
+    own = {}  # per effect what it changes: rig fields and sensor faults (sim.detectability runs each alone)
     for name in names:
+        before = (dict(fields_), dataclasses.asdict(table), dataclasses.asdict(mass))
         r = rho(name) if name in RELATIVE_FORCE else None
         if name == "coulomb_friction":
             effects[name] = r * Fs
@@ -292,6 +287,12 @@ def _draw(rng, category, names, duration_s=None, fs_hz=None, wide=False) -> Scen
             raise ValueError(f"unknown effect {name!r}")
         if name in effects:
             mags[name] = {"value": effects[name], "relative_force": r}
+        own[name] = detectability.Changes(
+            rig={**{k: v for k, v in fields_.items() if k not in before[0]},
+                 **({"effects": {name: effects[name]}} if name in effects else {})},
+            table={k: v for k, v in dataclasses.asdict(table).items() if before[1][k] != v},
+            mass={k: v for k, v in dataclasses.asdict(mass).items() if before[2][k] != v})
+    plain_rig = rig
     rig = dataclasses.replace(rig, effects=effects, **fields_)
     sc = Scenario(category, list(names), rig, sweep, fs, table, mass, magnitudes=mags,
                   pilot={"Q_m": Q, "V_ms": V, "Fs_n": Fs, "fn_hz": rig.natural_frequency_hz},
@@ -304,16 +305,9 @@ def _draw(rng, category, names, duration_s=None, fs_hz=None, wide=False) -> Scen
         q2 = check.states[:, 1]
         depth = max(q2.max() - upper, -q2.min() - lower, 0.0)
         mags["end_stop"]["relative_force"] = rig.contact_stiffness_n_per_m * depth / Fs  # at the deepest contact
-        return _detectable(sc) if contact >= 10 else None
-    q = check.truth["max_abs_q_m"]
-    return _detectable(sc) if contact == 0 and MIN_RESPONSE * Q < q < MAX_RESPONSE_MM * 1e-3 else None
-
-
-def _detectable(sc: Scenario) -> Scenario:
-    """Lower the sensor noise until every effect's expected gap is DETECTABLE x its floor (GAP_PER_SIZE)."""
-    for name in sc.truth_effects:
-        if name in GAP_PER_SIZE:
-            cap = GAP_PER_SIZE[name] * sc.magnitudes[name]["relative_force"] / (DETECTABLE * NOISE_FLOOR_PER_NOISE)
-            for sensor in (sc.table_sensor, sc.mass_sensor):
-                sensor.noise_fraction = min(sensor.noise_fraction, max(cap, MIN_NOISE))
-    return sc
+        sane = contact >= 10
+    else:
+        sane = contact == 0 and MIN_RESPONSE * Q < check.truth["max_abs_q_m"] < MAX_RESPONSE_MM * 1e-3
+    if not sane:
+        return None
+    return detectability.quiet_enough(sc, plain_rig, own, rng) if detectable else sc

@@ -109,19 +109,8 @@ class DiscrepancyAnalysis(Rounds):
         a down sweep, sweeps at several amplitudes: identify.explain.several), through the same rounds: each
         recording its own chain, states, held-out blocks and shooting segments, the errors pooled, one
         set of coefficients (identify.explain.structure.Fitter; drift time per recording)."""
-        recs = as_recordings(recordings)
         catalog = default_catalog() if self.catalog is None else self.catalog
-        parts = []
-        for rec in recs:
-            sig = reconstruct_states(rec, self.band_hz)
-            edges, held = holdout_blocks(sig, self.holdout_fraction)
-            if not held.any():
-                raise IdentificationError("the discrepancy workflow needs held-out samples (holdout fraction > 0)")
-            parts.append((rec, sig, edges, held))
-        fitter = Fitter(parts)
-        self.layout_, self.states_, self.fitter_ = fitter.layout, fitter.parts[0].sig, fitter
-        self.recordings_ = recs
-        self.heldout_rows_ = fitter.rows_held
+        fitter = self._fitter(recordings)
         cur, err = self._baseline(fitter)
         cur, err, effects = self._explain(fitter, cur, err, catalog)
         self._answer(cur, err, effects)
@@ -140,6 +129,29 @@ class DiscrepancyAnalysis(Rounds):
         self.pair_p_value_ = effects[0].get("p_beats_runner_up") if effects else None
         self._validate(fitter, cur, err, effects)
         return self
+
+    @one_blas_thread
+    def baseline_gap(self, recordings: Recording | list[Recording]) -> dict:
+        """The baseline's held-out gap and the noise floor, nothing explained: where the rounds would start.
+        sim.detectability measures with it how much of an effect a plain model leaves visible."""
+        self._baseline(self._fitter(recordings))
+        return {"gap": self.gap_before_, "noise_floor": self.noise_floor_}
+
+    def _fitter(self, recordings) -> Fitter:
+        """Each recording's chain, states and held-out blocks, in one Fitter."""
+        recs = as_recordings(recordings)
+        parts = []
+        for rec in recs:
+            sig = reconstruct_states(rec, self.band_hz)
+            edges, held = holdout_blocks(sig, self.holdout_fraction)
+            if not held.any():
+                raise IdentificationError("the discrepancy workflow needs held-out samples (holdout fraction > 0)")
+            parts.append((rec, sig, edges, held))
+        fitter = Fitter(parts)
+        self.layout_, self.states_, self.fitter_ = fitter.layout, fitter.parts[0].sig, fitter
+        self.recordings_ = recs
+        self.heldout_rows_ = fitter.rows_held
+        return fitter
 
     def _baseline(self, fitter):
         """The baseline structure (refit on the shooting error when it is the textbook one), its segments,
