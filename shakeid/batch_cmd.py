@@ -27,6 +27,7 @@ from daq.formats import NAMES as FORMAT_NAMES
 from identify.errors import ShakeidError
 
 from .argtypes import int_in, positive
+from .files import read_recording
 
 EXIT_OK, EXIT_MODEL_FAILED, EXIT_REFUSED = 0, 1, 2
 
@@ -53,7 +54,7 @@ def identify_file(args: argparse.Namespace, path: str) -> dict:
     one.file = path
     try:
         ident = args.make_identifier(one)
-        rec = args.read_recording(one)
+        rec = read_recording(one)
         data = check_identifiable(rec, path, args.accept_faulty)
         try:
             ident.fit(rec)
@@ -190,10 +191,11 @@ def _merged_index(path: Path, doc: dict) -> tuple[dict, int]:
     return index, len(earlier["models"]) + len(earlier["failed"])
 
 
-def add_batch_parser(sub, add_identify_options, make_identifier, read_recording) -> None:
-    """The `batch` subcommand. The CLI hands over how it adds identify's options, builds the identifier
-    from them and reads a recording (shakeid/cli.py's), so this module never imports the CLI (no import
-    circle); the two functions travel to the workers with the parsed arguments."""
+def add_batch_parser(sub, add_identify_options, make_identifier) -> None:
+    """The `batch` subcommand. The CLI hands over how it adds identify's options and builds the identifier
+    from them (shakeid/cli.py's), so this module never imports the CLI (no import circle); the function
+    travels to the workers with the parsed arguments. Recordings are read as `shakeid identify` reads them
+    (shakeid.files.read_recording)."""
     q = sub.add_parser("batch", help="identify each of many recordings on its own, in a local process pool or "
                                      "on a Dask cluster (--scheduler)")
     q.add_argument("files", nargs="+", metavar="FILE", help=f"recordings ({FORMAT_NAMES})")
@@ -210,4 +212,4 @@ def add_batch_parser(sub, add_identify_options, make_identifier, read_recording)
     q.add_argument("--accept-faulty", action="store_true",
                    help="identify recordings that are not complete or whose quality flags make them unusable")
     add_identify_options(q)
-    q.set_defaults(func=cmd_batch, make_identifier=make_identifier, read_recording=read_recording)
+    q.set_defaults(func=cmd_batch, make_identifier=make_identifier)

@@ -52,7 +52,7 @@ def cmd_identify(args) -> int:
     if len(args.files) > 1:
         from .joint_cmd import cmd_identify_joint
 
-        return cmd_identify_joint(args, _identifier, read_recording)
+        return cmd_identify_joint(args, _identifier)
     args.file, args.samples = file_and_samples(args.files[0], getattr(args, "samples", None))
     ident = _identifier(args)  # option errors first, before any file is read
     from .ooc_cmd import identify_out_of_core, wants_out_of_core
@@ -182,7 +182,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--accept-faulty", action="store_true",
                    help="identify a recording that is not complete or whose quality flags make it unusable")
     q.set_defaults(func=cmd_identify)
-    add_batch_parser(sub, _add_identify_options, _identifier, read_recording)
+    add_batch_parser(sub, _add_identify_options, _identifier)
     add_explain_parser(sub)
     add_lab_parsers(sub)
     add_campaign_parser(sub)

@@ -15,6 +15,7 @@ import sys
 from identify.errors import ShakeidError
 
 from .argtypes import file_and_samples
+from .files import read_recording
 
 
 def _refuse_twice(names: list, cuts: list) -> None:
@@ -32,8 +33,9 @@ def _refuse_twice(names: list, cuts: list) -> None:
         seen.setdefault(os.path.realpath(path), []).append((name, rows))
 
 
-def cmd_identify_joint(args, make_identifier, read) -> int:
-    """`args.files` (two or more); make_identifier(args), read(args) as the single-file command's."""
+def cmd_identify_joint(args, make_identifier) -> int:
+    """`args.files` (two or more); make_identifier(args) as the single-file command's, each file read as it
+    reads one (shakeid.files.read_recording)."""
     from identify.data.quality import check_identifiable
 
     if args.report:
@@ -46,8 +48,8 @@ def cmd_identify_joint(args, make_identifier, read) -> int:
     ident = make_identifier(args)  # option errors first, before any file is read
     recs, quality = [], []
     for path, (file, samples) in zip(args.files, cuts):
-        args.file, args.samples = file, samples  # what read() reads: FILE[START:STOP] gives each its own rows
-        rec = read(args)
+        args.file, args.samples = file, samples  # what read_recording reads: FILE[START:STOP] gives each its rows
+        rec = read_recording(args)
         quality.append(check_identifiable(rec, path, args.accept_faulty))
         rec.source = path
         recs.append(rec)
