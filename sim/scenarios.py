@@ -53,7 +53,7 @@ import numpy as np
 from protocol.sweep import SineSweep
 
 from . import detectability
-from .detectability import DETECTABLE, MIN_NOISE  # noqa: F401 (DETECTABLE: part of this module's contract)
+from .detectability import MIN_NOISE
 from . import wide as wide_draws
 from .rig import RigParameters
 from .sensors import Accelerometer
