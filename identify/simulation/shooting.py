@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model import SparseModel
-from .simulate import choose_substeps, fine_grid_input, simulate
+from .simulate import choose_substeps, equation_rows, fine_grid_input, simulate
 
 #: Segment length in periods of the (linear) resonance.
 SEGMENT_PERIODS = 4.0
@@ -101,7 +101,7 @@ class ShootingData:
             if res.diverged:
                 bad.append(i)
                 continue
-            out[a:b] = (model.rhs(res.states, self.inputs[a:b])[:, 0] if self.gap == "q1_dot"
+            out[a:b] = (equation_rows(model, res.states, self.inputs[a:b], 0) if self.gap == "q1_dot"
                         else res.states[:, 1])
         if self.lowpass is not None:
             ok = np.isfinite(out)
@@ -135,7 +135,7 @@ class ShootingData:
 
         def mean_rhs(shift):
             x[:, 1] = self.states[rows, 1] + shift[seg_of_row]
-            return np.add.reduceat(model.rhs(x, u)[:, 0], cuts) / length
+            return np.add.reduceat(equation_rows(model, x, u, 0), cuts) / length
 
         for _ in range(2):  # Newton on all segments at once (each segment's own offset)
             f0 = mean_rhs(d) - target
