@@ -29,6 +29,9 @@ from ..simulation.simulate import simulate
 GAP_SIGNAL = {"base": "q1_dot", "force": "q2"}
 #: An end stop's asymmetry term and the symmetric term it follows on a one-sided stop: on the stop's
 #: side s, f + s sign(q2) f = 2 f there and 0 on the other side.
+#: Band-limited library columns kept between equation fits (Fitter.band_limited_columns): the baseline's and
+#: the round's terms are the same for every candidate, each a band operation over the whole record.
+BAND_LIMITED_CACHE = 32
 ONE_SIDED = {"sign(q2)*stop(q2)": "stop(q2)", "q1*sign(q2)*contact(q2)": "q1*contact(q2)"}
 
 
@@ -136,6 +139,7 @@ class Fitter:
         self.rows_held = np.repeat(self.held, np.diff(self.edges))
         self._z: dict = {}
         self._data: dict = {}
+        self._columns: dict = {}  # band_limited_columns' columns, insertion ordered (oldest evicted)
         self.starts = self.stops = self.seg_held = None
 
     # -- signals ----------------------------------------------------------------------------------
@@ -217,14 +221,37 @@ class Fitter:
         starting at its top frequency) rang through the band (with the true coefficients: a band-limited
         residual of 10 (m/s^2)^2 over the first eighth of a 20-1 Hz down-sweep, 2e-5 built whole). The
         hysteresis state, integrated over the valid rows from z = 0, is 0 before them and held after."""
-        n, v = part.rec.n_samples, sig.valid
-        cols = [sig.q1, sig.q2]
-        if st.hyst is not None:
-            z = self.z_state(sig, st.hyst)
-            cols.append(np.concatenate([np.zeros(v.start), z, np.full(n - v.stop, z[-1] if z.size else 0.0)]))
-        ins = [sig.input] + ([np.arange(n) / max(n - 1, 1) - 0.5] if any("tau" in t for t in st.terms) else [])
-        A = lib.evaluate(np.column_stack(cols), np.column_stack(ins)) @ T
-        return np.column_stack([spectral_op(c, sig.fs_hz, sig.band_hz, 0, sig.taper_n)[v] for c in A.T])
+        # only the recording's own signals are kept (a fault candidate's corrected ones are new every trial)
+        keep = sig is part.sig
+        keys = [self._column_key(t, st, part) for t in lib.terms]
+        missing = [j for j, k in enumerate(keys) if not keep or k not in self._columns]
+        fresh = {}
+        if missing:
+            n, v = part.rec.n_samples, sig.valid
+            cols = [sig.q1, sig.q2]
+            if st.hyst is not None:
+                z = self.z_state(sig, st.hyst)
+                cols.append(np.concatenate([np.zeros(v.start), z, np.full(n - v.stop, z[-1] if z.size else 0.0)]))
+            drift = any("tau" in t for t in st.terms)
+            ins = [sig.input] + ([np.arange(n) / max(n - 1, 1) - 0.5] if drift else [])
+            A = lib.subset(missing).evaluate(np.column_stack(cols), np.column_stack(ins))
+            for j, c in zip(missing, A.T):
+                fresh[j] = spectral_op(c, sig.fs_hz, sig.band_hz, 0, sig.taper_n)[v]
+        out = np.column_stack([fresh[j] if j in fresh else self._columns[k] for j, k in enumerate(keys)]) @ T
+        if keep:
+            self._columns.update((keys[j], c) for j, c in fresh.items())
+            while len(self._columns) > BAND_LIMITED_CACHE:
+                self._columns.pop(next(iter(self._columns)))  # the oldest first
+        return out
+
+    @staticmethod
+    def _column_key(term, st: Structure, part: Part) -> tuple:
+        """What a band-limited column of the recording's own signals depends on: the recording, the term,
+        the Bouc-Wen pair if it reads z, the travel if it has a stop or contact."""
+        features = [f for f, _ in term.factors]
+        reads_z = any(f.strip("|") == "z" or f.endswith("(z)") for f in features)
+        stop = any(f.startswith(("stop(", "contact(")) for f in features)
+        return (part.offset, term.name, st.hyst if reads_z else None, st.travel if stop else None)
 
     @staticmethod
     def tie_matrix(st: Structure, names) -> np.ndarray:
