@@ -30,7 +30,7 @@ of catalog: an absorber of 2-6 % of the mass tuned to 1.3-2.2 fn (damping ratio 
 linear spring with k g = rho Fs (g <= 0.3 Q and g <= Z/2: with g above the table amplitude Z the mass
 floats and the spring never engages). `magnitudes[name]["relative_force"]` is rho for forces; for sensor
 faults the relative size of the error: |gain - 1|, the phase 2 pi fn delay at resonance, the bias ramp
-over the peak mass acceleration.
+over the peak mass acceleration. Each effect's draw is one function in sim/effect_draws.py (DRAWS).
 
 A drawn scenario is checked by running its physics once (no noise): it must not diverge, stay below
 MAX_RESPONSE_MM, reach at least MIN_RESPONSE of the plain rig's peak, and touch the end stops only if end
@@ -54,6 +54,7 @@ from protocol.sweep import SineSweep
 
 from . import detectability
 from .detectability import MIN_NOISE
+from .effect_draws import DRAWS, Draw
 from . import wide as wide_draws
 from .rig import RigParameters
 from .sensors import Accelerometer
@@ -151,6 +152,9 @@ def make_scenario(rng: np.random.Generator, category: str, effects: list[str] | 
     Redraws until the physics checks (module docstring)."""
     if category not in CATEGORIES:
         raise ValueError(f"unknown category {category!r}; known: {CATEGORIES}")
+    unknown = [n for n in (effects or []) if n not in DRAWS]
+    if unknown:
+        raise ValueError(f"unknown effect(s) {unknown}; known: {sorted(DRAWS)}")
     for _ in range(MAX_TRIES):
         names = list(effects) if effects is not None else _draw_names(rng, category)
         try:
@@ -211,103 +215,47 @@ def _pilot(rig, sweep, fs, q_target):
 
 
 def _draw(rng, category, names, duration_s=None, fs_hz=None, wide=False, detectable=True) -> Scenario | None:
+    """One draw: the plain rig, sweep and sensors, the pilot, each effect (sim.effect_draws), the physics
+    check, and the measured detectability; None for a draw make_scenario must redo."""
     rig, sweep, fs, (table, mass), q_target = (wide_draws.draw_base if wide else _base)(rng, duration_s, fs_hz)
     sweep, Q, V, Fs = _pilot(rig, sweep, fs, q_target)
     if wide and Q >= MAX_RESPONSE_MM * 1e-3:
         return None  # the plain rig alone runs too far (wide draws: the amplitude is not rescaled)
-    k, m = rig.stiffness_n_per_m, rig.mass_kg
-    fields_, effects, mags = {}, {}, {}
-
-    def rho(name):
-        return rng.uniform(*RELATIVE_FORCE[name])
-
-    own = {}  # per effect what it changes: rig fields and sensor faults (sim.detectability runs each alone)
-    for name in names:
-        before = (dict(fields_), dataclasses.asdict(table), dataclasses.asdict(mass))
-        r = rho(name) if name in RELATIVE_FORCE else None
-        if name == "coulomb_friction":
-            effects[name] = r * Fs
-        elif name == "displacement_dependent_damping":
-            effects[name] = r * Fs / (V * Q**2)
-        elif name == "quadratic_stiffness":
-            effects[name] = rng.choice([-1, 1]) * r * Fs / Q**2
-        elif name == "quadratic_damping":
-            effects[name] = r * Fs / V**2
-        elif name == "cubic_damping":
-            effects[name] = r * Fs / V**3
-        elif name == "asymmetric_stiffness":
-            effects[name] = r * Fs / Q
-            fields_["asymmetric_side"] = int(rng.choice([-1, 1]))
-        elif name == "end_stop":
-            gap = rng.uniform(0.7, 0.9) * Q * 1e3
-            side = str(rng.choice(["both", "upper", "lower"]))
-            fields_.update(end_stop_travel_mm=gap if side == "both" else None,
-                           end_stop_lower_mm=None if side == "both" else (gap if side == "lower" else math.inf),
-                           end_stop_upper_mm=None if side == "both" else (gap if side == "upper" else math.inf))
-            kc = rng.uniform(2.0, 10.0) * Fs / Q
-            fields_.update(contact_stiffness_n_per_m=kc,
-                           contact_damping_ns_per_m=2 * rng.uniform(0.1, 0.25) * math.sqrt(kc * m))
-            mags[name] = {"gap_mm": gap, "side": side, "contact_stiffness_n_per_m": kc}
-        elif name == "stiffness_drift":
-            fields_["stiffness_drift"] = float(rng.choice([-1, 1]) * rng.uniform(0.05, 0.15))
-            mags[name] = {"r": fields_["stiffness_drift"], "relative_force": abs(fields_["stiffness_drift"]) * k * Q / Fs}
-        elif name == "hysteresis":
-            z_max = rng.uniform(0.2, 0.5) * Q
-            share = rng.uniform(0.5, 0.9)
-            fields_.update(hysteresis_alpha=r * Fs / (k * z_max), hysteresis_beta=share / z_max,
-                           hysteresis_gamma=(1 - share) / z_max, hysteresis_n=1, hysteresis_A=1.0)
-            mags[name] = {"alpha": fields_["hysteresis_alpha"], "z_max_m": z_max, "relative_force": r}
-        elif name == "second_mode":
-            ma = rng.uniform(0.02, 0.06) * m
-            fn = rig.natural_frequency_hz
-            fa = min(rng.uniform(1.3, 2.2), 0.85 * sweep.f_end_hz / fn) * fn
-            ka = ma * (2 * math.pi * fa) ** 2
-            ca = 2 * rng.uniform(0.02, 0.08) * math.sqrt(ka * ma)
-            fields_.update(absorber_mass_kg=ma, absorber_stiffness_n_per_m=ka, absorber_damping_ns_per_m=ca)
-            mags[name] = {"mass_ratio": ma / m, "frequency_hz": fa, "relative_force": ma / m}
-        elif name == "free_play":
-            g = min(r * Fs / k, 0.3 * Q, 0.5 * sweep.amplitude_mm * 1e-3)  # g > Z: the spring never engages
-            fields_["spring_free_play_mm"] = g * 1e3
-            mags[name] = {"free_play_mm": g * 1e3, "relative_force": k * g / Fs}
-        elif name in ("mass_acc_gain", "table_acc_gain"):
-            gain = 1 + rng.choice([-1, 1]) * rng.uniform(0.02, 0.05)
-            (mass if name == "mass_acc_gain" else table).gain = gain
-            mags[name] = {"gain": gain, "relative_force": abs(gain - 1)}
-        elif name == "channel_delay":
-            d = rng.uniform(0.3e-3, 2e-3)
-            channel = str(rng.choice(["table", "mass"]))
-            (mass if channel == "mass" else table).delay_s = d
-            mags[name] = {"delay_s": d, "channel": channel, "relative_force": 2 * math.pi * rig.natural_frequency_hz * d}
-        elif name == "bias_drift":
-            b = rng.choice([-1, 1]) * rng.uniform(0.01, 0.05)
-            channel = str(rng.choice(["table", "mass"]))
-            (mass if channel == "mass" else table).bias_drift_ms2 = b
-            mags[name] = {"bias_drift_ms2": b, "channel": channel, "relative_force": abs(b) / (2 * math.pi * rig.natural_frequency_hz * V)}
-        else:
-            raise ValueError(f"unknown effect {name!r}")
-        if name in effects:
-            mags[name] = {"value": effects[name], "relative_force": r}
-        own[name] = detectability.Changes(
-            rig={**{k: v for k, v in fields_.items() if k not in before[0]},
-                 **({"effects": {name: effects[name]}} if name in effects else {})},
-            table={k: v for k, v in dataclasses.asdict(table).items() if before[1][k] != v},
-            mass={k: v for k, v in dataclasses.asdict(mass).items() if before[2][k] != v})
-    plain_rig = rig
-    rig = dataclasses.replace(rig, effects=effects, **fields_)
-    sc = Scenario(category, list(names), rig, sweep, fs, table, mass, magnitudes=mags,
-                  pilot={"Q_m": Q, "V_ms": V, "Fs_n": Fs, "fn_hz": rig.natural_frequency_hz},
+    d = Draw(rng, rig, sweep, table, mass, Q, V, Fs)
+    own = {name: _draw_effect(d, name) for name in names}
+    sc = Scenario(category, list(names), dataclasses.replace(rig, effects=d.effects, **d.fields), sweep, fs, table,
+                  mass, magnitudes=d.mags, pilot={"Q_m": Q, "V_ms": V, "Fs_n": Fs, "fn_hz": rig.natural_frequency_hz},
                   nuisances=wide_draws.nuisances(table, mass))
+    if not _sane(sc, Q, Fs):
+        return None
+    return detectability.quiet_enough(sc, rig, own, rng) if detectable else sc
+
+
+def _draw_effect(d: Draw, name: str) -> detectability.Changes:
+    """Draw effect `name` onto d (its rho first, for forces); what it changed of the plain scenario."""
+    before = (dict(d.fields), dataclasses.asdict(d.table), dataclasses.asdict(d.mass))
+    r = d.rng.uniform(*RELATIVE_FORCE[name]) if name in RELATIVE_FORCE else None
+    DRAWS[name](d, r)
+    if name in d.effects:
+        d.mags[name] = {"value": d.effects[name], "relative_force": r}
+    return detectability.Changes(
+        rig={**{k: v for k, v in d.fields.items() if k not in before[0]},
+             **({"effects": {name: d.effects[name]}} if name in d.effects else {})},
+        table={k: v for k, v in dataclasses.asdict(d.table).items() if before[1][k] != v},
+        mass={k: v for k, v in dataclasses.asdict(d.mass).items() if before[2][k] != v})
+
+
+def _sane(sc: Scenario, Q: float, Fs: float) -> bool:
+    """The scenario's physics run once without noise (what sc.run() will run): it touches the end stops
+    only when they are its effect (then >= 10 samples, their relative force read at the deepest contact),
+    else stays between MIN_RESPONSE x the plain peak Q and MAX_RESPONSE_MM."""
     quiet = Accelerometer(noise_fraction=0.0)
-    check = run_sweep(rig, sweep, fs, sc.settle_s, quiet, quiet, None)  # the physics sc.run() will run
+    check = run_sweep(sc.rig, sc.sweep, sc.fs_hz, sc.settle_s, quiet, quiet, None)
     contact = check.truth["contact_samples"]
-    if "end_stop" in names:
-        lower, upper = (v * 1e-3 for v in rig.travels_mm)
+    if "end_stop" in sc.truth_effects:
+        lower, upper = (v * 1e-3 for v in sc.rig.travels_mm)
         q2 = check.states[:, 1]
         depth = max(q2.max() - upper, -q2.min() - lower, 0.0)
-        mags["end_stop"]["relative_force"] = rig.contact_stiffness_n_per_m * depth / Fs  # at the deepest contact
-        sane = contact >= 10
-    else:
-        sane = contact == 0 and MIN_RESPONSE * Q < check.truth["max_abs_q_m"] < MAX_RESPONSE_MM * 1e-3
-    if not sane:
-        return None
-    return detectability.quiet_enough(sc, plain_rig, own, rng) if detectable else sc
+        sc.magnitudes["end_stop"]["relative_force"] = sc.rig.contact_stiffness_n_per_m * depth / Fs
+        return contact >= 10
+    return contact == 0 and MIN_RESPONSE * Q < check.truth["max_abs_q_m"] < MAX_RESPONSE_MM * 1e-3
