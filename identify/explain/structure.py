@@ -27,11 +27,18 @@ from ..simulation.simulate import simulate
 #: The gap is measured on what was measured: the relative acceleration for the accelerometer rig, the
 #: output y itself for a force-input layout (its second derivative is a noise-amplified derived signal).
 GAP_SIGNAL = {"base": "q1_dot", "force": "q2"}
-#: An end stop's asymmetry term and the symmetric term it follows on a one-sided stop: on the stop's
-#: side s, f + s sign(q2) f = 2 f there and 0 on the other side.
+#: The shooting refit's smallest Bouc-Wen saturation, per parameter: beta and gamma
+#: are each capped at 1 / (this x the largest |q2|). A z saturating within 2 % of the stroke is a Coulomb
+#: friction (sign(q1) times its level), which the catalog has; and it is stiff: on a rig without
+#: hysteresis a refit drove beta to where the RK4 needed 158-256 substeps a sample (benchmark seed
+#: 1706589829, case 141: 122 s of CPU, 5.5 GB of fine inputs before shooting.FINE_GRID_BYTES).
+#: The candidate's grid starts at 0.1 (identify.explain.effects.hysteresis.HYST_SATURATION).
+HYST_MIN_SATURATION = 0.02
 #: Band-limited library columns kept between equation fits (Fitter.band_limited_columns): the baseline's and
 #: the round's terms are the same for every candidate, each a band operation over the whole record.
 BAND_LIMITED_CACHE = 32
+#: An end stop's asymmetry term and the symmetric term it follows on a one-sided stop: on the stop's
+#: side s, f + s sign(q2) f = 2 f there and 0 on the other side.
 ONE_SIDED = {"sign(q2)*stop(q2)": "stop(q2)", "q1*sign(q2)*contact(q2)": "q1*contact(q2)"}
 
 
@@ -294,7 +301,7 @@ class Fitter:
         held = self.seg_held if starts is None else np.zeros(len(s0), bool)
         d = ShootingData(X, U, measured, self.gap, self.fs_hz, s0, s1, held, 1.0 + st.p.get("mass_acc_gain", 0.0),
                          self.lowpass, self.cuts)
-        if len(self._data) > 48:
+        if len(self._data) > 16:  # each holds up to shooting.FINE_GRID_BYTES of fine inputs
             self._data.clear()  # before inserting: the entry is used right after
         self._data[key] = d
         return d
@@ -328,13 +335,15 @@ class Fitter:
         theta0 = np.concatenate([theta0, extra])
         train = ~self.seg_held
         norm = float(np.sqrt(np.sum(self.data(st).measured ** 2))) or 1.0
+        # beta, gamma capped where z would saturate below HYST_MIN_SATURATION of the stroke (flat beyond)
+        log_cap = -np.log(HYST_MIN_SATURATION * float(np.max(np.abs(self.displacement(st))))) if hyst else 0.0
 
         def build(theta) -> Structure:
             coef = dict(zip(names, map(float, theta[:k])))
             coef.update({t: factor * coef[src] for t, (src, factor) in ties.items()})
             out = replace(st, coef=tuple((t, coef[t]) for t in st.coefficients))
             if hyst:
-                out = replace(out, hyst=tuple(map(float, np.exp(theta[k:k + 2]))))
+                out = replace(out, hyst=tuple(map(float, np.exp(np.minimum(theta[k:k + 2], log_cap)))))
             return replace(out, travel=float(np.exp(theta[-1]))) if travel else out
 
         def resid(theta):

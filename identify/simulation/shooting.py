@@ -22,6 +22,16 @@ import numpy as np
 from ..model import SparseModel
 from .simulate import choose_substeps, equation_rows, fine_grid_input, simulate
 
+#: Largest fine input grid a ShootingData keeps (bytes; one, for the last substeps). A model that needs
+#: many RK4 substeps (a refit's trial step far out, a stiff contact) multiplies the record by 2 x substeps:
+#: a 102 s record at 1000 Hz at 256 substeps is 52.6 M rows, 0.8 GB a grid, and with a grid kept per
+#: substeps and per fault trial an explanation grew to 13.5 GB and was killed (benchmark seed 1706589829,
+#: case 140). Above it each segment's grid is built for the run and dropped.
+FINE_GRID_BYTES = 32 * 2**20
+#: Rows either side of a segment its own fine grid is interpolated from (the band-limited filter's reach
+#: is 10 rows; resample_poly's Kaiser window).
+FINE_PAD = 32
+
 #: Segment length in periods of the (linear) resonance.
 SEGMENT_PERIODS = 4.0
 MIN_SEGMENT = 48
@@ -64,20 +74,40 @@ class ShootingData:
         self._fine: dict[int, np.ndarray] = {}
         self.bound = 100.0 * float(np.max(np.abs(self.states[:, :2]))) + 1e-9
 
-    def fine(self, substeps: int) -> np.ndarray:
+    def fine(self, substeps: int) -> np.ndarray | None:
         """The inputs every h/2 (simulate's inputs_fine), row r at index 2 substeps r: each recording's
-        interpolated on its own, padded with its last value up to the next one's first row."""
+        interpolated on its own, padded with its last value up to the next one's first row. Kept for the
+        last `substeps` only, and only up to FINE_GRID_BYTES: None above (run builds each segment's own)."""
         if substeps not in self._fine:
             up = 2 * substeps
+            if self.inputs.size * up * 8 > FINE_GRID_BYTES:
+                return None
             pieces = np.split(self.inputs, list(self.cuts))
             grids = []
             for i, piece in enumerate(pieces):
-                u = fine_grid_input(piece[:, :1], substeps)
-                if piece.shape[1] > 1:  # known smooth extra inputs (the time ramp): linear interpolation
-                    u = np.column_stack([u, fine_grid_input(piece[:, 1:], substeps, "linear")])
+                u = self._fine_piece(piece, substeps)
                 grids.append(u if i == len(pieces) - 1 else np.vstack([u, np.repeat(u[-1:], up - 1, axis=0)]))
-            self._fine[substeps] = np.ascontiguousarray(grids[0] if len(grids) == 1 else np.vstack(grids))
+            self._fine = {substeps: np.ascontiguousarray(grids[0] if len(grids) == 1 else np.vstack(grids))}
         return self._fine[substeps]
+
+    @staticmethod
+    def _fine_piece(piece: np.ndarray, substeps: int, mean=None) -> np.ndarray:
+        u = fine_grid_input(piece[:, :1], substeps, mean=mean)
+        if piece.shape[1] > 1:  # known smooth extra inputs (the time ramp): linear interpolation
+            u = np.column_stack([u, fine_grid_input(piece[:, 1:], substeps, "linear")])
+        return u
+
+    def segment_fine(self, a: int, b: int, substeps: int) -> np.ndarray:
+        """The fine inputs of rows a..b-1 alone (what fine()[a up:(b-1) up + 1] holds), interpolated from
+        the segment and FINE_PAD rows either side within its recording (the band-limited interpolation's
+        filter reaches ~10 rows, and the recording's mean is removed as fine() removes it)."""
+        edges = [0, *self.cuts, self.inputs.shape[0]]
+        lo = max([e for e in edges if e <= a])
+        hi = min([e for e in edges if e >= b])
+        a0, b0 = max(a - FINE_PAD, lo), min(b + FINE_PAD, hi)
+        up = 2 * substeps
+        u = self._fine_piece(self.inputs[a0:b0], substeps, self.inputs[lo:hi, 0].mean())
+        return np.ascontiguousarray(u[(a - a0) * up:(b - 1 - a0) * up + 1])
 
     def run(self, model: SparseModel, which: np.ndarray | None = None):
         """Piecewise free run: (simulated gap signal over the valid rows, NaN outside the segments run;
@@ -85,7 +115,7 @@ class ShootingData:
         n = self.states.shape[0]
         scale = 1.5 * np.max(np.abs(self.states), axis=0)
         substeps = choose_substeps(model, 1.0 / self.fs_hz, scale)
-        uf = self.fine(substeps)
+        uf = self.fine(substeps)  # None: too large to hold, built per segment
         up = 2 * substeps
         out = np.full(n, np.nan)
         seg = np.arange(self.starts.size) if which is None else np.flatnonzero(which)
@@ -96,7 +126,8 @@ class ShootingData:
             a, b = int(self.starts[i]), int(self.stops[i])
             x0 = self.states[a].copy()
             x0[1] += offsets[i]
-            res = simulate(model, dt, x0, inputs_fine=uf[a * up:(b - 1) * up + 1], substeps=substeps,
+            u = uf[a * up:(b - 1) * up + 1] if uf is not None else self.segment_fine(a, b, substeps)
+            res = simulate(model, dt, x0, inputs_fine=u, substeps=substeps,
                            n_samples=b - a, bound=self.bound)
             if res.diverged:
                 bad.append(i)

@@ -44,8 +44,11 @@ class SimulationResult:
         return self.n_valid < self.states.shape[0]
 
 
-def fine_grid_input(inputs: np.ndarray, substeps: int, interpolation: str = "bandlimited") -> np.ndarray:
-    """Input samples (n, n_inputs) -> values every h/2, shape ((n-1)*2*substeps+1, n_inputs)."""
+def fine_grid_input(inputs: np.ndarray, substeps: int, interpolation: str = "bandlimited",
+                    mean: np.ndarray | None = None) -> np.ndarray:
+    """Input samples (n, n_inputs) -> values every h/2, shape ((n-1)*2*substeps+1, n_inputs). `mean`: what
+    the band-limited interpolation removes before and adds after (default the inputs' own mean; a
+    stretch of a longer record passes the record's, to get the record's values)."""
     inputs = np.asarray(inputs, dtype=float)
     if inputs.ndim == 1:
         inputs = inputs[:, None]
@@ -62,7 +65,7 @@ def fine_grid_input(inputs: np.ndarray, substeps: int, interpolation: str = "ban
     if interpolation == "bandlimited":
         # resample_poly keeps the original samples' positions (output[k*up] ~= input[k]) and handles
         # non-periodic records without wrap-around; mean removed so its zero-padded edges do not ring.
-        mean = inputs.mean(axis=0)
+        mean = inputs.mean(axis=0) if mean is None else np.broadcast_to(np.asarray(mean, dtype=float), inputs.shape[1:])
         if inputs.shape[1] == 1:  # one channel as a 1-D signal: the same numbers, without the strided axis
             return (resample_poly(inputs[:, 0] - mean[0], up, 1)[:n_fine] + mean[0])[:, None]
         fine = resample_poly(inputs - mean, up, 1, axis=0)[:n_fine] + mean

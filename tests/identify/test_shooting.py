@@ -1,0 +1,50 @@
+"""The shooting error's inputs (identify.simulation.shooting.ShootingData): a fine input grid too large to
+hold is built per segment, with the values the whole record's grid has."""
+import numpy as np
+import pytest
+
+from identify.model import SparseModel
+from identify.simulation import shooting
+from identify.simulation.shooting import ShootingData
+
+
+def _data(n=20000, cut=12000):
+    rng = np.random.default_rng()
+    x = np.convolve(rng.standard_normal(n), np.hanning(40), "same") + 3.0  # band-limited, off zero
+    q = np.column_stack([np.gradient(x), x]) * 1e-3
+    starts = np.arange(0, n, 400)
+    stops = np.minimum(starts + 400, n)
+    return ShootingData(q, np.column_stack([x, np.linspace(-0.5, 0.5, n)]), x, "q1_dot", 1000.0, starts, stops,
+                        np.zeros(starts.size, bool), cuts=(cut,))
+
+
+@pytest.mark.parametrize("substeps", [1, 4, 16])
+def test_a_segments_fine_inputs_are_the_records(substeps):
+    """Rows a..b-1 interpolated from the segment and FINE_PAD rows either side, the recording's mean removed:
+    the same numbers as the whole record's grid, at the record's edges, a cut between two recordings and
+    inside (the band-limited filter reaches ~10 rows)."""
+    d = _data()
+    up = 2 * substeps
+    full = d.fine(substeps)
+    for a, b in [(0, 300), (5000, 5400), (11800, 12000), (12000, 12400), (19600, 20000)]:
+        np.testing.assert_array_equal(d.segment_fine(a, b, substeps), full[a * up:(b - 1) * up + 1])
+
+
+def test_a_grid_over_the_budget_is_not_held_and_the_run_is_the_same(monkeypatch):
+    """Above FINE_GRID_BYTES fine() holds nothing and run() builds each segment's inputs: the same
+    simulated signal and errors; below, only the last substeps' grid is kept."""
+    d = _data()
+    model = SparseModel({"q1_dot": {"q1": -2.0, "q2": -900.0, "q2^3": -1e6, "zdd": -1.0}, "q2_dot": {"q1": 1.0}},
+                        states=("q1", "q2"), inputs=("zdd", "tau"))
+    held = d.run(model)
+    assert len(d._fine) == 1
+    monkeypatch.setattr(shooting, "FINE_GRID_BYTES", 1024)
+    fresh = _copy(d)
+    assert fresh.fine(2) is None and fresh._fine == {}
+    per_segment = fresh.run(model)
+    np.testing.assert_allclose(per_segment[0], held[0], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(per_segment[1], held[1], rtol=1e-12)
+
+
+def _copy(d: ShootingData) -> ShootingData:
+    return ShootingData(d.states, d.inputs, d.measured, d.gap, d.fs_hz, d.starts, d.stops, d.held, cuts=d.cuts)
