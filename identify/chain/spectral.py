@@ -88,13 +88,8 @@ def noise_level(p: np.ndarray, segments: int, quantile: float = 0.5) -> float:
     mean by 0.3 % over the ~120 segments of a million-sample record in 16384-sample segments, by 11 %
     over 3; its low decile is 0.67 of the mean over 14 segments and 0.37 over 3 (undivided, a 10 dB
     threshold over it sat at 3.7 dB over the noise of a short record, and noise bins crossed it)."""
-    return level_from_quantile(p, quantile, welch_dof(segments))
-
-
-def level_from_quantile(values: np.ndarray, quantile: float, dof: float) -> float:
-    """The mean of values distributed as mean x chi-square(dof) / dof, from their `quantile` (noise_level's
-    statistics; also the gap floor's windows in time, identify.noise.floor.quiet_level)."""
-    return float(np.quantile(values, quantile) / (chi2.ppf(quantile, dof) / dof))
+    dof = welch_dof(segments)
+    return float(np.quantile(p, quantile) / (chi2.ppf(quantile, dof) / dof))
 
 
 def bin_weights(n_bins: int, nfft: int) -> np.ndarray:
