@@ -72,6 +72,7 @@ class ShootingData:
 
     def __post_init__(self):
         self._fine: dict[int, np.ndarray] = {}
+        self._piece_means: list[float] | None = None  # segment_fine's recording means, once
         self.bound = 100.0 * float(np.max(np.abs(self.states[:, :2]))) + 1e-9
 
     def fine(self, substeps: int) -> np.ndarray | None:
@@ -102,11 +103,13 @@ class ShootingData:
         the segment and FINE_PAD rows either side within its recording (the band-limited interpolation's
         filter reaches ~10 rows, and the recording's mean is removed as fine() removes it)."""
         edges = [0, *self.cuts, self.inputs.shape[0]]
-        lo = max([e for e in edges if e <= a])
-        hi = min([e for e in edges if e >= b])
+        piece = int(np.searchsorted(edges, a, side="right")) - 1  # the recording holding the segment
+        lo, hi = edges[piece], edges[piece + 1]
         a0, b0 = max(a - FINE_PAD, lo), min(b + FINE_PAD, hi)
         up = 2 * substeps
-        u = self._fine_piece(self.inputs[a0:b0], substeps, self.inputs[lo:hi, 0].mean())
+        if self._piece_means is None:  # each recording's input mean, once (not per segment and run)
+            self._piece_means = [float(self.inputs[e0:e1, 0].mean()) for e0, e1 in zip(edges[:-1], edges[1:])]
+        u = self._fine_piece(self.inputs[a0:b0], substeps, self._piece_means[piece])
         return np.ascontiguousarray(u[(a - a0) * up:(b - 1 - a0) * up + 1])
 
     def run(self, model: SparseModel, which: np.ndarray | None = None):
