@@ -50,6 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from identify.explain.effects import CATALOG
 from protocol.sweep import SineSweep
 
 from . import detectability
@@ -61,10 +62,12 @@ from .sensors import Accelerometer
 from .synth import SyntheticRun, run_sweep
 
 CATEGORIES = ("none", "single", "two_effects", "sensor_fault", "out_of_catalog")
-#: Catalog physics: the effect names identify.explain.effects.CATALOG uses (docs/discrepancy.md, Catalog).
-PHYSICS = ("coulomb_friction", "displacement_dependent_damping", "quadratic_stiffness", "quadratic_damping",
-           "cubic_damping", "asymmetric_stiffness", "end_stop", "stiffness_drift", "hysteresis")
-MEASUREMENT = ("mass_acc_gain", "table_acc_gain", "channel_delay", "bias_drift")
+#: Catalog physics and the sensor faults a scenario can hold, in the catalog's order: read from the
+#: registry the analysis uses (identify.explain.effects.CATALOG), not listed again; each one needs its draw
+#: (sim/effect_draws.py DRAWS; the catalog's mains hum is a nuisance of wide draws, sim/wide.py).
+PHYSICS = tuple(n for n, e in CATALOG.items() if e.kind == "physics")
+MEASUREMENT = tuple(n for n, e in CATALOG.items() if e.kind == "measurement" and n in DRAWS)
+#: Physics outside the catalog: what no name fits (a second mode, free play of the spring).
 OUT_OF_CATALOG = ("second_mode", "free_play")
 #: Physics a sweep can hardly tell apart: naming one for another is not a *wrong* name (the suite counts
 #: wrong names outside the truth and its groups). Symmetric by construction.
