@@ -168,17 +168,17 @@ def _index_html(out: Path, analysis, result: dict, u: str) -> str:
         page.table(["effect", "kind", "coefficients (q1_dot, SI)", "confidence", "gap after", "stands in for"],
                    rows, "The effects added to the baseline, in order, each on top of those before it. Physics "
                          "terms are forces per unit mass in the q1_dot equation; measurement effects (sensor "
-                         "gain, delay, drift) change the chain instead. Confidence: (1 − Wald p) × the bootstrap "
+                         "gain, delay, drift) change the chain instead. Confidence: (1 − p) × the bootstrap "
                          "probability that the effect beats both the runner-up and the explanation before it.")
     page.heading("Every candidate (first round)")
     crow = [[c["name"], c["kind"], f"{c['score']:+.3f}",
-             "-" if c.get("kind") == "measurement" else p_value_text(c["p_value"]),
+             p_value_text(c["p_value"]),
              "-" if c.get("gap_share_closed") is None else gap_closed_text(c["gap_share_closed"]),
              c.get("rejected") or ("named" if c["name"] in {e["name"] for e in result["effects"]} else "")]
             for c in result["candidates"]]
-    page.table(["candidate", "kind", "equation-error share", "Wald p", "shooting gap closed", "rejected because"],
+    page.table(["candidate", "kind", "equation-error share", "p", "shooting gap closed", "rejected because"],
                crow, f"Each catalog effect fitted on top of the baseline: the share of the held-out equation error "
-                     f"it explains, the Wald p of its terms (measurement effects are searched, not tested), and "
+                     f"it explains, p: the Wald p of its terms (a measurement fault: its own test), and "
                      f"the share of the held-out squared shooting error it removes; an effect is named when that "
                      f"share is at least {analysis.min_gap_closed:g} and no rule (energy, direction, "
                      f"significance) rejects it.")

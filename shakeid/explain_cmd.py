@@ -152,7 +152,7 @@ def print_explanation(result: dict) -> None:
           "1 - gap after² / gap before²):")
     for c in result["candidates"]:
         closed = c.get("gap_share_closed")
-        p = "not tested" if c.get("kind") == "measurement" else p_value_text(c["p_value"])  # searched, no Wald test
+        p = p_value_text(c["p_value"])  # physics: Wald; a measurement fault: its own test
         print(f"  {c['name']:32s} equation-error share {c['score']:+.3f}  p {p if p[0] == '<' else '= ' + p}  "
               f"shooting gap closed {gap_closed_text(closed)}"
               + (f"  (rejected: {c['rejected']})" if c.get("rejected") else ""))

@@ -39,6 +39,21 @@ def test_dissipative_terms_and_sign_flips_are_refused():
     assert check("coulomb_friction", {"sign(q1)": -0.5, "q2^3": 1.0e6}, {"q2^3": -2.2e5}, {"q2^3": 1e5}) == ""
 
 
+def test_a_sign_flip_that_explains_nearly_everything_is_allowed():
+    """Rule 2 guards against trading one error for another; a candidate that removes nearly all of the
+    gap, or takes it to the noise floor, traded nothing: the baseline's sign was the missing effect's
+    imprint (Bouc-Wen hysteresis read as a softening q2^3 by the textbook fit, restored to hardening)."""
+    from identify.explain.admissibility import FLIP_WAIVED_AT, FLIP_WAIVED_SHARE, flips_waived
+
+    flipped, base, se = {"z": -200.0, "q2^3": -1.6e6}, {"q2^3": 4.2e6}, {"q2^3": 0.8e6}
+    assert "flips the sign" in check("hysteresis", flipped, base, se)
+    assert check("hysteresis", flipped, base, se, waive_flips=True) == ""
+    # the effect's own rules still hold
+    assert "restoring" in check("hysteresis", {"z": 200.0, "q2^3": -1.6e6}, base, se, waive_flips=True)
+    assert flips_waived(FLIP_WAIVED_SHARE, 3.0) and flips_waived(0.5, FLIP_WAIVED_AT)
+    assert not flips_waived(0.99 * FLIP_WAIVED_SHARE, 1.01 * FLIP_WAIVED_AT)
+
+
 def test_one_sided_stop_ties_its_asymmetry_terms():
     terms = ("q1", "q2", "q2^3", "zdd") + STOP
     for side in (1, -1):
