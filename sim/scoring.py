@@ -74,6 +74,16 @@ def gap_closed_enough(result: dict) -> bool:
         closed is not None and closed > 0 and after is not None and floor is not None and after <= floor)
 
 
+def after_nuisances(result: dict) -> str:
+    """The answer when only nuisances were named: `unexplained` if the gap they leave is still above the
+    analysis' none_factor x the noise floor (something else is missing), else `none`."""
+    after, floor = result.get("gap_after"), result.get("noise_floor")
+    factor = (result.get("thresholds") or {}).get("none_factor")
+    if after is None or floor is None or factor is None:
+        return "none"
+    return "unexplained" if after > factor * floor else "none"
+
+
 def score(category: str, truth_effects: list[str], result: dict, nuisances=()) -> dict:
     """Whether a result is right for the scenario (contract rules), its wrong physical names and its
     measurement names where no fault exists. `nuisances` (sim.wide: "hum", "quantisation") are measurement
@@ -81,7 +91,7 @@ def score(category: str, truth_effects: list[str], result: dict, nuisances=()) -
     all_effects = result_effects(result)
     effects = [e for e in all_effects if not is_nuisance(e, nuisances)]
     if result.get("effect") not in ("none", "unexplained") and all_effects and not effects:
-        result = {**result, "effect": "none"}  # only nuisances named: nothing else is missing
+        result = {**result, "effect": after_nuisances(result)}  # only nuisances named: judged on what is left
     names = [e["name"] for e in effects]
     closed_enough = gap_closed_enough(result)
     wrong = wrong_physical_names(truth_effects, effects)

@@ -145,6 +145,20 @@ def test_scoring_follows_the_contract(category, truth, result, right, wrong):
     assert got["right"] is right and got["wrong_names"] == wrong
 
 
+def test_a_named_nuisance_is_passed_over_and_the_rest_judged_by_the_gap_it_leaves():
+    """Mains hum is a nuisance of wide draws: naming it is neither right nor wrong. What it leaves decides:
+    a second mode whose gap stays at 4.9x the floor after the hum is `unexplained` (right for out-of-catalog
+    physics: benchmarks/explain_robustness.py --seed 1453442049 --case 8 named the hum alone, closing 20 %
+    of the squared gap); a plain rig whose gap falls to the floor is `none`."""
+    hum = {"effects": [entry("mains_hum", 0.68, kind="measurement", surrogate_for=["channel_delay"])],
+           "effect": "mains_hum", "thresholds": {"none_factor": 2.0}, "noise_floor": 0.001, "gap_closed": 0.11}
+    left_over, at_floor = {**hum, "gap_after": 0.0049}, {**hum, "gap_after": 0.0012}
+    assert score("out_of_catalog", ["second_mode"], left_over, ("hum",))["right"]
+    assert not score("out_of_catalog", ["second_mode"], at_floor, ("hum",))["right"]
+    assert score("none", [], at_floor, ("hum",))["right"]
+    assert not score("none", [], left_over, ("hum",))["right"]
+
+
 def test_a_result_without_effects_is_read_as_one_physics_entry():
     assert result_effects({"effect": "none"}) == [] and result_effects({"effect": "unexplained"}) == []
     assert result_effects({"effect": "quadratic_damping", "confidence": 0.8}) == [entry("quadratic_damping", 0.8)]
