@@ -102,3 +102,23 @@ def test_a_sign_within_its_uncertainty_of_zero_is_not_a_violation():
     assert "outwards" in check("end_stop", outwards_a_hair, {}, {}, dict(zip(STOP, (0.15, 0.15, 0.1, 0.1))))
     assert check("quadratic_damping", {"q1*|q1|": 0.3}, {}, {}, {"q1*|q1|": 0.2}) == ""
     assert "injects energy" in check("quadratic_damping", {"q1*|q1|": 0.3}, {}, {}, {"q1*|q1|": 0.1})
+
+
+def test_the_best_excluded_candidate_is_refit_only_when_it_fits_best():
+    """A candidate excluded at its equation-error start is judged again on its shooting refit when it fits
+    the segments better than every admissible one (identify.explain.rounds.Rounds._judged_after_refit);
+    otherwise no refit is spent on it."""
+    from identify.explain.effects import Candidate
+    from identify.explain.rounds import Rounds
+
+    def cand(name, err, admissible):
+        c = Candidate(name, "physics", [], None, None)
+        c.err, c.admissible = np.array(err, dtype=float), admissible
+        return c
+
+    hyst, stop = cand("hysteresis", [1.0, 1.0], False), cand("end_stop", [9.0, 9.0], False)
+    delay = cand("channel_delay", [4.0, 4.0], True)
+    cands = [delay, stop, hyst]
+    assert Rounds._judged_after_refit(cands, [delay]) == [hyst]
+    assert Rounds._judged_after_refit([delay, stop], [delay]) == []
+    assert Rounds._judged_after_refit([stop, hyst], []) == [hyst]
