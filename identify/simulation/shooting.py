@@ -156,16 +156,21 @@ class ShootingData:
         the chain's band removes it from the measured q2, so a segment started from the measured state
         would start off the model's orbit and ring. The offset is where the model's mean acceleration
         over the segment matches the measured one (two Newton steps; 0 for a symmetric model). Segments
-        need not be contiguous (those around a jump are left out, jump_segments)."""
+        need not be contiguous (those around a jump are left out, jump_segments). Only the segments `seg`
+        (None: all) are computed, each from its own rows (0 for the others)."""
         n_seg = len(self.starts)
+        idx = np.arange(n_seg) if seg is None else np.asarray(seg, dtype=int)
+        out = np.zeros(n_seg)
+        if idx.size == 0:
+            return out
         h = 1e-3 * float(np.max(np.abs(self.states[:, 1]))) + 1e-12
-        length = (self.stops - self.starts).astype(int)
-        rows = np.concatenate([np.arange(a, b) for a, b in zip(self.starts, self.stops)])
+        length = (self.stops[idx] - self.starts[idx]).astype(int)
+        rows = np.concatenate([np.arange(a, b) for a, b in zip(self.starts[idx], self.stops[idx])])
         cuts = np.concatenate([[0], np.cumsum(length)[:-1]])
         x, u = self.states[rows].copy(), self.inputs[rows]
-        seg_of_row = np.repeat(np.arange(n_seg), length)
+        seg_of_row = np.repeat(np.arange(idx.size), length)
         target = np.add.reduceat(self.measured[rows], cuts) / length
-        d = np.zeros(n_seg)
+        d = np.zeros(idx.size)
 
         def mean_rhs(shift):
             x[:, 1] = self.states[rows, 1] + shift[seg_of_row]
@@ -176,11 +181,7 @@ class ShootingData:
             slope = (mean_rhs(d + h) - target - f0) / h
             ok = np.isfinite(f0) & np.isfinite(slope) & (slope < 0)
             d = np.where(ok, d - np.where(ok, f0 / np.where(ok, slope, 1.0), 0.0), d)
-        out = np.clip(np.nan_to_num(d), -0.5 * h * 1e3, 0.5 * h * 1e3)
-        if seg is not None and len(seg) < n_seg:
-            mask = np.zeros(n_seg, bool)
-            mask[seg] = True
-            out = np.where(mask, out, 0.0)
+        out[idx] = np.clip(np.nan_to_num(d), -0.5 * h * 1e3, 0.5 * h * 1e3)
         return out
 
     def residuals(self, model: SparseModel, which: np.ndarray) -> np.ndarray:

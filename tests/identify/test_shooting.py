@@ -48,3 +48,18 @@ def test_a_grid_over_the_budget_is_not_held_and_the_run_is_the_same(monkeypatch)
 
 def _copy(d: ShootingData) -> ShootingData:
     return ShootingData(d.states, d.inputs, d.measured, d.gap, d.fs_hz, d.starts, d.stops, d.held, cuts=d.cuts)
+
+
+def test_offsets_of_some_segments_are_those_of_the_whole_record():
+    """ShootingData.offsets computes only the segments asked for (a refit runs the training segments), each
+    from its own rows: bitwise what the computation over every segment gives them, 0 for the others."""
+    d = _data()
+    model = SparseModel({"q1_dot": {"q1": -2.0, "q2": -900.0, "q2^2": 3e4, "q2^3": -1e6, "zdd": -1.0},
+                         "q2_dot": {"q1": 1.0}}, states=("q1", "q2"), inputs=("zdd", "tau"))
+    every = d.offsets(model, None)
+    assert np.count_nonzero(every) > len(every) // 2  # an asymmetric spring: the offsets are not all 0
+    some = np.array([0, 3, 4, 17, len(every) - 1])
+    part = d.offsets(model, some)
+    np.testing.assert_array_equal(part[some], every[some])
+    assert not np.delete(part, some).any()
+    assert not d.offsets(model, np.array([], dtype=int)).any()
