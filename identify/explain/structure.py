@@ -147,6 +147,9 @@ class Fitter:
         self._z: dict = {}
         self._data: dict = {}
         self._columns: dict = {}  # band_limited_columns' columns, insertion ordered (oldest evicted)
+        #: what an effect computes once per analysis from the recordings alone, by the effect's own key
+        #: (mains hum's evidence: the same in every round)
+        self.memo: dict = {}
         self.starts = self.stops = self.seg_held = None
 
     # -- signals ----------------------------------------------------------------------------------

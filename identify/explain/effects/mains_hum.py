@@ -61,7 +61,9 @@ class MainsHum(Effect):
         the supply's cycle), while a structure's fault parameters are one set for all recordings."""
         if self.name in cur.effects or fitter.chain is None or len(fitter.parts) > 1:
             return None
-        ev = self.evidence(fitter.parts[0].rec)
+        if self.name not in fitter.memo:
+            fitter.memo[self.name] = self.evidence(fitter.parts[0].rec)
+        ev = fitter.memo[self.name]
         if ev is None:
             return None
         p = dict(cur.meas)
