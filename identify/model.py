@@ -57,6 +57,17 @@ class SparseModel:
         self.terms = [self.space.parse(n) for n in names]
         self.coef_ = np.array([[self.equations[eq].get(n, 0.0) for n in names] for eq in expected]).reshape(
             len(expected), len(names))
+        self._kernel_terms: tuple | None = None
+
+    def kernel_terms(self) -> tuple[bytes, bytes, bytes, bytes]:
+        """The terms as the compiled kernel reads them (identify/_simkernel.c: term pointers, features and
+        powers as int32 bytes) and the travels (float64 bytes): packed once per model, not per call (a
+        shooting refit calls the kernel for every segment, ~55,000 times in one explanation)."""
+        if self._kernel_terms is None:
+            ptr, feat, powr = self.space.encode(self.terms)
+            self._kernel_terms = tuple(np.asarray(a, dtype=np.int32).tobytes() for a in (ptr, feat, powr)) + (
+                np.array([self.travel.get(s, np.inf) for s in self.states]).tobytes(),)
+        return self._kernel_terms
 
     # -- evaluation -------------------------------------------------------------------------------
     def rhs(self, states: np.ndarray, inputs: np.ndarray) -> np.ndarray:

@@ -139,10 +139,8 @@ def equation_rows(model: SparseModel, states, inputs, equation: int = 0) -> np.n
     if n == 0 or not np.any(coef):
         out[:] = 0.0
         return out
-    ptr, feat, powr = model.space.encode(model.terms)
-    _simkernel.rhs_rows(np.asarray(ptr, dtype=np.int32).tobytes(), np.asarray(feat, dtype=np.int32).tobytes(),
-                        np.asarray(powr, dtype=np.int32).tobytes(), coef.tobytes(), tuple(cols), int(equation),
-                        out, np.array([model.travel.get(s, np.inf) for s in model.states]).tobytes())
+    ptr, feat, powr, travel = model.kernel_terms()
+    _simkernel.rhs_rows(ptr, feat, powr, coef.tobytes(), tuple(cols), int(equation), out, travel)
     return out
 
 
@@ -178,13 +176,12 @@ def simulate(model: SparseModel, dt: float, x0, inputs=None, *, inputs_fine=None
         raise ValueError(f"input has {u.shape[1]} channels; model expects {model.inputs}")
     if bound is None:
         bound = 1e6 if state_scale is None else 1e3 * float(np.max(state_scale))
-    ptr, feat, powr = model.space.encode(model.terms)
+    ptr, feat, powr, travel = model.kernel_terms()
     out = np.empty((n_samples, x0.size))  # the kernel writes the rows it reaches; the rest are NaN'd below
     n_valid = _simkernel.simulate(
-        np.asarray(ptr, dtype=np.int32).tobytes(), np.asarray(feat, dtype=np.int32).tobytes(),
-        np.asarray(powr, dtype=np.int32).tobytes(), np.ascontiguousarray(model.coef_).tobytes(),
+        ptr, feat, powr, np.ascontiguousarray(model.coef_).tobytes(),
         x0.tobytes(), u.reshape(-1), u.shape[1], int(n_samples), int(substeps), int(stride), float(dt), float(bound),
-        out.reshape(-1), np.array([model.travel.get(s, np.inf) for s in model.states]).tobytes())
+        out.reshape(-1), travel)
     if n_valid < n_samples:
         out[n_valid:] = np.nan
     return SimulationResult(out, int(n_valid), int(substeps), int(stride))
