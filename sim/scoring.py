@@ -2,7 +2,12 @@
 rules, which benchmarks/explain_robustness.py counts (docs in benchmarks/README.md, "Scoring")."""
 from __future__ import annotations
 
+from identify.explain.workflow import DiscrepancyAnalysis
+
 from .scenarios import OUT_OF_CATALOG, SURROGATE_GROUPS
+
+#: The analysis' own none_factor, for results stored without their thresholds.
+DEFAULT_NONE_FACTOR = DiscrepancyAnalysis().none_factor
 
 #: Share of the gap (NRMSE) a single effect or an out-of-catalog surrogate must close to be right, unless it
 #: takes the gap down to the noise floor (gap_closed_enough).
@@ -76,11 +81,12 @@ def gap_closed_enough(result: dict) -> bool:
 
 def after_nuisances(result: dict) -> str:
     """The answer when only nuisances were named: `unexplained` if the gap they leave is still above the
-    analysis' none_factor x the noise floor (something else is missing), else `none`."""
+    analysis' none_factor x the noise floor (something else is missing), else `none`. A result without
+    its thresholds (stored before they were kept) is read with the analysis' default none_factor."""
     after, floor = result.get("gap_after"), result.get("noise_floor")
-    factor = (result.get("thresholds") or {}).get("none_factor")
-    if after is None or floor is None or factor is None:
+    if after is None or floor is None:
         return "none"
+    factor = (result.get("thresholds") or {}).get("none_factor", DEFAULT_NONE_FACTOR)
     return "unexplained" if after > factor * floor else "none"
 
 

@@ -14,9 +14,10 @@ it fits.
    errors of the baseline's own fit): a term that only fits by turning the hardening spring into a
    softening one (seen: q2^3 = +1.16e6 against the truth's -2.18e6 after adding Coulomb friction) is
    trading one error for another, not explaining the data. Unless the candidate explains nearly all of
-   it: one that removes FLIP_WAIVED_SHARE of the held-out squared gap, or brings the gap down to
-   FLIP_WAIVED_AT x the noise floor, has shown that the baseline's sign was the missing effect's imprint
-   (the baseline's standard errors are those of a model without it). Seen: Bouc-Wen hysteresis, whose
+   it: one that removes FLIP_WAIVED_SHARE of the held-out squared gap has shown that the baseline's sign
+   was the missing effect's imprint (the baseline's standard errors are those of a model without it).
+   A share, not a gap near the floor: near the floor a small share reaches it, and that is where the
+   rule protects (the floor is an upper estimate; perfect models reach 0.6-0.9x of it). Seen: Bouc-Wen hysteresis, whose
    saturating force a textbook Duffing fit reads as a softening q2^3 (+4.2e6 and +2.9e6, 4-5 standard
    errors), restored the rig's hardening spring and closed 98-99 % of the gap; excluded, a channel delay
    closing 83-84 % was named in its place (benchmarks/explain_robustness.py --seed 1649110157 --case 51,
@@ -36,15 +37,13 @@ from .effects.base import SIGN_TOL, SIGN_Z_WRONG, sides, wrong_side  # noqa: F40
 
 #: A baseline coefficient is well determined when |value| exceeds this many standard errors.
 SIGN_Z = 4.0
-#: Rule 2 is waived for a candidate that removes this share of the held-out squared gap, or whose gap is
-#: within FLIP_WAIVED_AT x the noise floor.
+#: Rule 2 is waived for a candidate that removes this share of the held-out squared gap.
 FLIP_WAIVED_SHARE = 0.9
-FLIP_WAIVED_AT = 1.0
 
 
-def flips_waived(gap_share_closed: float, gap_over_floor: float) -> bool:
+def flips_waived(gap_share_closed: float) -> bool:
     """Whether a candidate explains enough that a sign it turns over is the baseline's error (rule 2)."""
-    return gap_share_closed >= FLIP_WAIVED_SHARE or gap_over_floor <= FLIP_WAIVED_AT
+    return gap_share_closed >= FLIP_WAIVED_SHARE
 
 
 def check(name: str, coef: dict, baseline_coef: dict, baseline_se: dict, se: dict | None = None,

@@ -1,7 +1,7 @@
 """The rounds of the discrepancy workflow (identify.explain.workflow): every catalog effect's candidate on top of
 the current explanation scored on the held-out segments' shooting error, the admissible best added when
 it closes enough; the totals that decide (trimmed in the first round, plain sums after). A mixin of
-DiscrepancyAnalysis, which holds the thresholds (alpha, min_gap_closed, refine), the fitter and the noise floor.
+DiscrepancyAnalysis, which holds the thresholds (alpha, min_gap_closed, refine) and the fitter.
 """
 from __future__ import annotations
 
@@ -13,7 +13,8 @@ from ..simulation.shooting import bootstrap_prob, trimmed_total
 from .structure import Fitter, Structure
 
 #: Candidates refit on the shooting error per round: the best REFINE_TOP - 1 by shooting error at their
-#: equation-error start and the best REFINE_TOP - 1 by held-out equation error.
+#: equation-error start and the best REFINE_TOP - 1 by held-out equation error (and the best a sign rule
+#: excluded, when it fits best of all: Rounds._judged_after_refit).
 REFINE_TOP = 3
 #: Below none_factor x the floor the first effect must close NEAR_CLOSED of the squared gap and beat the
 #: baseline with bootstrap probability NEAR_P_BEATS, else the answer is `none` (the suite's single
@@ -89,7 +90,7 @@ class Rounds:
             # shooting error at the start and the best by held-out equation error
             by_eq = sorted(ok, key=lambda c: -c.score)
             chosen = list({id(c): c for c in ok[:REFINE_TOP - 1] + by_eq[:REFINE_TOP - 1]
-                           + self._judged_after_refit(cands, ok)}.values())
+                           + self._judged_after_refit(cands, ok, self.alpha)}.values())
             for c in chosen:
                 refined = c.refit(fitter.refine(c.structure))
                 self._score(fitter, refined, cur, err, cur_se, mse_cur)
@@ -108,14 +109,15 @@ class Rounds:
         return {"best": best, "table": table, "entry": self._entry(best, others, err, held)}
 
     @staticmethod
-    def _judged_after_refit(cands: list, ok: list) -> list:
-        """The candidate that fits best of those a rule excluded at their equation-error start, when it
-        fits better than every admissible one: its start's coefficients come from a coarse search
+    def _judged_after_refit(cands: list, ok: list, alpha: float) -> list:
+        """The candidate that fits best of those a sign rule excluded at their equation-error start (not
+        those found insignificant: a refit keeps the test), when it fits better than every admissible
+        one: its start's coefficients come from a coarse search
         (hysteresis: six (beta, gamma) pairs), so a sign they break is judged again on its shooting
         refit. Seen: Bouc-Wen hysteresis closing 98 % at a start that turned the baseline's q2^3 over
         (+4.2e6, 5 standard errors), excluded, and a channel delay closing 84 % named in its place
         (benchmarks/explain_robustness.py --seed 1649110157 --case 51)."""
-        out = sorted([c for c in cands if not c.admissible], key=lambda c: np.sum(c.err))[:1]
+        out = sorted([c for c in cands if not c.admissible and c.p_value < alpha], key=lambda c: np.sum(c.err))[:1]
         return [c for c in out if not ok or np.sum(c.err) < np.sum(ok[0].err)]
 
     def _entry(self, best: Candidate, others: list, err, held) -> dict:
@@ -137,9 +139,8 @@ class Rounds:
         c.err = fitter.errors(st)
         e0, e1 = self._total(err[held]), self._total(c.err[held])
         c.gap_share_closed = float(1 - e1 / e0) if e0 > 0 else 0.0
-        floor = self.noise_floor_
-        waive = admissibility.flips_waived(c.gap_share_closed, self._gap(c.err) / floor if floor > 0 else np.inf)
-        reason = admissibility.check(c.name, st.coefficients, cur.coefficients, cur_se, c.fit.se, waive)
+        reason = admissibility.check(c.name, st.coefficients, cur.coefficients, cur_se, c.fit.se,
+                                     admissibility.flips_waived(c.gap_share_closed))
         if not reason and not c.p_value < self.alpha:  # a measurement name needs the same evidence
             test = "Wald p" if c.kind == "physics" else "p of its own test"
             reason = f"not significant ({test} = {c.p_value:.2g} >= {self.alpha:g})"

@@ -17,9 +17,10 @@ and how much adding them closes the gap.
    apart: its time and frequency, measured and as the models' free runs predict it (identify.explain.jumps).
 3. Explain until explained (identify.explain.rounds, candidates from identify.explain.effects): while the gap is above
    `none_factor` x the noise floor, every catalog effect (physics and measurement faults) is fitted on
-   top of the current explanation; candidates a rule excludes are dropped; the best by training
-   shooting error is added if it removes at least `min_gap_closed` of the held-out squared shooting
-   error. Each added effect's confidence: (1 - Wald p) x the block-bootstrap probability that it beats
+   top of the current explanation; candidates a rule excludes are dropped (the best a sign rule excluded
+   is judged again on its shooting refit when it fits best); the best by training shooting error is
+   added if it removes at least `min_gap_closed` of the held-out squared shooting error. Each added
+   effect's confidence: (1 - p) x the block-bootstrap probability that it beats
    both the runner-up and the explanation before it; candidates that come within SURROGATE_SHARE of
    what it closes are reported as its surrogates.
 4. Answer: `effect` = the first added effect; `none` when the baseline's gap is within `none_factor`
@@ -84,8 +85,8 @@ def default_catalog() -> dict[str, Effect]:
 
 class DiscrepancyAnalysis(Rounds):
     """Parameters: baseline (SparseModel or None for the fitted textbook Duffing), catalog of effects
-    ({name: Effect}; default: identify.explain.effects' registry), holdout_fraction, alpha (Wald test level for
-    physics terms), min_gap_closed (smallest share of the current held-out squared shooting error an
+    ({name: Effect}; default: identify.explain.effects' registry), holdout_fraction, alpha (test level: the Wald
+    test of physics terms, a measurement fault's own test), min_gap_closed (smallest share of the current held-out squared shooting error an
     added effect must remove), none_factor (gap within this multiple of the noise floor: nothing to
     explain), max_effects, refine (shooting refit of baseline and candidates), band_hz (measurement chain)."""
 

@@ -73,6 +73,7 @@ class ShootingData:
     def __post_init__(self):
         self._fine: dict[int, np.ndarray] = {}
         self._piece_means: list[float] | None = None  # segment_fine's recording means, once
+        self._worst: np.ndarray | None = None  # divergence_error's, once
         #: each state's largest |value| over the rows: once, not per run (an abs and a max over the whole
         #: record were 6 % of an explanation's CPU)
         self.state_max = np.max(np.abs(self.states), axis=0)
@@ -146,11 +147,17 @@ class ShootingData:
             out = np.where(ok, self.lowpass(filled), np.nan)
         err = np.array([np.sum((out[a:b] - self.measured[a:b]) ** 2) for a, b in zip(self.starts, self.stops)])
         err *= self.scale ** 2
-        worst = np.array([4 * np.sum(self.measured[a:b] ** 2) for a, b in zip(self.starts, self.stops)])
-        err = np.where(np.isfinite(err), err, worst)
+        err = np.where(np.isfinite(err), err, self.divergence_error())
         if which is not None:
             err = np.where(which, err, np.nan)
         return out, err, substeps
+
+    def divergence_error(self) -> np.ndarray:
+        """Per segment, the error run() gives a segment whose free run diverged: 4x its signal energy
+        (once per ShootingData; a caller tells a diverged segment by it)."""
+        if self._worst is None:
+            self._worst = np.array([4 * np.sum(self.measured[a:b] ** 2) for a, b in zip(self.starts, self.stops)])
+        return self._worst
 
     def offsets(self, model: SparseModel, seg: np.ndarray) -> np.ndarray:
         """Per segment, the displacement offset the model implies but accelerometers cannot see.

@@ -41,17 +41,16 @@ def test_dissipative_terms_and_sign_flips_are_refused():
 
 def test_a_sign_flip_that_explains_nearly_everything_is_allowed():
     """Rule 2 guards against trading one error for another; a candidate that removes nearly all of the
-    gap, or takes it to the noise floor, traded nothing: the baseline's sign was the missing effect's
-    imprint (Bouc-Wen hysteresis read as a softening q2^3 by the textbook fit, restored to hardening)."""
-    from identify.explain.admissibility import FLIP_WAIVED_AT, FLIP_WAIVED_SHARE, flips_waived
+    gap traded nothing: the baseline's sign was the missing effect's imprint (Bouc-Wen hysteresis read as
+    a softening q2^3 by the textbook fit, restored to hardening)."""
+    from identify.explain.admissibility import FLIP_WAIVED_SHARE, flips_waived
 
     flipped, base, se = {"z": -200.0, "q2^3": -1.6e6}, {"q2^3": 4.2e6}, {"q2^3": 0.8e6}
     assert "flips the sign" in check("hysteresis", flipped, base, se)
     assert check("hysteresis", flipped, base, se, waive_flips=True) == ""
     # the effect's own rules still hold
     assert "restoring" in check("hysteresis", {"z": 200.0, "q2^3": -1.6e6}, base, se, waive_flips=True)
-    assert flips_waived(FLIP_WAIVED_SHARE, 3.0) and flips_waived(0.5, FLIP_WAIVED_AT)
-    assert not flips_waived(0.99 * FLIP_WAIVED_SHARE, 1.01 * FLIP_WAIVED_AT)
+    assert flips_waived(FLIP_WAIVED_SHARE) and not flips_waived(0.99 * FLIP_WAIVED_SHARE)
 
 
 def test_one_sided_stop_ties_its_asymmetry_terms():
@@ -119,6 +118,9 @@ def test_the_best_excluded_candidate_is_refit_only_when_it_fits_best():
     hyst, stop = cand("hysteresis", [1.0, 1.0], False), cand("end_stop", [9.0, 9.0], False)
     delay = cand("channel_delay", [4.0, 4.0], True)
     cands = [delay, stop, hyst]
-    assert Rounds._judged_after_refit(cands, [delay]) == [hyst]
-    assert Rounds._judged_after_refit([delay, stop], [delay]) == []
-    assert Rounds._judged_after_refit([stop, hyst], []) == [hyst]
+    assert Rounds._judged_after_refit(cands, [delay], 1e-3) == [hyst]
+    assert Rounds._judged_after_refit([delay, stop], [delay], 1e-3) == []
+    assert Rounds._judged_after_refit([stop, hyst], [], 1e-3) == [hyst]
+    # excluded as insignificant: a refit keeps its test, so none is spent on it
+    hyst.p_value = 0.2
+    assert Rounds._judged_after_refit(cands, [delay], 1e-3) == []

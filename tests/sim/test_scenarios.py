@@ -157,6 +157,9 @@ def test_a_named_nuisance_is_passed_over_and_the_rest_judged_by_the_gap_it_leave
     assert not score("out_of_catalog", ["second_mode"], at_floor, ("hum",))["right"]
     assert score("none", [], at_floor, ("hum",))["right"]
     assert not score("none", [], left_over, ("hum",))["right"]
+    # stored before the thresholds were kept: the analysis' default none_factor (2) is read
+    bare = {k: v for k, v in left_over.items() if k != "thresholds"}
+    assert score("out_of_catalog", ["second_mode"], bare, ("hum",))["right"]
 
 
 def test_a_result_without_effects_is_read_as_one_physics_entry():

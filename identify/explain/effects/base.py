@@ -40,7 +40,7 @@ class Candidate:
     terms: list                     # the dq1/dt terms it adds
     structure: object               # identify.explain.structure.Structure, coefficients by equation error
     fit: object                     # identify.explain.structure.Fit of that structure
-    wald: float | None = None       # Wald statistic of its terms (None: searched, not tested)
+    wald: float | None = None       # Wald statistic of its terms (a fault: its test's t^2; None: not tested)
     p_value: float = 0.0
     extra: dict = field(default_factory=dict)     # its searched parameters (report fields)
     same_as: list = field(default_factory=list)   # effects the data cannot tell from it (reported as surrogates)
