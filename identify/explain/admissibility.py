@@ -17,8 +17,8 @@ it fits.
    it: one that removes FLIP_WAIVED_SHARE of the held-out squared gap has shown that the baseline's sign
    was the missing effect's imprint (the baseline's standard errors are those of a model without it).
    A share, not a gap near the floor: near the floor a small share reaches it, and that is where the
-   rule protects (the floor is an upper estimate; perfect models reach 0.6-0.9x of it). Seen: Bouc-Wen hysteresis, whose
-   saturating force a textbook Duffing fit reads as a softening q2^3 (+4.2e6 and +2.9e6, 4-5 standard
+   rule protects (the floor is an upper estimate; perfect models reach 0.6-0.9x of it). Seen: Bouc-Wen
+   hysteresis, whose saturating force a textbook Duffing fit reads as a softening q2^3 (+4.2e6 and +2.9e6, 4-5 standard
    errors), restored the rig's hardening spring and closed 98-99 % of the gap; excluded, a channel delay
    closing 83-84 % was named in its place (benchmarks/explain_robustness.py --seed 1649110157 --case 51,
    --seed 1706589829 --case 134).

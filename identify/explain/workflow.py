@@ -86,8 +86,8 @@ def default_catalog() -> dict[str, Effect]:
 class DiscrepancyAnalysis(Rounds):
     """Parameters: baseline (SparseModel or None for the fitted textbook Duffing), catalog of effects
     ({name: Effect}; default: identify.explain.effects' registry), holdout_fraction, alpha (test level: the Wald
-    test of physics terms, a measurement fault's own test), min_gap_closed (smallest share of the current held-out squared shooting error an
-    added effect must remove), none_factor (gap within this multiple of the noise floor: nothing to
+    test of physics terms, a measurement fault's own test), min_gap_closed (smallest share of the current
+    held-out squared shooting error an added effect must remove), none_factor (gap within this multiple of the noise floor: nothing to
     explain), max_effects, refine (shooting refit of baseline and candidates), band_hz (measurement chain)."""
 
     def __init__(self, baseline: SparseModel | None = None, catalog: dict[str, Effect] | None = None,

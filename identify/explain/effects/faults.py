@@ -14,8 +14,8 @@ curvature, so there are few effective clusters: each slope is scaled by 1 / (1 -
 segment's leverage (the CR3 / jackknife correction), and t = value / SE is read against Student's t with
 segments - 1 degrees of freedom (the small-cluster recipe of Cameron and Miller, 2015). Kish's effective
 number of segments as the degrees of freedom was tried and was too strict: a true 2.5 % gain beside
-Coulomb friction, t = 65, came out at p = 0.01 (S_eff ~ 2) and a stiffness drift was named instead. Segments that disagree on the fault (a misfit elsewhere bending it)
-widen it; a value the search settles on without the data asking for it (a 10 us delay, 0.02 samples,
+Coulomb friction, t = 65, came out at p = 0.01 (S_eff ~ 2) and a stiffness drift was named instead.
+Segments that disagree on the fault (a misfit elsewhere bending it) widen it; a value the search settles on without the data asking for it (a 10 us delay, 0.02 samples,
 once named at confidence 0.68 after a gain fault: benchmarks/explain_robustness.py --seed 646344572
 --case 4) is not significant.
 """
