@@ -87,8 +87,8 @@ class DiscrepancyAnalysis(Rounds):
     """Parameters: baseline (SparseModel or None for the fitted textbook Duffing), catalog of effects
     ({name: Effect}; default: identify.explain.effects' registry), holdout_fraction, alpha (test level: the Wald
     test of physics terms, a measurement fault's own test), min_gap_closed (smallest share of the current
-    held-out squared shooting error an added effect must remove), none_factor (gap within this multiple of the noise floor: nothing to
-    explain), max_effects, refine (shooting refit of baseline and candidates), band_hz (measurement chain)."""
+    held-out squared shooting error an added effect must remove), none_factor (gap within this multiple of
+    the noise floor: nothing to explain), max_effects, refine (shooting refit of baseline and candidates), band_hz (measurement chain)."""
 
     def __init__(self, baseline: SparseModel | None = None, catalog: dict[str, Effect] | None = None,
                  holdout_fraction: float = 0.2, alpha: float = 1e-3, min_gap_closed: float = 0.2,
