@@ -9,6 +9,7 @@ import numpy as np
 
 from . import admissibility
 from .effects import CATALOG, Candidate, Effect
+from .masking import MASKED_P_BEATS, masked_candidates
 from ..simulation.shooting import bootstrap_prob, trimmed_total
 from .structure import Fitter, Structure
 
@@ -107,6 +108,21 @@ class Rounds:
             return {"best": None, "table": table}
         best, others = ok[0], ok[1:]
         return {"best": best, "table": table, "entry": self._entry(best, others, err, held)}
+
+    def _mask_round(self, fitter: Fitter, cur: Structure, err, cur_se, mse_cur, catalog, named: str) -> dict:
+        """The members of a named effect's group it may mask (identify.explain.masking), each refit from its
+        signed start and tested on the shooting error; the best admissible one if it closes enough and beats
+        the explanation with MASKED_P_BEATS."""
+        cands = masked_candidates(fitter, cur, named, catalog)
+        for c in cands:
+            self._score(fitter, c, cur, err, cur_se, mse_cur)
+        table = [self._public(c) for c in sorted(cands, key=lambda c: -c.gap_share_closed)]
+        ok = sorted([c for c in cands if c.admissible and c.gap_share_closed >= self.min_gap_closed
+                     and c.p_beats_current >= MASKED_P_BEATS], key=lambda c: np.sum(c.err))
+        if not ok:
+            return {"best": None, "table": table}
+        others = [c for c in cands if c is not ok[0] and c.admissible]
+        return {"best": ok[0], "table": table, "entry": self._entry(ok[0], others, err, fitter.seg_held)}
 
     @staticmethod
     def _judged_after_refit(cands: list, ok: list, alpha: float) -> list:

@@ -179,18 +179,26 @@ class DiscrepancyAnalysis(Rounds):
 
     def _explain(self, fitter, cur, err, catalog):
         """Explain until explained: rounds while the gap is above the floor (LOOK_FACTOR, then
-        CONTINUE_FACTOR), each adding the best candidate that closes enough, the whole refit after."""
-        effects, rounds = [], []
+        CONTINUE_FACTOR), each adding the best candidate that closes enough, the whole refit after; when a
+        round names nothing (or the gap is down at the floor), the group of each named effect is checked
+        once for an effect it masks (identify.explain.masking)."""
+        effects, rounds, checked = [], [], set()
         cur_se, mse0 = self._base_fit.se, self._base_fit.mse_heldout
         self._plain = False
-        while len(effects) < self.max_effects and self._decision_gap(err) > (
-                LOOK_FACTOR if not effects else CONTINUE_FACTOR) * self.noise_floor_:
-            # within none_factor x the floor the answer is `none` unless a candidate clearly closes the gap
-            near = not effects and self._gap(err) <= self.none_factor * self.noise_floor_
-            step = self._round(fitter, cur, err, cur_se, mse0, catalog, near)
-            self._plain = True  # rounds after the first decide on plain sums (see _total)
-            rounds.append(step["table"])
-            if step["best"] is None:
+        while len(effects) < self.max_effects:
+            step = None
+            if self._decision_gap(err) > (LOOK_FACTOR if not effects else CONTINUE_FACTOR) * self.noise_floor_:
+                # within none_factor x the floor the answer is `none` unless a candidate clearly closes the gap
+                near = not effects and self._gap(err) <= self.none_factor * self.noise_floor_
+                step = self._round(fitter, cur, err, cur_se, mse0, catalog, near)
+                self._plain = True  # rounds after the first decide on plain sums (see _total)
+                rounds.append(step["table"])
+            while self.refine and (step is None or step["best"] is None) and self._unchecked(effects, checked):
+                named = self._unchecked(effects, checked)[0]
+                checked.add(CATALOG[named].group)
+                step = self._mask_round(fitter, cur, err, cur_se, mse0, catalog, named)
+                rounds.append(step["table"])
+            if step is None or step["best"] is None:
                 break
             best, entry, gap_prev = step["best"], step["entry"], self._gap(err)
             cur, err = best.structure, best.err
@@ -202,6 +210,12 @@ class DiscrepancyAnalysis(Rounds):
         self.rounds_ = rounds
         self.candidates_ = rounds[0] if rounds else []
         return cur, err, effects
+
+    @staticmethod
+    def _unchecked(effects: list, checked: set) -> list[str]:
+        """Named physics effects whose group (Effect.group) has not been checked for masking yet."""
+        return [e["name"] for e in effects if e["name"] in CATALOG and CATALOG[e["name"]].kind == "physics"
+                and CATALOG[e["name"]].group and CATALOG[e["name"]].group not in checked]
 
     def _answer(self, cur, err, effects) -> None:
         """The answer: the first effect added, `none` or `unexplained`, and its confidence."""
