@@ -122,7 +122,8 @@ class Rounds:
         if not ok:
             return {"best": None, "table": table}
         others = [c for c in cands if c is not ok[0] and c.admissible]
-        return {"best": ok[0], "table": table, "entry": self._entry(ok[0], others, err, fitter.seg_held)}
+        entry = {**self._entry(ok[0], others, err, fitter.seg_held), "masked_by": named}
+        return {"best": ok[0], "table": table, "entry": entry}
 
     @staticmethod
     def _judged_after_refit(cands: list, ok: list, alpha: float) -> list:

@@ -179,9 +179,9 @@ class DiscrepancyAnalysis(Rounds):
 
     def _explain(self, fitter, cur, err, catalog):
         """Explain until explained: rounds while the gap is above the floor (LOOK_FACTOR, then
-        CONTINUE_FACTOR), each adding the best candidate that closes enough, the whole refit after; when a
-        round names nothing (or the gap is down at the floor), the group of each named effect is checked
-        once for an effect it masks (identify.explain.masking)."""
+        CONTINUE_FACTOR), each adding the best candidate that closes enough, the whole refit after; once
+        the gap is down at the floor, the group of each named effect is checked once for an effect it masks
+        (identify.explain.masking)."""
         effects, rounds, checked = [], [], set()
         cur_se, mse0 = self._base_fit.se, self._base_fit.mse_heldout
         self._plain = False
@@ -193,7 +193,9 @@ class DiscrepancyAnalysis(Rounds):
                 step = self._round(fitter, cur, err, cur_se, mse0, catalog, near)
                 self._plain = True  # rounds after the first decide on plain sums (see _total)
                 rounds.append(step["table"])
-            while self.refine and (step is None or step["best"] is None) and self._unchecked(effects, checked):
+            at_floor = step is None  # below the floor: what is left may be masked
+            while self.refine and at_floor and (step is None or step["best"] is None) \
+                    and self._unchecked(effects, checked):
                 named = self._unchecked(effects, checked)[0]
                 checked.add(CATALOG[named].group)
                 step = self._mask_round(fitter, cur, err, cur_se, mse0, catalog, named)
