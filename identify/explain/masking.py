@@ -12,22 +12,25 @@ from the explanation's own coefficients, with the damping started on its physica
 probability 1.0); on a Coulomb-only rig the same refit drifts to the wrong sign and raises the held-out
 error.
 
-So once the gap is down at the floor (identify.explain.workflow.CONTINUE_FACTOR x it), the group of each named
-effect is checked once (DiscrepancyAnalysis._explain): screen() takes each other plain-term member's Gauss-Newton step
-on the training segments' shooting error from the explanation (one run per coefficient: the Jacobian of
-its coefficients, and a secant for the member's terms) and keeps those it moves to their physical side;
-up to MASKED_REFITS of them are refit on the shooting error from the explanation's coefficients and that
-step (not from the equation error's, which is what is off); each is tested on the shooting error itself
-(shooting_test: its Wald statistic under the segment-clustered sandwich), judged on the sign rules with
-those standard errors, and added if it removes min_gap_closed of the held-out squared error and beats the
-explanation with MASKED_P_BEATS. Below the floor this is where the evidence is: the held-out segments are
-not fitted, so a drop of their error is the model's, not noise fitted away. The entry says `masked_by`.
-Above the floor a round that names nothing is where the rounds end: the check, run there too at first,
-named an energy-injecting displacement-dependent damping (closing 37 %, p 8e-19) on a Coulomb-only rig
-whose Coulomb model left 3.1x the floor (benchmarks/explain_robustness.py --seed 2433474371 --case 108).
-On the design rig (30 s, 1-20 Hz at 1.3 mm, 0.5 % noise; tests/identify/test_masking.py) the joint
-shooting refit finds quadratic damping at 7-13 % of truth beside Coulomb friction (p ~ 1e-20) and, on a
-Coulomb-only rig, +0.3 +- 0.2 (p 0.02-0.14).
+So once the reported (trimmed) gap is down at the floor (identify.explain.workflow.CONTINUE_FACTOR x it; a
+round on the plain sums may still have run and named nothing), the group of each named effect is checked once
+(DiscrepancyAnalysis._explain, with refine on): screen() takes each other plain-term member with a physical
+side (Effect.sign: Coulomb friction, quadratic and cubic damping)'s Gauss-Newton step on the training
+segments' shooting error from the explanation (one run per coefficient: the Jacobian of its coefficients, and
+a secant for the member's terms) and keeps those it moves to their physical side; up to MASKED_REFITS of them
+are refit on the shooting error from the explanation's coefficients and that step (not from the equation
+error's, which is what is off); each is tested on the shooting error itself (shooting_test: its Wald statistic
+under the segment-clustered sandwich), judged on the sign rules with those standard errors, and added if it
+removes min_gap_closed of the held-out squared error and beats the explanation with MASKED_P_BEATS; the polish
+after it (workflow.POLISH_NFEV) is not kept if it takes the term across zero. Below the floor this is where
+the evidence is: the held-out segments are not fitted, so a drop of their error is the model's, not noise
+fitted away. The entry says `masked_by`. Above the floor a round that names nothing is where the rounds end:
+the check, run there too at first, named an energy-injecting displacement-dependent damping (closing 37 %, p
+8e-19) on a Coulomb-only rig whose Coulomb model left 3.1x the floor (benchmarks/explain_robustness.py --seed
+2433474371 --case 108).
+On the design rig (30 s, 1-20 Hz at 1.3 mm, 0.5 % noise; tests/identify/test_masking.py) the joint shooting
+refit finds quadratic damping within 7-13 % of truth beside Coulomb friction (p ~ 1e-20) and, on a Coulomb-
+only rig, +0.3 +- 0.2 (p 0.02-0.14).
 """
 from __future__ import annotations
 
@@ -48,6 +51,8 @@ MASKED_P_BEATS = 0.99
 MASKED_REFITS = 3
 #: The screen's secant for a new term spans at least this many of its equation-error standard errors.
 MIN_START_SE = 1.0
+#: The shooting test's curvature (on unit columns) beyond this condition number determines nothing: p = 1.
+MAX_CONDITION = 1e10
 #: Relative step of the shooting test's finite differences (of each coefficient's magnitude).
 TEST_STEP = 1e-5
 #: A segment's leverage on the test (its share of the Gauss-Newton curvature, largest eigenvalue) is taken
@@ -79,14 +84,16 @@ class _Runs:
 
     def jacobian(self, r0: np.ndarray, steps0: int, names=None, sizes=None) -> np.ndarray | None:
         """Forward differences of the residuals in `names` (default: every free coefficient) at steps
-        `sizes` (default: TEST_STEP of each magnitude); None where a run diverges or changes its substeps."""
+        `sizes` (secants: a change of the integration's substeps is allowed, small beside the step) or
+        TEST_STEP of each magnitude (derivatives: it is not); None where a run diverges, or a derivative's
+        run changes its substeps."""
         names = self.names if names is None else names
         coef = self.st.coefficients
         J = np.empty((r0.size, len(names)))
         for j, t in enumerate(names):
             h = sizes[j] if sizes is not None else TEST_STEP * max(abs(coef[t]), 1e-12)
             r, steps, bad = self({t: coef[t] + h})
-            if bad or steps != steps0:
+            if bad or (sizes is None and steps != steps0):
                 return None
             J[:, j] = (r - r0) / h
         return J
@@ -98,26 +105,34 @@ def shooting_test(fitter: Fitter, st: Structure, terms: list) -> tuple[dict, flo
     and the segment-clustered sandwich, each segment's score J_s' r_s taken as the jackknife's shift
     (H - H_s)^-1 J_s' r_s (CR3, leverage capped at MAX_LEVERAGE); the Wald statistic over d terms read
     as F(d, segments - 1) (a fault's one-parameter test, t with segments - 1 degrees of freedom, is the
-    case d = 1). p = 1 where nothing is determined (a run diverging, the integration's substeps changing,
-    a singular curvature)."""
+    case d = 1; W / d against F is looser than Hotelling's for d > 1, and every plain member has d = 1). S is
+    the number of training segments. The algebra is on unit-norm Jacobian columns (the coefficients span
+    ~10 decades). A segment's leverage above MAX_LEVERAGE scales its whole H_s (exact for d = 1). The
+    Bouc-Wen pair and a free end-stop travel, refit beside the coefficients by Fitter.refine, are held at
+    their values here: their uncertainty is not in these standard errors. p = 1 where nothing is
+    determined (a run diverging, the integration's substeps changing, a curvature with condition number
+    beyond MAX_CONDITION)."""
     runs = _Runs(fitter, st)
     r0, steps0, bad = runs()
     J = None if bad else runs.jacobian(r0, steps0)
     if J is None:
         return {}, 1.0
-    H = J.T @ J
-    cuts = np.cumsum([0] + runs.lengths)
-    try:
-        H_inv = np.linalg.inv(H)
-        shifts = []
-        for a, b in zip(cuts[:-1], cuts[1:]):
-            Js = J[a:b]
-            Hs = Js.T @ Js
-            lev = float(np.max(np.linalg.eigvals(H_inv @ Hs).real))
-            Hs = Hs * min(1.0, MAX_LEVERAGE / lev) if lev > 0 else Hs
-            shifts.append(np.linalg.solve(H - Hs, Js.T @ r0[a:b]))
-    except np.linalg.LinAlgError:
+    scale = np.linalg.norm(J, axis=0)  # the columns span ~10 decades (q2^3 against the input): unit columns
+    if not np.all(scale > 0):
         return {}, 1.0
+    Js_all = J / scale
+    H = Js_all.T @ Js_all
+    if not np.linalg.cond(H) < MAX_CONDITION:
+        return {}, 1.0
+    cuts = np.cumsum([0] + runs.lengths)
+    root = np.linalg.cholesky(np.linalg.inv(H))  # leverage: eigenvalues of L' H_s L, L L' = H^-1
+    shifts = []
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        Js = Js_all[a:b]
+        Hs = Js.T @ Js
+        lev = float(np.max(np.linalg.eigvalsh(root.T @ Hs @ root)))
+        Hs = Hs * min(1.0, MAX_LEVERAGE / lev) if lev > 0 else Hs
+        shifts.append(np.linalg.solve(H - Hs, Js.T @ r0[a:b]) / scale)
     D = np.array(shifts)
     cov = D.T @ D
     names, coef = runs.names, st.coefficients
@@ -126,64 +141,84 @@ def shooting_test(fitter: Fitter, st: Structure, terms: list) -> tuple[dict, flo
     block = cov[np.ix_(pos, pos)]
     if not pos or not np.all(np.diag(block) > 0):
         return se, 1.0
-    theta = np.array([coef[names[i]] for i in pos])
-    w = float(theta @ np.linalg.solve(block, theta))
+    theta = np.array([coef[names[i]] for i in pos]) / np.sqrt(np.diag(block))
+    corr = block / np.sqrt(np.outer(np.diag(block), np.diag(block)))
+    try:
+        w = float(theta @ np.linalg.solve(corr, theta))
+    except np.linalg.LinAlgError:
+        return se, 1.0
     return se, float(stats.f.sf(w / len(pos), len(pos), max(len(runs.lengths) - 1, 1)))
 
 
 def _members(fitter: Fitter, cur: Structure, named: str, catalog: dict) -> list:
-    """(effect, candidate) of the other plain-term physics members of the named effect's group."""
-    group = CATALOG[named].group if named in CATALOG else ""
+    """(effect, candidate) of the other plain-term physics members of the named effect's group that have a
+    physical side (Effect.sign): below the floor the sign is a guard the held-out error alone is not (a
+    sign-free displacement-dependent damping, energy-injecting, was named on a Coulomb-only rig)."""
+    named_effect = catalog.get(named) or CATALOG.get(named)
+    group = named_effect.group if named_effect is not None else ""
     out = []
     for name, effect in catalog.items():
         effect = effect if effect is not None else CATALOG[name]
-        if group and effect.group == group and effect.plain and effect.kind == "physics":
+        if group and effect.group == group and effect.plain and effect.kind == "physics" and effect.sign:
             cand = effect.propose(fitter, cur)
             if cand is not None:
                 out.append((effect, cand))
     return out
 
 
-def screen(fitter: Fitter, cur: Structure, members: list) -> list:
-    """[(predicted drop of the training shooting error, effect, candidate, start of its new terms)], largest
-    first, of the members whose Gauss-Newton step from the explanation (its coefficients' Jacobian and
-    the new terms' secants at one equation-error size, MIN_START_SE standard errors at least) moves the new
-    terms to their physical side (Effect.sign): one run per coefficient and member, where a refit is ~100."""
+def screen(fitter: Fitter, cur: Structure, members: list) -> tuple[list, list]:
+    """([(predicted drop of the training shooting error, effect, candidate, start of its new terms)], largest
+    first, of the members whose Gauss-Newton step from the explanation (its coefficients' Jacobian and the
+    new terms' secants at one equation-error size, MIN_START_SE standard errors at least) moves the new
+    terms to their physical side (Effect.sign); [(candidate, reason)] of the others): one run per
+    coefficient and member, where a refit is ~100."""
     runs = _Runs(fitter, cur)
     r0, steps0, bad = runs()
     J = None if bad else runs.jacobian(r0, steps0)
     if J is None:
-        return []
-    out = []
+        return [], [(c, "the explanation's shooting error gave no Gauss-Newton step") for _, c in members]
+    out, dropped = [], []
     for effect, cand in members:
         new = cand.terms
         size = [max(abs(cand.fit.coef.get(t, 0.0)), MIN_START_SE * cand.fit.se.get(t, 0.0)) or 1e-12 for t in new]
-        step = [effect.sign * h if effect.sign else np.copysign(h, cand.fit.coef.get(t, 0.0))
-                for t, h in zip(new, size)]
         st = replace(cand.structure, coef=tuple((t, cur.coefficients.get(t, 0.0)) for t in cand.structure.coefficients))
-        cols = _Runs(fitter, st).jacobian(r0, steps0, new, step)
-        if cols is None:
+        cols = _Runs(fitter, st).jacobian(r0, steps0, new, [effect.sign * h for h in size])
+        A = None if cols is None else np.column_stack([J, cols])
+        scale = None if A is None else np.linalg.norm(A, axis=0)
+        if scale is None or not np.all(scale > 0):
+            dropped.append((cand, "its free run diverged in the Gauss-Newton screen"))
             continue
-        A = np.column_stack([J, cols])
-        delta = np.linalg.lstsq(A, -r0, rcond=None)[0]
-        drop = float(r0 @ r0 - np.sum((r0 + A @ delta) ** 2))
+        delta = np.linalg.lstsq(A / scale, -r0, rcond=None)[0] / scale  # on unit columns, as shooting_test
         move = delta[-len(new):]
-        if effect.sign and not np.all(effect.sign * move > 0):
+        if not np.all(effect.sign * move > 0):
+            dropped.append((cand, f"its Gauss-Newton step on the shooting error goes to the wrong side "
+                                  f"({', '.join(f'{t} {m:+.4g}' for t, m in zip(new, move))})"))
             continue
+        drop = float(r0 @ r0 - np.sum((r0 + A @ delta) ** 2))
         out.append((drop, effect, cand, dict(zip(new, map(float, move)))))
-    return sorted(out, key=lambda x: -x[0])
+    return sorted(out, key=lambda x: -x[0]), dropped
 
 
-def masked_candidates(fitter: Fitter, cur: Structure, named: str, catalog: dict) -> list[Candidate]:
-    """The members of the named effect's group that screen() finds moving to their physical side, the best
+def masked_candidates(fitter: Fitter, cur: Structure, named: str, catalog: dict) -> tuple[list[Candidate], dict]:
+    """(the members of the named effect's group that screen() finds moving to their physical side, the best
     MASKED_REFITS of them refit on the shooting error from the explanation's coefficients and that step,
-    with their standard errors and p from shooting_test."""
-    out = []
-    for _, effect, cand, move in screen(fitter, cur, _members(fitter, cur, named, catalog))[:MASKED_REFITS]:
+    with their standard errors and p from shooting_test; {id(candidate): why not}: the others, at the
+    explanation itself (their terms at zero), for the report)."""
+    kept, dropped = screen(fitter, cur, _members(fitter, cur, named, catalog))
+    out, why = [], {}
+    for _, effect, cand, move in kept[:MASKED_REFITS]:
         start = dict(cur.coefficients, **move)
         st = fitter.refine(replace(cand.structure, coef=tuple((t, start[t]) for t in cand.structure.coefficients)))
         se, p = shooting_test(fitter, st, cand.terms)
         eq = fitter.equation_fit(st)
         fit = Fit(dict(st.coefficients), {**eq.se, **se}, eq.cov, eq.names, eq.mse_heldout)
-        out.append(replace(cand, structure=st, fit=fit, p_value=p))
-    return out
+        # the equation error's Wald statistic no longer applies: p is the shooting test's
+        out.append(replace(cand, structure=st, fit=fit, p_value=p, wald=None))
+    for _, _, cand, _ in kept[MASKED_REFITS:]:
+        dropped.append((cand, f"not refit (beyond MASKED_REFITS = {MASKED_REFITS})"))
+    for cand, reason in dropped:
+        st = replace(cand.structure, coef=tuple((t, cur.coefficients.get(t, 0.0)) for t in cand.structure.coefficients))
+        c = replace(cand, structure=st, p_value=1.0, wald=None)
+        why[id(c)] = reason
+        out.append(c)
+    return out, why

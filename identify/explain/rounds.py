@@ -110,12 +110,14 @@ class Rounds:
         return {"best": best, "table": table, "entry": self._entry(best, others, err, held)}
 
     def _mask_round(self, fitter: Fitter, cur: Structure, err, cur_se, mse_cur, catalog, named: str) -> dict:
-        """The members of a named effect's group it may mask (identify.explain.masking), each refit from its
-        signed start and tested on the shooting error; the best admissible one if it closes enough and beats
-        the explanation with MASKED_P_BEATS."""
-        cands = masked_candidates(fitter, cur, named, catalog)
+        """The members of a named effect's group it may mask (identify.explain.masking), screened, refit and
+        tested on the shooting error (those screened out listed with the reason); the best admissible one if
+        it closes enough and beats the explanation with MASKED_P_BEATS."""
+        cands, why_not = masked_candidates(fitter, cur, named, catalog)
         for c in cands:
             self._score(fitter, c, cur, err, cur_se, mse_cur)
+            if id(c) in why_not:  # screened out: listed at the explanation itself, with the reason
+                c.admissible, c.rejected = False, why_not[id(c)]
         table = [self._public(c) for c in sorted(cands, key=lambda c: -c.gap_share_closed)]
         ok = sorted([c for c in cands if c.admissible and c.gap_share_closed >= self.min_gap_closed
                      and c.p_beats_current >= MASKED_P_BEATS], key=lambda c: np.sum(c.err))

@@ -193,7 +193,9 @@ class DiscrepancyAnalysis(Rounds):
                 step = self._round(fitter, cur, err, cur_se, mse0, catalog, near)
                 self._plain = True  # rounds after the first decide on plain sums (see _total)
                 rounds.append(step["table"])
-            at_floor = step is None  # below the floor: what is left may be masked
+            # at the floor (the reported, trimmed gap: a round may still run on the plain sums) what is left
+            # may be masked; above it, a round that names nothing ends the rounds
+            at_floor = step is None or self._gap(err) <= CONTINUE_FACTOR * self.noise_floor_
             while self.refine and at_floor and (step is None or step["best"] is None) \
                     and self._unchecked(effects, checked):
                 named = self._unchecked(effects, checked)[0]
@@ -205,7 +207,10 @@ class DiscrepancyAnalysis(Rounds):
             best, entry, gap_prev = step["best"], step["entry"], self._gap(err)
             cur, err = best.structure, best.err
             if self.refine:
-                cur, err = self._polish(fitter, cur, err)
+                polished, perr = self._polish(fitter, cur, err)
+                # a masked term is weakly determined: a polish that takes it across zero is not kept
+                if not ("masked_by" in entry and CATALOG[best.name].admissibility(polished.coefficients, best.fit.se)):
+                    cur, err = polished, perr
                 entry.update(gap_after=self._gap(err), **closed_shares(gap_prev, self._gap(err)))
             effects.append(entry)
             cur_se = fitter.equation_fit(cur).se

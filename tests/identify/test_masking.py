@@ -2,13 +2,16 @@
 floor; the group check finds it by a refit and a test on the shooting error, and finds nothing on a rig
 without it. Design rig, 1-20 Hz in 30 s at 1.3 mm, 1000 Hz, 0.5 % noise (test_explain_effects._run)."""
 from dataclasses import replace
+from types import SimpleNamespace
 
+import jsonschema
 import pytest
 
 from identify.explain.masking import shooting_test
 from identify.explain.workflow import DiscrepancyAnalysis
 
 from .test_explain_effects import _run
+from .test_explain_schema import SCHEMA
 
 MASS_KG = 0.49  # the design rig's (RigParameters.design)
 
@@ -53,6 +56,9 @@ def test_damping_masked_by_coulomb_friction_is_named():
     first, second = res["effects"][:2]
     assert first["name"] == "coulomb_friction" and first["gap_after"] < res["noise_floor"]
     assert second["name"] == "quadratic_damping" and second["masked_by"] == "coulomb_friction"
+    entry_schema = {"$defs": SCHEMA["$defs"], "$ref": "#/$defs/effect_entry"}
+    for e in res["effects"]:  # masked_by is a documented field
+        jsonschema.Draft202012Validator(entry_schema).validate(e)
     assert res["model"]["q1_dot"]["q1*|q1|"] == pytest.approx(-1.0 / MASS_KG, rel=0.30)
     assert res["model"]["q1_dot"]["sign(q1)"] == pytest.approx(-0.1 / MASS_KG, rel=0.10)
 
@@ -65,3 +71,65 @@ def test_coulomb_alone_masks_nothing():
     assert [e["name"] for e in res["effects"]] == ["coulomb_friction"]
     checked = {c["name"] for c in res["rounds"][-1]}
     assert checked and checked <= {"quadratic_damping", "cubic_damping", "displacement_dependent_damping"}
+
+
+class _Scripted(DiscrepancyAnalysis):
+    """The rounds' control flow alone: each gap is a number (the per-segment errors stand in as it), a
+    round names the next scripted effect, the masking check records which effect's group it was asked for.
+    No fitting: a stand-in for the fitter's parts _explain touches, to test when the check runs."""
+
+    def __init__(self, rounds, masked=(), trimmed=1.0, **kw):
+        super().__init__(**kw)
+        self.script, self.masked, self.asked, self.trimmed = list(rounds), list(masked), [], trimmed
+        self._base_fit = SimpleNamespace(se={}, mse_heldout=1.0)
+        self.noise_floor_ = 1.0
+
+    def _decision_gap(self, err):  # the plain sums after the first round
+        return err
+
+    def _gap(self, err):  # the reported, trimmed gap
+        return err * self.trimmed
+
+    def _polish(self, fitter, cur, err):
+        return cur, err
+
+    @staticmethod
+    def _step(named, gap, **entry):
+        if named is None:
+            return {"best": None, "table": []}
+        best = SimpleNamespace(name=named, structure=SimpleNamespace(coefficients={}), err=gap, fit=SimpleNamespace(se={}))
+        return {"best": best, "table": [], "entry": {"name": named, **entry}}
+
+    def _round(self, fitter, cur, err, *args, **kw):
+        return self._step(*self.script.pop(0))
+
+    def _mask_round(self, fitter, cur, err, cur_se, mse_cur, catalog, named):
+        self.asked.append(named)
+        return self._step(*(self.masked.pop(0) if self.masked else (None, err)), masked_by=named)
+
+
+def _explained(analysis, gap):
+    fitter = SimpleNamespace(equation_fit=lambda st: SimpleNamespace(se={}))
+    return [e["name"] for e in analysis._explain(fitter, SimpleNamespace(coefficients={}), gap, {})[2]]
+
+
+def test_the_masking_check_runs_only_at_the_floor_once_per_group():
+    # a round above the floor that names nothing ends the rounds: no check (seed 2433474371 case 108)
+    a = _Scripted([("coulomb_friction", 3.0), (None, 3.0)])
+    assert _explained(a, 5.0) == ["coulomb_friction"] and a.asked == []
+    # the reported (trimmed) gap at the floor while the plain sums are above it: the round runs, names
+    # nothing, and the check runs (seed 2590080356 case 122)
+    a = _Scripted([("coulomb_friction", 1.5), (None, 1.5)], trimmed=0.5)
+    assert _explained(a, 5.0) == ["coulomb_friction"] and a.asked == ["coulomb_friction"]
+    # at the floor the named effect's group is checked, once, and what it finds is added
+    a = _Scripted([("coulomb_friction", 0.8)], masked=[("quadratic_damping", 0.6)])
+    assert _explained(a, 5.0) == ["coulomb_friction", "quadratic_damping"] and a.asked == ["coulomb_friction"]
+    # two named effects of one group: one check; of two groups: one each
+    a = _Scripted([("coulomb_friction", 3.0), ("cubic_damping", 0.9)])
+    assert _explained(a, 5.0) == ["coulomb_friction", "cubic_damping"] and a.asked == ["coulomb_friction"]
+    a = _Scripted([("quadratic_stiffness", 3.0), ("coulomb_friction", 0.9)])
+    assert _explained(a, 5.0) == ["quadratic_stiffness", "coulomb_friction"]
+    assert a.asked == ["quadratic_stiffness", "coulomb_friction"]
+    # without the shooting refit there is no check
+    a = _Scripted([("coulomb_friction", 0.8)], refine=False)
+    assert _explained(a, 5.0) == ["coulomb_friction"] and a.asked == []
