@@ -115,9 +115,11 @@ class Rounds:
         it closes enough and beats the explanation with MASKED_P_BEATS."""
         cands, why_not = masked_candidates(fitter, cur, named, catalog)
         for c in cands:
-            self._score(fitter, c, cur, err, cur_se, mse_cur)
-            if id(c) in why_not:  # screened out: listed at the explanation itself, with the reason
+            if id(c) in why_not:  # screened out: listed at the explanation itself (its errors), with the reason
+                c.err, c.gap_share_closed, c.p_beats_current, c.score = err, 0.0, 0.0, 0.0
                 c.admissible, c.rejected = False, why_not[id(c)]
+            else:
+                self._score(fitter, c, cur, err, cur_se, mse_cur)
         table = [self._public(c) for c in sorted(cands, key=lambda c: -c.gap_share_closed)]
         ok = sorted([c for c in cands if c.admissible and c.gap_share_closed >= self.min_gap_closed
                      and c.p_beats_current >= MASKED_P_BEATS], key=lambda c: np.sum(c.err))

@@ -196,10 +196,11 @@ class DiscrepancyAnalysis(Rounds):
             # at the floor (the reported, trimmed gap: a round may still run on the plain sums) what is left
             # may be masked; above it, a round that names nothing ends the rounds
             at_floor = step is None or self._gap(err) <= CONTINUE_FACTOR * self.noise_floor_
-            while self.refine and at_floor and (step is None or step["best"] is None) \
-                    and self._unchecked(effects, checked):
-                named = self._unchecked(effects, checked)[0]
+            unchecked = self._unchecked(effects, checked) if self.refine and at_floor else []
+            while unchecked and (step is None or step["best"] is None):
+                named = unchecked.pop(0)
                 checked.add(CATALOG[named].group)
+                unchecked = [n for n in unchecked if CATALOG[n].group not in checked]
                 step = self._mask_round(fitter, cur, err, cur_se, mse0, catalog, named)
                 rounds.append(step["table"])
             if step is None or step["best"] is None:
