@@ -24,20 +24,21 @@ def _record(seed: int, duration_s: float, noise: float = 0.05):
 def test_a_kept_term_within_a_few_standard_errors_of_zero_is_reported_apart():
     """The found case: 30 s, 5 % noise, seed 418825265 (one of 3 in 60 fresh draws at 1-5 % noise and
     20-60 s to keep a spurious term; every true term had P(kept) 1.00). The held-out placement of the fit
-    keeps q1^2*q2, none of the 24 random placements does. Reported: the five true terms; q1^2*q2 apart,
-    with a coefficient within 3 standard errors of its true 0."""
+    keeps q1*q2^3, none of the 24 random placements does. Reported: the five true terms; q1*q2^3 apart,
+    with a coefficient within 3 standard errors of its true 0. (It was q1^2*q2 while an even selection
+    carried a displacement below the band without asking whether the data establish it: the last test.)"""
     rec = _record(418825265, 30.0)
     ident = SparseIdentifier().fit(rec)  # only terms the selection kept are judged and listed apart
     res = ident.result()
     assert set(res["model"]["q1_dot"]) == set(TRUTH) and res["selection"]["q1_dot"]["n_terms"] == len(TRUTH)
     apart = res["uncertain_terms"]["q1_dot"]
-    assert list(apart) == ["q1^2*q2"] and res["uncertain_terms"]["q2_dot"] == {}
-    term = apart["q1^2*q2"]
+    assert list(apart) == ["q1*q2^3"] and res["uncertain_terms"]["q2_dot"] == {}
+    term = apart["q1*q2^3"]
     assert term["inclusion_probability"] < unc.MIN_INCLUSION_PROBABILITY
     assert abs(term["coefficient"]) < 3 * term["standard_error"]
     # left out of what is simulated and validated, and of the selection's support, too
-    assert "q1^2*q2" not in ident.training_model_.equations["q1_dot"]
-    assert "q1^2*q2" not in ident.validated_model_.equations["q1_dot"]
+    assert "q1*q2^3" not in ident.training_model_.equations["q1_dot"]
+    assert "q1*q2^3" not in ident.validated_model_.equations["q1_dot"]
     for t, c in TRUTH.items():  # the terms left, refit without it, hold the truth
         assert abs(res["model"]["q1_dot"][t] - c) < 3 * res["standard_errors"]["q1_dot"][t], t
 
@@ -72,24 +73,45 @@ def test_a_term_the_data_carry_stays_whatever_its_probability():
 
 
 def test_a_kept_term_within_a_few_standard_errors_is_left_out_whatever_its_probability():
-    """A 60 s record of 2-20 Hz noise on the Table 1 rig (sim.synth.noise_input_recording), seed 1314243276:
-    the selection keeps q1^2 and q2^2, at P(kept) 0.79 and 0.83 but 2.4 and 2.9 standard errors from zero
-    (a rule that also asked P(kept) < 0.5 kept them); q1^2 leaves first, and refit without it q2^2 is still
-    within 3 standard errors. Both are reported apart; the model is the true one,
-    each coefficient within 3 standard errors of the truth. Without inclusion probabilities (placements=0)
-    the same terms leave: the bound is on the standard errors, which do not depend on them."""
-    rec = noise_input_recording(1314243276)
+    """A 60 s record of 2-20 Hz noise on the Table 1 rig (sim.synth.noise_input_recording), seed 7018 (one of
+    60 draws, 7000-7059, all of which gave the true model): the selection keeps q2^2, the constant and q1^2,
+    at P(kept) 0.58-0.63 but 2.5-2.9 standard errors from zero (a rule that also asked P(kept) < 0.5 kept
+    them). The three are reported apart; the model is the true one, each coefficient within 3 standard
+    errors of the truth. Without inclusion probabilities (placements=0) the same terms leave: the bound is on
+    the standard errors, which do not depend on them. (The case before, seed 1314243276, was one where an even
+    selection carried a displacement below the band the data did not establish: the last test.)"""
+    apart_expected = {"q2^2", "1", "q1^2"}
+    rec = noise_input_recording(7018)
     res = SparseIdentifier().fit(rec).result()
     apart = res["uncertain_terms"]["q1_dot"]
-    assert set(apart) == {"q1^2", "q2^2"}, apart
+    assert set(apart) == apart_expected, apart
     assert all(u["inclusion_probability"] >= unc.MIN_INCLUSION_PROBABILITY for u in apart.values()), apart
     assert set(res["model"]["q1_dot"]) == set(TRUTH)
     for t, c in TRUTH.items():
         assert abs(res["model"]["q1_dot"][t] - c) < 3 * res["standard_errors"]["q1_dot"][t], t
     bare = SparseIdentifier(placements=0).fit(rec).result()
-    assert set(bare["uncertain_terms"]["q1_dot"]) == {"q1^2", "q2^2"} and set(bare["model"]["q1_dot"]) == set(TRUTH)
+    assert set(bare["uncertain_terms"]["q1_dot"]) == apart_expected and set(bare["model"]["q1_dot"]) == set(TRUTH)
     assert all(u["inclusion_probability"] is None for u in bare["uncertain_terms"]["q1_dot"].values())
     assert bare["uncertainty"]["term_rules"]["significant_z"] == unc.SIGNIFICANT_Z  # the bound stated all the same
     said = summary(bare, "noise.csv")
     assert f"(within {unc.SIGNIFICANT_Z:g} standard errors of zero)" in said and "q2^2 (q1_dot) " in said
     assert "P(kept)" not in said.split("uncertain terms")[1].split("\n")[0]  # said without a probability
+
+
+def test_an_even_term_the_data_do_not_establish_carries_no_displacement_below_the_band():
+    """Seed 5036 (30 s, 5 % noise; found in 40 draws): the first selection has q2^2 and q2^4, an even force
+    within 2 standard errors of zero. Carried as if it were one, the second pass on the band-limited
+    columns kept q2^4 in the model (before: q1, q2, q1*q2^2, q2^3, q2^4, zdd; offset carried, SIMEX). Decided
+    on the terms the data establish: the true five, no offset, the two listed apart within 3 standard
+    errors of their true 0, the closed-form chain bias (no carried offset stands in its way)."""
+    ident = SparseIdentifier(validate=False).fit(_record(5036, 30.0))
+    res = ident.result()
+    assert set(res["model"]["q1_dot"]) == set(TRUTH)
+    assert ident.offset_["carried"] is False
+    apart = res["uncertain_terms"]["q1_dot"]
+    assert {"q2^2", "q2^4"} <= set(apart)
+    for term in apart.values():
+        assert abs(term["coefficient"]) < 3 * term["standard_error"]
+    assert ident.uncertainty_["chain_bias"]["method"] == unc.ANALYTIC
+    for term, c in TRUTH.items():
+        assert abs(ident.model_.coefficient("q1_dot", term) / c - 1) < 0.03, term
