@@ -37,8 +37,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from scipy import stats
-
+from .clustered import cr3_covariance, wald_p
 from .effects import CATALOG, Candidate
 from .structure import Fit, Fitter, Structure
 
@@ -55,9 +54,6 @@ MIN_START_SE = 1.0
 MAX_CONDITION = 1e10
 #: Relative step of the shooting test's finite differences (of each coefficient's magnitude).
 TEST_STEP = 1e-5
-#: A segment's leverage on the test (its share of the Gauss-Newton curvature, largest eigenvalue) is taken
-#: as at most this in its CR3 correction, as a fault's test does (identify.explain.effects.faults).
-MAX_LEVERAGE = 0.9
 
 
 class _Runs:
@@ -102,12 +98,11 @@ class _Runs:
 def shooting_test(fitter: Fitter, st: Structure, terms: list) -> tuple[dict, float]:
     """({term: standard error}, p) of `terms`' coefficients in `st` against zero, on the training segments'
     shooting error: its Gauss-Newton curvature H = J'J (forward differences, one run per free coefficient)
-    and the segment-clustered sandwich, each segment's score J_s' r_s taken as the jackknife's shift
-    (H - H_s)^-1 J_s' r_s (CR3, leverage capped at MAX_LEVERAGE); the Wald statistic over d terms read
-    as F(d, segments - 1) (a fault's one-parameter test, t with segments - 1 degrees of freedom, is the
-    case d = 1; W / d against F is looser than Hotelling's for d > 1, and every plain member has d = 1). S is
-    the number of training segments. The algebra is on unit-norm Jacobian columns (the coefficients span
-    ~10 decades). A segment's leverage above MAX_LEVERAGE scales its whole H_s (exact for d = 1). The
+    and the segment-clustered sandwich of identify.explain.clustered (each segment's score J_s' r_s
+    taken as the jackknife's shift, CR3; the Wald statistic over d terms read as F(d, segments - 1), the
+    case d = 1 being a fault's one-parameter t; W / d against F is looser than Hotelling's for d > 1, and
+    every plain member has d = 1). The algebra is on unit-norm Jacobian columns (the coefficients span
+    ~10 decades). A segment's leverage above clustered.MAX_LEVERAGE scales its whole H_s (exact for d = 1). The
     Bouc-Wen pair and a free end-stop travel, refit beside the coefficients by Fitter.refine, are held at
     their values here: their uncertainty is not in these standard errors. p = 1 where nothing is
     determined (a run diverging, the integration's substeps changing, a curvature with condition number
@@ -125,29 +120,17 @@ def shooting_test(fitter: Fitter, st: Structure, terms: list) -> tuple[dict, flo
     if not np.linalg.cond(H) < MAX_CONDITION:
         return {}, 1.0
     cuts = np.cumsum([0] + runs.lengths)
-    root = np.linalg.cholesky(np.linalg.inv(H))  # leverage: eigenvalues of L' H_s L, L L' = H^-1
-    shifts = []
-    for a, b in zip(cuts[:-1], cuts[1:]):
-        Js = Js_all[a:b]
-        Hs = Js.T @ Js
-        lev = float(np.max(np.linalg.eigvalsh(root.T @ Hs @ root)))
-        Hs = Hs * min(1.0, MAX_LEVERAGE / lev) if lev > 0 else Hs
-        shifts.append(np.linalg.solve(H - Hs, Js.T @ r0[a:b]) / scale)
-    D = np.array(shifts)
-    cov = D.T @ D
+    pieces = [Js_all[a:b] for a, b in zip(cuts[:-1], cuts[1:])]
+    cov = cr3_covariance(H, [Js.T @ Js for Js in pieces], [Js.T @ r0[a:b] for Js, a, b
+                                                            in zip(pieces, cuts[:-1], cuts[1:])])
+    cov = cov / np.outer(scale, scale)
     names, coef = runs.names, st.coefficients
     se = {t: float(np.sqrt(max(cov[j, j], 0.0))) for j, t in enumerate(names)}
     pos = [names.index(t) for t in terms if t in names]
-    block = cov[np.ix_(pos, pos)]
-    if not pos or not np.all(np.diag(block) > 0):
+    if not pos:
         return se, 1.0
-    theta = np.array([coef[names[i]] for i in pos]) / np.sqrt(np.diag(block))
-    corr = block / np.sqrt(np.outer(np.diag(block), np.diag(block)))
-    try:
-        w = float(theta @ np.linalg.solve(corr, theta))
-    except np.linalg.LinAlgError:
-        return se, 1.0
-    return se, float(stats.f.sf(w / len(pos), len(pos), max(len(runs.lengths) - 1, 1)))
+    values = np.array([coef[names[i]] for i in pos])
+    return se, wald_p(values, cov[np.ix_(pos, pos)], len(runs.lengths))
 
 
 def _members(fitter: Fitter, cur: Structure, named: str, catalog: dict) -> list:

@@ -7,11 +7,12 @@ simulator makes them with sim.sensors.Accelerometer (gain, delay_s, bias_drift_m
 
 A fault's name needs the evidence a physical name needs (issue 32): a test of its own, its p held to the
 analysis' alpha as a Wald p is. The fitted value is an M-estimate (the minimum of a sum over training
-segments), so its standard error is the segment-clustered sandwich, H^-1 sqrt(sum_s g_s^2), g_s the slope
-of segment s's error and H the curvature of the sum at the fitted value (central differences at
-FAULT_STEP of the search range: three shooting runs). A few segments (the resonance's) carry most of the
-curvature, so there are few effective clusters: each slope is scaled by 1 / (1 - H_s / H), its
-segment's leverage (the CR3 / jackknife correction), and t = value / SE is read against Student's t with
+segments), so its standard error is the segment-clustered sandwich (identify.explain.clustered, which the
+masking check's test shares), H^-1 sqrt(sum_s g_s^2), g_s the slope of segment s's error and H the
+curvature of the sum at the fitted value (central differences at FAULT_STEP of the search range: three
+shooting runs). A few segments (the resonance's) carry most of the curvature, so there are few effective
+clusters: each slope is scaled by 1 / (1 - H_s / H), its segment's leverage (the CR3 / jackknife
+correction, capped at clustered.MAX_LEVERAGE), and t = value / SE is read against Student's t with
 segments - 1 degrees of freedom (the small-cluster recipe of Cameron and Miller, 2015). Kish's effective
 number of segments as the degrees of freedom was tried and was too strict: a true 2.5 % gain beside
 Coulomb friction, t = 65, came out at p = 0.01 (S_eff ~ 2) and a stiffness drift was named instead.
@@ -24,9 +25,9 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from scipy import stats
 from scipy.optimize import minimize_scalar
 
+from ..clustered import cr3_covariance, wald_p
 from ..measurement import PARAMS
 from .base import Candidate, Effect
 
@@ -34,9 +35,6 @@ from .base import Candidate, Effect
 #: 4e-4, a delay step of 20 us. Small against the faults the suite draws (gains of 2-5 %, delays of
 #: 0.3-2 ms), large against the shooting's rounding.
 FAULT_STEP = 2e-3
-#: A segment's share of the curvature above this is taken as this in its leverage correction (a segment
-#: that holds all of it would otherwise divide by zero).
-MAX_LEVERAGE = 0.9
 
 
 class ChannelFault(Effect):
@@ -102,13 +100,11 @@ class ChannelFault(Effect):
         curvature = float(np.sum(per_segment))
         if len(steps) > 1 or not curvature > 0 or e[0].size < 2:
             return 0.0, 1.0
-        share = np.clip(per_segment / curvature, 0.0, None)
-        slopes = (e[2] - e[0]) / (2 * h) / (1.0 - np.minimum(share, MAX_LEVERAGE))
-        se = float(np.sqrt(np.sum(slopes ** 2))) / curvature
+        cov = cr3_covariance(np.array([[curvature]]), per_segment[:, None, None], ((e[2] - e[0]) / (2 * h))[:, None])
+        se = float(np.sqrt(cov[0, 0]))
         if not se > 0:
             return 0.0, 1.0
-        t = value / se
-        return float(t), float(2 * stats.t.sf(abs(t), e[0].size - 1))
+        return value / se, wald_p(np.array([value]), cov, e[0].size)
 
     same_as: tuple[str, ...] = ()
 
