@@ -67,16 +67,12 @@ class _Runs:
         self.names = [t for t in st.coefficients if t not in self.ties]  # tied terms follow their free term
         d = self.data
         self.lengths = [int(b - a) for a, b, w in zip(d.starts, d.stops, self.train) if w]
-        self.rows = np.concatenate([np.arange(a, b) for a, b, w in zip(d.starts, d.stops, self.train) if w])
 
     def __call__(self, values: dict | None = None):
         c = dict(self.st.coefficients, **(values or {}))
         c.update({t: f * c[s] for t, (s, f) in self.ties.items()})
         model = self.fitter.model(replace(self.st, coef=tuple((t, c[t]) for t in self.st.coefficients)))
-        out, err, substeps = self.data.run(model, self.train)
-        bad = bool(np.any(err[self.train] == self.data.divergence_error()[self.train]))
-        r = out[self.rows] - self.data.measured[self.rows]
-        return r, substeps, bad or not np.all(np.isfinite(r))
+        return self.data.run_residuals(model, self.train)
 
     def jacobian(self, r0: np.ndarray, steps0: int, names=None, sizes=None) -> np.ndarray | None:
         """Forward differences of the residuals in `names` (default: every free coefficient) at steps

@@ -194,12 +194,25 @@ class ShootingData:
         out[idx] = np.clip(np.nan_to_num(d), -0.5 * h * 1e3, 0.5 * h * 1e3)
         return out
 
+    def segment_rows(self, which: np.ndarray) -> np.ndarray:
+        """The rows of the segments in `which`, segment after segment."""
+        return np.concatenate([np.arange(a, b) for a, b, w in zip(self.starts, self.stops, which) if w])
+
+    def run_residuals(self, model: SparseModel, which: np.ndarray) -> tuple[np.ndarray, int, bool]:
+        """(unscaled residuals simulated - measured over segment_rows(which), NaN where not run; substeps;
+        whether a segment's free run diverged or a residual is not finite)."""
+        out, err, substeps = self.run(model, which)
+        rows = self.segment_rows(which)
+        r = out[rows] - self.measured[rows]
+        diverged = bool(np.any(err[which] == self.divergence_error()[which])) or not np.all(np.isfinite(r))
+        return r, substeps, diverged
+
     def residuals(self, model: SparseModel, which: np.ndarray) -> np.ndarray:
-        """Scaled residual vector over the rows of the segments in `which` (for least squares)."""
-        out, err, _ = self.run(model, which)
-        rows = np.concatenate([np.arange(a, b) for a, b, w in zip(self.starts, self.stops, which) if w])
-        r = (out[rows] - self.measured[rows]) * self.scale
-        return np.where(np.isfinite(r), r, 10.0 * np.abs(self.measured[rows]) + 1e-12)
+        """Scaled residual vector over the rows of the segments in `which` (for least squares); a diverged
+        segment's rows 10x their measured magnitude."""
+        r, _, _ = self.run_residuals(model, which)
+        r = r * self.scale
+        return np.where(np.isfinite(r), r, 10.0 * np.abs(self.measured[self.segment_rows(which)]) + 1e-12)
 
 
 #: Share of the segments whose largest errors are left out of any total that decides (at least one of
