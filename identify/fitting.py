@@ -140,16 +140,19 @@ def fit_sources(ident, sources: list, timings: dict) -> list:
     # source finds it (identify.chain.inband) and the pass runs again on q2 + offset. An odd force needs none.
     t0 = time.perf_counter()
     ident.offset_ = {"carried": False, "passes": 0}
-    even, dropped = _established_even_force(ident, sources, blocks, gram, held, n_eff, coefs)
+    even, trusted = _established_even_force(ident, sources, blocks, gram, held, n_eff, coefs)
     if even and len(sources) > 1:
         raise IdentificationError(
-            "the joint fit has a force with an even part (" + ", ".join(training.equations["q1_dot"]) + "): its "
-            "displacement below the band is carried per record (identify.chain.inband), which joint identification "
-            "does not do; identify the recordings one by one")
+            "the joint fit has a force with an even part (" + ", ".join(_named(ident.selections_, lib.names)["q1_dot"])
+            + "): its displacement below the band is carried per record (identify.chain.inband), which joint "
+            "identification does not do; identify the recordings one by one")
     if even:
         sources[0], gram, ident.offset_ = sources[0].carry_offset(lib, blocks[0][0], ~held)
         train, coefs = fit_pass(ident, n_eff, gram, held, timings)
-    timings["offset"] = time.perf_counter() - t0
+        trusted = None  # a new selection on the carried displacement: trusted afresh below
+    elif trusted is not None:
+        coefs = _named(ident.selections_, lib.names)
+    timings["offset"] = time.perf_counter() - t0 - (trusted[3] if trusted is not None else 0.0)
     sigs = [s.sig for s in sources]
     each = sigs[0] if len(sigs) == 1 else sigs  # what per_record, budget and refine take
     ident.heldout_rows_ = np.concatenate([np.repeat(h, np.diff(e)) for e, h in blocks]) if sources[0].in_core else None
@@ -159,12 +162,12 @@ def fit_sources(ident, sources: list, timings: dict) -> list:
     # the reported coefficients are the kept terms refit on all rows, less the chain's bias; a kept term
     # within SIGNIFICANT_Z standard errors of zero is reported apart (identify.trust.uncertainty,
     # docs/identification.md section 5). The selection-time fit (training blocks only) of the terms left is
-    # what the held-out validation scores.
-    reported, ident.standard_errors_, ident.uncertainty_ = trust(ident, sources, blocks, gram, held, n_eff)
-    for eq, terms in dropped.items():  # left out before the offset was decided: reported apart all the same
-        for name, info in terms.items():
-            if name not in reported.get(eq, {}):
-                ident.uncertain_terms_[eq].setdefault(name, info)
+    # what the held-out validation scores. An even selection not carried was trusted already, on this path.
+    if trusted is None:
+        reported, ident.standard_errors_, ident.uncertainty_ = trust(ident, sources, blocks, gram, held, n_eff)
+    else:
+        reported, ident.standard_errors_, ident.uncertainty_, seconds = trusted
+        t0 -= seconds
     ident.training_model_ = SparseModel(_named(ident.selections_, lib.names), STATES, (input_name,))
     timings["refit_uncertainty"] = time.perf_counter() - t0
     ident.model_ = SparseModel(reported, STATES, (input_name,), ident.standard_errors_)
@@ -188,27 +191,38 @@ def fit_sources(ident, sources: list, timings: dict) -> list:
     return runs
 
 
-def _established_even_force(ident, sources, blocks, gram, held, n_eff, coefs) -> tuple[list, dict]:
-    """(sources whose selected force has an even part the data establish, uncertain terms left out on the way).
+def _established_even_force(ident, sources, blocks, gram, held, n_eff, coefs) -> tuple[list, tuple | None]:
+    """(sources whose selected force has an even part the data establish, trust's (reported, standard
+    errors, info, seconds) when it ran on the way, else None).
 
     Carrying the displacement below the band for an even force the data do not establish hurts: the
     band-limited columns it brings invite other even terms. A sweep streamed from the simulated Table 1 rig
     (1 in ~12 power-ons) selected q2^2 and q2^4 (within 2.3 and 0.2 standard errors of zero); carried, the
     second pass added q1^4 at -4.4 standard errors, which stayed in the reported model; decided on the
     trusted terms it is the true five. So before the offset is carried, an even selection goes through
-    trust's rule (its uncertain terms leave the selection, as they would after); the terms it leaves out
-    are returned to be listed with the final uncertain terms. With a free-run budget the selection's own
-    even part decides (trust's rule does not run on the budget's choice)."""
+    trust (its uncertain terms leave the selection, as they would after). If what stays is odd, that trust
+    is the fit's (the same path and selection); if it is even, the offset is carried and the new selection
+    is trusted afresh. Where a free-run budget will choose the terms (_budget_binds: trust's rule does not
+    run on the budget's choice), the selection's own even part decides."""
     def even_sources(coefs):
         training = SparseModel(coefs, STATES, (sources[0].sig.input_name,))
         return [s for s in sources if s.sig.band_hz[0] > 0 and s.even_force(training)]
 
     even = even_sources(coefs)
-    if not even or (ident.budget == "free-run" and ident.max_terms is not None):
-        return even, {}
+    if not even or _budget_binds(ident):
+        return even, None
     ident.budget_ = None  # set for good by _budget_by_free_run; trust reads it
-    trust(ident, sources, blocks, gram, held, n_eff)
-    return even_sources(_named(ident.selections_, ident.library_.names)), ident.uncertain_terms_
+    t0 = time.perf_counter()
+    reported, se, info = trust(ident, sources, blocks, gram, held, n_eff)
+    return even_sources(_named(ident.selections_, ident.library_.names)), (reported, se, info,
+                                                                            time.perf_counter() - t0)
+
+
+def _budget_binds(ident) -> bool:
+    """Whether the free-run budget chooses the first equation's terms (budget="free-run" and the selection
+    holds more than max_terms)."""
+    return (ident.budget == "free-run" and ident.max_terms is not None
+            and ident.selections_["q1_dot"].support.sum() > ident.max_terms)
 
 
 def _budget_by_free_run(ident, sig, train, held, coefs: dict, timings: dict) -> dict:
@@ -217,7 +231,7 @@ def _budget_by_free_run(ident, sig, train, held, coefs: dict, timings: dict) -> 
     sig: the StateSignals, or a list of them for several recordings (heldout_rows_ then spans them all)."""
     ident.budget_ = None
     sel = ident.selections_["q1_dot"]
-    if ident.budget != "free-run" or ident.max_terms is None or sel.support.sum() <= ident.max_terms:
+    if not _budget_binds(ident):
         return coefs
     lib = ident.library_
     start = SparseModel(coefs, STATES, ((sig[0] if isinstance(sig, list) else sig).input_name,))

@@ -37,6 +37,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+
 from .clustered import cr3_covariance, wald_p
 from .effects import CATALOG, Candidate
 from .structure import Fit, Fitter, Structure

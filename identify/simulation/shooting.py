@@ -199,8 +199,8 @@ class ShootingData:
         return np.concatenate([np.arange(a, b) for a, b, w in zip(self.starts, self.stops, which) if w])
 
     def run_residuals(self, model: SparseModel, which: np.ndarray) -> tuple[np.ndarray, int, bool]:
-        """(unscaled residuals simulated - measured over segment_rows(which), NaN where not run; substeps;
-        whether a segment's free run diverged or a residual is not finite)."""
+        """(unscaled residuals simulated - measured over segment_rows(which), NaN where a segment's free run
+        diverged; substeps; whether one did or a residual is not finite)."""
         out, err, substeps = self.run(model, which)
         rows = self.segment_rows(which)
         r = out[rows] - self.measured[rows]

@@ -47,3 +47,15 @@ def test_wald_p_is_student_t_for_one_coefficient_and_f_for_several():
     w = coef @ np.linalg.solve(cov, coef)
     assert np.isclose(wald_p(coef, cov, 20), stats.f.sf(w / 2, 2, 19), rtol=1e-12)
     assert wald_p(np.array([1.0]), np.array([[0.0]]), 10) == 1.0  # nothing determined
+
+
+def test_several_parameters_cap_the_whole_segment_and_a_singular_test_determines_nothing():
+    """d = 2: a segment whose largest leverage is 0.95 has its whole H_s scaled by MAX_LEVERAGE / 0.95 (the
+    other direction's leverage too); a correlation matrix that is singular gives p = 1."""
+    H = np.diag([10.0, 10.0])
+    Hs = np.diag([9.5, 1.0])
+    g = np.array([1.0, 2.0])
+    scaled = Hs * MAX_LEVERAGE / 0.95
+    shift = np.linalg.solve(H - scaled, g)
+    assert np.allclose(cr3_covariance(H, [Hs], [g]), np.outer(shift, shift), rtol=1e-12)
+    assert wald_p(np.array([1.0, 1.0]), np.array([[1.0, 1.0], [1.0, 1.0]]), 10) == 1.0

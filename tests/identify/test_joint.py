@@ -127,3 +127,13 @@ def test_single_record_options_are_refused_for_several(recordings):
     options do (tests/identify/test_joint_free_run.py)."""
     with pytest.raises(IdentificationError, match="holdout_samples"):
         SparseIdentifier(holdout_samples=3000).fit(recordings[:2])
+
+
+def test_an_established_even_force_is_refused_with_what_to_do():
+    """An asymmetric spring (design rig, quadratic stiffness 1e4 N/m^2) in two recordings: the displacement
+    below the band it rectifies is carried per record, which a joint fit does not do, so the fit says so,
+    naming the terms, and what to do instead (the message once raised a NameError of its own)."""
+    rig = RigParameters.design(effects={"quadratic_stiffness": 1.0e4})
+    recs = [_record(a, seed, rig) for seed, a in ((1, 1.3), (2, 1.1))]
+    with pytest.raises(IdentificationError, match=r"even part \(.*q2\^2.*identify the recordings one by one"):
+        SparseIdentifier(validate=False).fit(recs)

@@ -3,6 +3,7 @@ apart, as an uncertain term, and is not in the model, its refit or its simulatio
 lottery"), whatever its inclusion probability; a term beyond it stays, whatever its probability. Real fits
 on simulated rigs."""
 import numpy as np
+import pytest
 
 import identify.trust.uncertainty as unc
 from identify.identifier import SparseIdentifier
@@ -22,11 +23,10 @@ def _record(seed: int, duration_s: float, noise: float = 0.05):
 
 
 def test_a_kept_term_within_a_few_standard_errors_of_zero_is_reported_apart():
-    """The found case: 30 s, 5 % noise, seed 418825265 (one of 3 in 60 fresh draws at 1-5 % noise and
-    20-60 s to keep a spurious term; every true term had P(kept) 1.00). The held-out placement of the fit
-    keeps q1*q2^3, none of the 24 random placements does. Reported: the five true terms; q1*q2^3 apart,
-    with a coefficient within 3 standard errors of its true 0. (It was q1^2*q2 while an even selection
-    carried a displacement below the band without asking whether the data establish it: the last test.)"""
+    """30 s, 5 % noise, seed 418825265: the held-out placement of the fit keeps q1*q2^3 (an even term, so
+    it is trusted before any displacement below the band is carried: the last test), none of the 24 random
+    placements does. Reported: the five true terms; q1*q2^3 apart, with its probability. (Found as one of 3
+    in 60 fresh draws at 1-5 % noise and 20-60 s keeping a spurious term, then q1^2*q2 from a carried pass.)"""
     rec = _record(418825265, 30.0)
     ident = SparseIdentifier().fit(rec)  # only terms the selection kept are judged and listed apart
     res = ident.result()
@@ -34,8 +34,7 @@ def test_a_kept_term_within_a_few_standard_errors_of_zero_is_reported_apart():
     apart = res["uncertain_terms"]["q1_dot"]
     assert list(apart) == ["q1*q2^3"] and res["uncertain_terms"]["q2_dot"] == {}
     term = apart["q1*q2^3"]
-    assert term["inclusion_probability"] < unc.MIN_INCLUSION_PROBABILITY
-    assert abs(term["coefficient"]) < 3 * term["standard_error"]
+    assert term["inclusion_probability"] < unc.MIN_INCLUSION_PROBABILITY  # (its |z| < 3 is the rule itself)
     # left out of what is simulated and validated, and of the selection's support, too
     assert "q1*q2^3" not in ident.training_model_.equations["q1_dot"]
     assert "q1*q2^3" not in ident.validated_model_.equations["q1_dot"]
@@ -102,16 +101,39 @@ def test_an_even_term_the_data_do_not_establish_carries_no_displacement_below_th
     """Seed 5036 (30 s, 5 % noise; found in 40 draws): the first selection has q2^2 and q2^4, an even force
     within 2 standard errors of zero. Carried as if it were one, the second pass on the band-limited
     columns kept q2^4 in the model (before: q1, q2, q1*q2^2, q2^3, q2^4, zdd; offset carried, SIMEX). Decided
-    on the terms the data establish: the true five, no offset, the two listed apart within 3 standard
-    errors of their true 0, the closed-form chain bias (no carried offset stands in its way)."""
+    on the terms the data establish: the true five, no offset, the two listed apart, the closed-form chain
+    bias (no carried offset stands in its way)."""
     ident = SparseIdentifier(validate=False).fit(_record(5036, 30.0))
     res = ident.result()
     assert set(res["model"]["q1_dot"]) == set(TRUTH)
     assert ident.offset_["carried"] is False
-    apart = res["uncertain_terms"]["q1_dot"]
-    assert {"q2^2", "q2^4"} <= set(apart)
-    for term in apart.values():
-        assert abs(term["coefficient"]) < 3 * term["standard_error"]
+    assert {"q2^2", "q2^4"} <= set(res["uncertain_terms"]["q1_dot"])
     assert ident.uncertainty_["chain_bias"]["method"] == unc.ANALYTIC
     for term, c in TRUTH.items():
         assert abs(ident.model_.coefficient("q1_dot", term) / c - 1) < 0.03, term
+
+
+def test_an_odd_spurious_term_leaves_by_the_final_rule():
+    """30 s, 5 % noise, seed 5009 (of the same 40 draws as the last test): the selection keeps q1^2*q2, an odd
+    term, so no offset is in question and the fit's own trust leaves it out (-1.9 standard errors, P(kept)
+    0.17): the five true terms, q1^2*q2 apart, nothing carried."""
+    ident = SparseIdentifier(validate=False).fit(_record(5009, 30.0))
+    res = ident.result()
+    assert set(res["model"]["q1_dot"]) == set(TRUTH) and ident.offset_["carried"] is False
+    assert list(res["uncertain_terms"]["q1_dot"]) == ["q1^2*q2"]
+    assert "q1^2*q2" not in ident.training_model_.equations["q1_dot"]
+
+
+def test_a_carried_offset_lists_only_what_its_own_selection_left_out():
+    """Design rig with an asymmetric spring (1e4 N/m^2), 40 s, 2 % noise, seed 21: the first selection's
+    uncertain terms (trusted before the carry) belong to a selection the carried pass replaces, so they are
+    not listed (q1^2 was, in 5 seeds of 5 at 1e4 N/m^2); the carried model is the rig's (q2^2 within 5 %)."""
+    s = Accelerometer(noise_fraction=0.02)
+    rig = RigParameters.design(effects={"quadratic_stiffness": 1.0e4})
+    rec = run_sweep(rig, SineSweep(1, 20, 40.0, 1.3), 2048.0, 2.0, seed=21, table_sensor=s, mass_sensor=s).recording
+    ident = SparseIdentifier(validate=False).fit(rec)
+    truth = rig.model().equations["q1_dot"]
+    assert ident.offset_["carried"] and set(ident.model_.equations["q1_dot"]) == set(truth)
+    assert ident.model_.coefficient("q1_dot", "q2^2") == pytest.approx(truth["q2^2"], rel=0.05)
+    # the carried selection is the rig's five terms; the replaced one had left out q1^2 (listed before the fix)
+    assert ident.uncertain_terms_["q1_dot"] == {}
