@@ -179,13 +179,13 @@ def screen(fitter: Fitter, cur: Structure, members: list) -> tuple[list, list]:
     return sorted(out, key=lambda x: -x[0]), dropped
 
 
-def masked_candidates(fitter: Fitter, cur: Structure, named: str, catalog: dict) -> tuple[list[Candidate], dict]:
-    """(the members of the named effect's group that screen() finds moving to their physical side, the best
+def masked_candidates(fitter: Fitter, cur: Structure, named: str, catalog: dict) -> list[Candidate]:
+    """The members of the named effect's group that screen() finds moving to their physical side, the best
     MASKED_REFITS of them refit on the shooting error from the explanation's coefficients and that step,
-    with their standard errors and p from shooting_test; {id(candidate): why not}: the others, at the
-    explanation itself (their terms at zero), for the report)."""
+    with their standard errors and p from shooting_test; then the others, at the explanation itself (their
+    terms at zero), with the reason in `rejected` (for the report)."""
     kept, dropped = screen(fitter, cur, _members(fitter, cur, named, catalog))
-    out, why = [], {}
+    out = []
     for _, effect, cand, move in kept[:MASKED_REFITS]:
         start = dict(cur.coefficients, **move)
         st = fitter.refine(replace(cand.structure, coef=tuple((t, start[t]) for t in cand.structure.coefficients)))
@@ -198,7 +198,5 @@ def masked_candidates(fitter: Fitter, cur: Structure, named: str, catalog: dict)
         dropped.append((cand, f"not refit (beyond MASKED_REFITS = {MASKED_REFITS})"))
     for cand, reason in dropped:
         st = replace(cand.structure, coef=tuple((t, cur.coefficients.get(t, 0.0)) for t in cand.structure.coefficients))
-        c = replace(cand, structure=st, p_value=1.0, wald=None)
-        why[id(c)] = reason
-        out.append(c)
-    return out, why
+        out.append(replace(cand, structure=st, p_value=1.0, wald=None, rejected=reason))
+    return out

@@ -113,11 +113,10 @@ class Rounds:
         """The members of a named effect's group it may mask (identify.explain.masking), screened, refit and
         tested on the shooting error (those screened out listed with the reason); the best admissible one if
         it closes enough and beats the explanation with MASKED_P_BEATS."""
-        cands, why_not = masked_candidates(fitter, cur, named, catalog)
+        cands = masked_candidates(fitter, cur, named, catalog)
         for c in cands:
-            if id(c) in why_not:  # screened out: listed at the explanation itself (its errors), with the reason
-                c.err, c.gap_share_closed, c.p_beats_current, c.score = err, 0.0, 0.0, 0.0
-                c.admissible, c.rejected = False, why_not[id(c)]
+            if c.rejected:  # screened out: listed at the explanation itself (its errors), with the reason
+                c.err, c.gap_share_closed, c.p_beats_current, c.score, c.admissible = err, 0.0, 0.0, 0.0, False
             else:
                 self._score(fitter, c, cur, err, cur_se, mse_cur)
         table = [self._public(c) for c in sorted(cands, key=lambda c: -c.gap_share_closed)]
