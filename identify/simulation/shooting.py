@@ -74,6 +74,7 @@ class ShootingData:
         self._fine: dict[int, np.ndarray] = {}
         self._piece_means: list[float] | None = None  # segment_fine's recording means, once
         self._worst: np.ndarray | None = None  # divergence_error's, once
+        self._rows: dict = {}  # segment_rows' by segment mask, once each (a refit asks ~100 times)
         #: each state's largest |value| over the rows: once, not per run (an abs and a max over the whole
         #: record were 6 % of an explanation's CPU)
         self.state_max = np.max(np.abs(self.states), axis=0)
@@ -195,8 +196,11 @@ class ShootingData:
         return out
 
     def segment_rows(self, which: np.ndarray) -> np.ndarray:
-        """The rows of the segments in `which`, segment after segment."""
-        return np.concatenate([np.arange(a, b) for a, b, w in zip(self.starts, self.stops, which) if w])
+        """The rows of the segments in `which`, segment after segment (made once per mask)."""
+        key = np.asarray(which, dtype=bool).tobytes()
+        if key not in self._rows:
+            self._rows[key] = np.concatenate([np.arange(a, b) for a, b, w in zip(self.starts, self.stops, which) if w])
+        return self._rows[key]
 
     def run_residuals(self, model: SparseModel, which: np.ndarray) -> tuple[np.ndarray, int, bool]:
         """(unscaled residuals simulated - measured over segment_rows(which), NaN where a segment's free run
