@@ -197,7 +197,7 @@ def _established_even_force(ident, sources, blocks, gram, held, n_eff, coefs) ->
 
     Carrying the displacement below the band for an even force the data do not establish hurts: the
     band-limited columns it brings invite other even terms. A sweep streamed from the simulated Table 1 rig
-    (1 in ~12 power-ons) selected q2^2 and q2^4 (within 2.3 and 0.2 standard errors of zero); carried, the
+    (2 of 52 power-ons) selected q2^2 and q2^4 (within 2.3 and 0.2 standard errors of zero); carried, the
     second pass added q1^4 at -4.4 standard errors, which stayed in the reported model; decided on the
     trusted terms it is the true five. So before the offset is carried, an even selection goes through
     trust (its uncertain terms leave the selection, as they would after). If what stays is odd, that trust
