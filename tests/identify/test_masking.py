@@ -71,6 +71,11 @@ def test_coulomb_alone_masks_nothing():
     assert [e["name"] for e in res["effects"]] == ["coulomb_friction"]
     checked = {c["name"] for c in res["rounds"][-1]}
     assert checked and checked <= {"quadratic_damping", "cubic_damping", "displacement_dependent_damping"}
+    # here the screen turns both dampings away (their Gauss-Newton steps point to the energy-injecting side,
+    # measured +0.095 and +0.64): listed at the explanation itself, with the reason
+    for c in res["rounds"][-1]:
+        assert not c["admissible"] and "goes to the wrong side" in c["rejected"]
+        assert c["gap_share_closed"] == 0.0 and c["p_value"] == 1.0
 
 
 class _Scripted(DiscrepancyAnalysis):
