@@ -21,6 +21,7 @@ from identify.simulation.simulate import simulate
 from protocol.plc import RIG_STATE_BOUND, SETPOINT_NAMES, Command, Fault, Limits, State
 from protocol.sweep import SineSweep, smoothstep
 
+from .physics import mass_acceleration
 from .rig import RigParameters
 from .sensors import Accelerometer
 
@@ -149,7 +150,7 @@ class RigPLC:
         res = simulate(self.physics, 1 / fs, self.x, inputs_fine=zdd_fine[:, None], substeps=S, n_samples=n + 1,
                        bound=RIG_STATE_BOUND)
         states = res.states[1:res.n_valid]
-        mass = self.physics.rhs(states, zdd[:len(states), None])[:, 0] + zdd[:len(states)]
+        mass = mass_acceleration(self.physics, states, zdd[:len(states), None], 1 / fs)
         finite = np.isfinite(mass)
         good = len(states) if finite.all() else int(np.argmin(finite))
         states, mass = states[:good], mass[:good]

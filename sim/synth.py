@@ -9,6 +9,7 @@ from identify.data.recording import Recording
 from identify.simulation.simulate import simulate
 from protocol.sweep import SineSweep
 
+from .physics import mass_acceleration
 from .rig import RigParameters
 from .sensors import Accelerometer
 
@@ -59,7 +60,7 @@ def run_sweep(rig: RigParameters | None = None, sweep: SineSweep | None = None, 
     if contact_samples == 0:
         model = rig.model()
     zdd = u[:, 0]
-    mass_acc = _mass_acc(model, res.states, u)
+    mass_acc = mass_acceleration(model, res.states, u, 1.0 / fs_hz)
     rng = np.random.default_rng(seed)
     table_sensor = table_sensor or Accelerometer()
     mass_sensor = mass_sensor or Accelerometer()
@@ -68,7 +69,7 @@ def run_sweep(rig: RigParameters | None = None, sweep: SineSweep | None = None, 
         table_late = sweep.kinematics(np.arange(n) / fs_hz - table_sensor.delay_s)[2]
     if mass_sensor.delay_s:  # the rig is at rest before the sweep: the delayed input gives the delayed motion
         res_late, u_late = _integrate(rig, rig.model(end_stops=True), sweep, fs_hz, n, substeps, mass_sensor.delay_s)
-        mass_late = _mass_acc(model, res_late.states, u_late)
+        mass_late = mass_acceleration(model, res_late.states, u_late, 1.0 / fs_hz)
     rec = Recording(table_sensor.measure(zdd, rng, fs_hz, table_late), mass_sensor.measure(mass_acc, rng, fs_hz, mass_late),
                     fs_hz, "base", source="simulated rig")
     truth = {**{k: v for k, v in model.to_dict().items() if k in ("model", "travel")}, "rig": rig.to_dict(),
@@ -106,7 +107,7 @@ def noise_input_recording(seed: int, rig: RigParameters | None = None, duration_
     sos = butter(4, list(band_hz), "bandpass", fs=fs_hz, output="sos")
     zdd = sosfiltfilt(sos, rng.standard_normal(int(duration_s * fs_hz))) * rms_scale
     run = simulate(model, 1 / fs_hz, [0.0, 0.0], zdd[:, None], state_scale=np.array([0.1, 0.01]))
-    mass = _mass_acc(model, run.states, zdd[:, None])
+    mass = mass_acceleration(model, run.states, zdd[:, None], 1.0 / fs_hz)
     return Recording(zdd + noise * np.std(zdd) * rng.standard_normal(zdd.size),
                      mass + noise * np.std(mass) * rng.standard_normal(zdd.size), fs_hz)
 
@@ -129,9 +130,6 @@ def _integrate(rig, model, sweep, fs_hz, n, substeps, late_s: float = 0.0):
     return res, u_fine[:: 2 * substeps]
 
 
-def _mass_acc(model, states, u) -> np.ndarray:
-    """The mass's absolute acceleration x'' = q'' + z'' (m/s^2) at the samples."""
-    return model.rhs(states[:, : len(model.states)], u[:, : len(model.inputs)])[:, 0] + u[:, 0]
 
 
 def _smooth(model, term) -> bool:

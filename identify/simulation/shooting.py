@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model import SparseModel
-from .simulate import choose_substeps, equation_rows, fine_grid_input, simulate
+from .simulate import choose_substeps, equation_rows, fine_grid_input, sampled_q1_dot, simulate
 
 #: Largest fine input grid a ShootingData keeps (bytes; one, for the last substeps). A model that needs
 #: many RK4 substeps (a refit's trial step far out, a stiff contact) multiplies the record by 2 x substeps:
@@ -140,7 +140,7 @@ class ShootingData:
             if res.diverged:
                 bad.append(i)
                 continue
-            out[a:b] = (equation_rows(model, res.states, self.inputs[a:b], 0) if self.gap == "q1_dot"
+            out[a:b] = (sampled_q1_dot(model, res.states, self.inputs[a:b], dt) if self.gap == "q1_dot"
                         else res.states[:, 1])
         if self.lowpass is not None:
             ok = np.isfinite(out)

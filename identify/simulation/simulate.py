@@ -116,6 +116,41 @@ def has_end_stops(model: SparseModel) -> bool:
     return bool(np.any(np.asarray(feat) >= 3 * len(model.states) + len(model.inputs)))
 
 
+def jumps_at_rest(model: SparseModel) -> bool:
+    """Whether the q1_dot equation's force jumps where q1 crosses 0: a kept term with an odd power of
+    sign(q1) (Coulomb friction), FeatureSpace's feature 2."""
+    ptr, feat, powr = (np.asarray(a) for a in model.space.encode(model.terms))
+    return any(model.coef_[0, j] != 0 and np.any((feat[ptr[j]:ptr[j + 1]] == 2) & (powr[ptr[j]:ptr[j + 1]] % 2 == 1))
+               for j in range(len(model.terms)))
+
+
+def sampled_q1_dot(model: SparseModel, states: np.ndarray, inputs: np.ndarray, dt_s: float) -> np.ndarray:
+    """q1_dot (m/s^2) at the samples of a run the kernel integrated (states (n, n_states), inputs (n,
+    n_inputs), dt_s apart), as an accelerometer reads it: equation_rows, except where the mass sticks.
+
+    Where the force jumps at q1 = 0 (jumps_at_rest: Coulomb friction's sign(q1)) and the other forces
+    cannot overcome it, both one-sided accelerations point at q1 = 0 (q1_dot(0+) < 0 < q1_dot(0-),
+    Filippov's sliding condition): the mass sticks and the true q1_dot is 0. RK4 steps through the jump, so
+    there its q1 chatters about 0 within a step's worth of the jump (the states stay right to that) while
+    q1_dot read at the samples flips between q1_dot(0+) and q1_dot(0-) from sample to sample: white
+    content of the friction's size that no rig has. Samples with |q1| within (q1_dot(0-) - q1_dot(0+)) dt_s
+    of 0 that meet the sliding condition read 0. The simulated rig's mass accelerometer reads its truth
+    this way (sim.physics.mass_acceleration) and the shooting error a model's runs (identify.simulation.shooting)."""
+    states = np.asarray(states, dtype=float)
+    qdd = equation_rows(model, states, inputs, 0)
+    if not jumps_at_rest(model):
+        return qdd
+    side = {}
+    for sign in (1.0, -1.0):
+        at_rest = states.copy()
+        at_rest[:, 0] = sign * np.finfo(float).tiny
+        side[sign] = equation_rows(model, at_rest, inputs, 0)
+    jump = side[-1.0] - side[1.0]
+    stuck = (side[1.0] < 0) & (side[-1.0] > 0) & (np.abs(states[:, 0]) <= jump * dt_s)
+    qdd[stuck] = 0.0
+    return qdd
+
+
 def equation_rows(model: SparseModel, states, inputs, equation: int = 0) -> np.ndarray:
     """model.rhs(states, inputs)[:, equation] (the equation's derivative, e.g. q1_dot in m/s^2) at n
     independent rows, in the compiled kernel: one pass, none of the library's intermediate columns.

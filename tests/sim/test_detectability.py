@@ -25,16 +25,16 @@ def _with_coulomb(plain, relative_force: float):
 def test_a_hidden_effect_is_redrawn_and_a_visible_one_gets_quiet_sensors():
     plain = make_scenario(np.random.default_rng(3), "none", **SHORT)
     for s in (plain.table_sensor, plain.mass_sensor):
-        s.noise_fraction = 0.03
+        s.noise_fraction = 0.05  # the wide draws' noisiest sensors
     # 1e-4 of the spring force: far under the floor at any noise the suite allows
     tiny, own = _with_coulomb(plain, 1e-4)
     assert detectability.quiet_enough(tiny, plain.rig, own, np.random.default_rng(0)) is None
     assert tiny.magnitudes["coulomb_friction"]["noise_cap"] < MIN_NOISE
-    # 3 % of it (the suite's middle): seen, and the sensors lowered from 3 % to the measured cap
+    # 3 % of it (the suite's middle): seen, and the sensors lowered from 5 % to the measured cap (3.0 %)
     visible, own = _with_coulomb(plain, 0.03)
     assert detectability.quiet_enough(visible, plain.rig, own, np.random.default_rng(0)) is visible
     m = visible.magnitudes["coulomb_friction"]
-    assert MIN_NOISE <= m["noise_cap"] < 0.03
+    assert MIN_NOISE <= m["noise_cap"] < 0.05
     assert visible.table_sensor.noise_fraction == visible.mass_sensor.noise_fraction == m["noise_cap"]
     assert m["gap_alone"] == pytest.approx(DETECTABLE * m["floor_per_noise"] * m["noise_cap"], rel=1e-12)
 
