@@ -53,7 +53,7 @@ BINS = (0.0, 0.25, 0.5, 0.75, 0.9, 1.0001)
 #: z of the Wilson intervals (95 %).
 WILSON_Z = 1.96
 #: Result fields kept per case (with its effects list).
-KEEP = ("effect", "confidence", "gap_before", "gap_after", "gap_closed", "noise_floor", "noise_floor_upper",
+KEEP = ("effect", "confidence", "gap_before", "gap_after", "gap_closed", "noise_floor", "noise_floor_before",
         "remaining", "jump", "thresholds")
 #: Issue 32 item 9's anchors for a 60 s recording on 2 cores (s).
 MEDIAN_TARGET_S, MAX_TARGET_S = 5.0, 15.0

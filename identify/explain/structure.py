@@ -313,6 +313,12 @@ class Fitter:
         """Per-segment squared shooting error of the gap signal, in recorded units."""
         return self.data(st).run(self.model(st))[1]
 
+    def unfiltered_runs(self, st: Structure) -> np.ndarray:
+        """The structure's multiple-shooting runs (errors' segments) of the gap signal on the pooled valid
+        rows, not band-limited (NaN outside the segments): what the model puts above the band, a friction's
+        or a contact's force steps among it (the noise floor after an effect: DiscrepancyAnalysis)."""
+        return replace(self.data(st), lowpass=None).run(self.model(st))[0]
+
     def free_run(self, st: Structure):
         """One free run per recording over its valid rows, from its first state: the simulated gap signal
         on the pooled rows (NaN where it diverged)."""

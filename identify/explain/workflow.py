@@ -172,7 +172,7 @@ class DiscrepancyAnalysis(Rounds):
         err = fitter.errors(cur)
         rows = fitter.rows_held
         self.noise_floors_ = [noise_floor(p.rec, p.sig, rows[p.offset:p.offset + p.n]) for p in fitter.parts]
-        self.noise_floor_ = pooled_floor(self.noise_floors_, meas0, rows, fitter)
+        self.noise_floor_ = self.noise_floor_before_ = pooled_floor(self.noise_floors_, meas0, rows, fitter)
         self.gap_before_ = self._gap(err)
         self.baseline_segment_errors_ = err  # per shooting segment (held-out: fitter_.seg_held)
         return cur, err
@@ -193,10 +193,8 @@ class DiscrepancyAnalysis(Rounds):
                 step = self._round(fitter, cur, err, cur_se, mse0, catalog, near)
                 self._plain = True  # rounds after the first decide on plain sums (see _total)
                 rounds.append(step["table"])
-            # at the floor (the reported, trimmed gap: a round may still run on the plain sums) what is left
-            # may be masked; above it, a round that names nothing ends the rounds
-            at_floor = step is None or self._gap(err) <= CONTINUE_FACTOR * self.noise_floor_
-            unchecked = self._unchecked(effects, checked) if self.refine and at_floor else []
+            # what a round does not name (or what is left at the floor) may be masked by a named effect
+            unchecked = self._unchecked(effects, checked) if self.refine else []
             while unchecked and (step is None or step["best"] is None):
                 named = unchecked.pop(0)
                 checked.add(CATALOG[named].group)
@@ -215,9 +213,28 @@ class DiscrepancyAnalysis(Rounds):
                 entry.update(gap_after=self._gap(err), **closed_shares(gap_prev, self._gap(err)))
             effects.append(entry)
             cur_se = fitter.equation_fit(cur).se
+            self.noise_floor_ = min(self.noise_floor_, self._floor_after(fitter, cur))
         self.rounds_ = rounds
         self.candidates_ = rounds[0] if rounds else []
         return cur, err, effects
+
+    def _floor_after(self, fitter: Fitter, st: Structure) -> float:
+        """The noise floor once the structure's effects are named (base layout; a force layout keeps the
+        record's): read, as the record's is (identify.noise.floor.noise_floor), above the band of the raw q''
+        less the structure's unfiltered shooting runs. A friction's or a contact's force steps fill the
+        spectrum above the band with their 1/f^2 tail, which the record's floor counts as noise (2-4x the
+        sensors' on the wide scenarios' Coulomb rigs, so a second effect at 4x the sensors' floor stayed
+        below it); once a model holds the effect, its runs hold the steps too. Outside the segments the
+        raw q'' stands."""
+        if fitter.layout != "base":
+            return self.noise_floor_
+        runs, rows = fitter.unfiltered_runs(st), fitter.rows_held
+        floors = []
+        for p in fitter.parts:
+            run = runs[p.offset:p.offset + p.n]
+            raw = (p.rec.output - p.rec.input)[p.sig.valid]
+            floors.append(noise_floor(p.rec, p.sig, rows[p.offset:p.offset + p.n], np.where(np.isfinite(run), run, raw)))
+        return pooled_floor(floors, self.gap_measured_, rows, fitter)
 
     @staticmethod
     def _unchecked(effects: list, checked: set) -> list[str]:
@@ -351,6 +368,7 @@ class DiscrepancyAnalysis(Rounds):
             "gap_closed": (1 - ga / gb) if gb else None,
             "metric": METRIC[self.layout_],
             "noise_floor": self.noise_floor_,
+            "noise_floor_before": self.noise_floor_before_,
             "model": self.model_.to_dict()["model"],
             **{k: v for k, v in self.model_.to_dict().items() if k in ("states", "inputs", "travel")},
             "measurement": {k: v for k, v in self.final_structure_.meas if v},

@@ -43,7 +43,7 @@ def noise_std(f: np.ndarray, p: np.ndarray, segments: int, fs_hz: float, band_hz
     return float(np.sqrt(noise_level(p[sel], segments) * nyq))
 
 
-def noise_floor(rec: Recording, sig: StateSignals, rows: np.ndarray) -> float:
+def noise_floor(rec: Recording, sig: StateSignals, rows: np.ndarray, explained: np.ndarray | None = None) -> float:
     """Upper estimate of the noise NRMSE of the gap signal (q'' for base layouts, y for force layouts).
 
     Base: above the band the raw q'' = x'' - z'' holds only the two accelerometers' noise; its level
@@ -52,11 +52,15 @@ def noise_floor(rec: Recording, sig: StateSignals, rows: np.ndarray) -> float:
     drives the simulation and partly cancels (a perfect model's NRMSE is ~80 % of this). Force: the
     output's level above the input's excited band (where only noise and the nonlinearity's weak
     harmonics are): an upper estimate too, as the harmonics count as noise. 0 when there is no room
-    above the band (fewer than 8 bins)."""
+    above the band (fewer than 8 bins). explained (base layout): what a model puts into q'' on the valid
+    rows, taken off the raw q'' first, so its own content above the band (a friction's force steps) is not
+    read as noise (identify.explain.workflow.DiscrepancyAnalysis._floor_after)."""
     fs, (lo, hi) = sig.fs_hz, sig.band_hz
     v = sig.valid
     if rec.layout == "base":
         raw = (rec.output - rec.input)[v]
+        if explained is not None:
+            raw = raw - explained
         target = sig.q1_dot[v][rows]
         region_lo = min(NOISE_FLOOR_ABOVE * hi, 0.9 * fs / 2)
     else:
