@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model import SparseModel
-from .simulate import choose_substeps, equation_rows, fine_grid_input, sampled_q1_dot, simulate
+from .simulate import choose_substeps, equation_rows, fine_grid_input, jumps_at_rest, sampled_q1_dot, simulate
 
 #: Largest fine input grid a ShootingData keeps (bytes; one, for the last substeps). A model that needs
 #: many RK4 substeps (a refit's trial step far out, a stiff contact) multiplies the record by 2 x substeps:
@@ -130,6 +130,7 @@ class ShootingData:
         dt = 1.0 / self.fs_hz
         bad = []
         offsets = self.offsets(model, seg) if self.gap == "q1_dot" else np.zeros(len(self.starts))
+        jumps = jumps_at_rest(model)  # once per run, not per segment
         for i in seg:
             a, b = int(self.starts[i]), int(self.stops[i])
             x0 = self.states[a].copy()
@@ -140,7 +141,7 @@ class ShootingData:
             if res.diverged:
                 bad.append(i)
                 continue
-            out[a:b] = (sampled_q1_dot(model, res.states, self.inputs[a:b], dt) if self.gap == "q1_dot"
+            out[a:b] = (sampled_q1_dot(model, res.states, self.inputs[a:b], dt, jumps) if self.gap == "q1_dot"
                         else res.states[:, 1])
         if self.lowpass is not None:
             ok = np.isfinite(out)

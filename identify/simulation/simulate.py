@@ -124,7 +124,8 @@ def jumps_at_rest(model: SparseModel) -> bool:
                for j in range(len(model.terms)))
 
 
-def sampled_q1_dot(model: SparseModel, states: np.ndarray, inputs: np.ndarray, dt_s: float) -> np.ndarray:
+def sampled_q1_dot(model: SparseModel, states: np.ndarray, inputs: np.ndarray, dt_s: float,
+                   jumps: bool | None = None) -> np.ndarray:
     """q1_dot (m/s^2) at the samples of a run the kernel integrated (states (n, n_states), inputs (n,
     n_inputs), dt_s apart), as an accelerometer reads it: equation_rows, except where the mass sticks.
 
@@ -135,10 +136,11 @@ def sampled_q1_dot(model: SparseModel, states: np.ndarray, inputs: np.ndarray, d
     q1_dot read at the samples flips between q1_dot(0+) and q1_dot(0-) from sample to sample: white
     content of the friction's size that no rig has. Samples with |q1| within (q1_dot(0-) - q1_dot(0+)) dt_s
     of 0 that meet the sliding condition read 0. The simulated rig's mass accelerometer reads its truth
-    this way (sim.physics.mass_acceleration) and the shooting error a model's runs (identify.simulation.shooting)."""
+    this way (sim.physics.mass_acceleration) and the shooting error a model's runs (identify.simulation.shooting).
+    jumps: jumps_at_rest(model) when the caller knows it (a shooting run reads every segment of one model)."""
     states = np.asarray(states, dtype=float)
     qdd = equation_rows(model, states, inputs, 0)
-    if not jumps_at_rest(model):
+    if not (jumps_at_rest(model) if jumps is None else jumps):
         return qdd
     side = {}
     for sign in (1.0, -1.0):
