@@ -222,18 +222,15 @@ class DiscrepancyAnalysis(Rounds):
         """The noise floor once the structure's effects are named (base layout; a force layout keeps the
         record's): read, as the record's is (identify.noise.floor.noise_floor), above the band of the raw q''
         less the structure's unfiltered shooting runs. A friction's or a contact's force steps fill the
-        spectrum above the band with their 1/f^2 tail, which the record's floor counts as noise (2-4x the
+        spectrum above the band with their 1/f^2 tail, which the record's floor counts as noise (1.4-3.8x the
         sensors' on the wide scenarios' Coulomb rigs, so a second effect at 4x the sensors' floor stayed
-        below it); once a model holds the effect, its runs hold the steps too. Outside the segments the
-        raw q'' stands."""
+        below it); once a model holds the effect, its runs hold the steps too. Outside the segments (and
+        where a run diverged) nothing is taken off: the raw q'' stands."""
         if fitter.layout != "base":
             return self.noise_floor_
-        runs, rows = fitter.unfiltered_runs(st), fitter.rows_held
-        floors = []
-        for p in fitter.parts:
-            run = runs[p.offset:p.offset + p.n]
-            raw = (p.rec.output - p.rec.input)[p.sig.valid]
-            floors.append(noise_floor(p.rec, p.sig, rows[p.offset:p.offset + p.n], np.where(np.isfinite(run), run, raw)))
+        runs, rows = np.nan_to_num(fitter.unfiltered_runs(st), nan=0.0), fitter.rows_held
+        floors = [noise_floor(p.rec, p.sig, rows[p.offset:p.offset + p.n], runs[p.offset:p.offset + p.n])
+                  for p in fitter.parts]
         return pooled_floor(floors, self.gap_measured_, rows, fitter)
 
     @staticmethod
