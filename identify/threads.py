@@ -16,11 +16,20 @@ process (a Dask worker's threads) share one limit: the first to enter sets it, t
 restores what was there (a reference count), never one fit restoring two threads under another.
 threadpoolctl (3.8) lets only the thread that first set a limit change OpenBLAS's while it lives; in a
 Dask worker that is the first task thread, whose limit of one then stays (what the worker wants).
-threadpoolctl is the standard control (scikit-learn uses it the same way)."""
+threadpoolctl is the standard control (scikit-learn uses it the same way).
+
+Threads that do pay: the explanation's shooting runs (map_runs). A shooting refit's finite-difference
+Jacobian is one full multiple-shooting run per coefficient, each independent of the others, and the
+compiled kernels that do most of a run release the GIL; so the columns, a round's candidate refits and the
+masking check's refits run side by side on the cores this process may use (usable_cores, at most
+MAX_RUN_THREADS). Each run computes what it would alone and the results are taken in order: the numbers
+are those of the serial loop, bit for bit (tests/identify/test_threads.py)."""
 from __future__ import annotations
 
 import functools
+import os
 import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import scipy.linalg  # noqa: F401  (loads scipy's BLAS, if it is its own, before the libraries are listed)
 from threadpoolctl import ThreadpoolController
@@ -56,3 +65,45 @@ def one_blas_thread(fn):
 def blas_threads() -> int:
     """The BLAS thread count now in force (the largest over the loaded BLAS libraries)."""
     return max((lib.num_threads for lib in _CONTROLLER.select(user_api="blas").lib_controllers), default=1)
+
+
+#: Most threads one explanation's shooting runs use at once (identify.explain: the columns of a finite-
+#: difference Jacobian, each a full multiple-shooting run of the model with one coefficient moved). The
+#: compiled kernels (identify/_simkernel.c) release the GIL for a segment's run and a pass over the rows,
+#: which are ~75 % of a run's time, so two columns run side by side on two cores.
+MAX_RUN_THREADS = 4
+
+_POOL = None  # (pid, threads, ThreadPoolExecutor): made on first use, again in a forked child (its threads are gone)
+_POOL_LOCK = threading.Lock()
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its affinity: a container's or taskset's limit, not the host's)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def run_threads() -> int:
+    """How many threads map_runs uses: usable_cores(), at most MAX_RUN_THREADS."""
+    return max(1, min(usable_cores(), MAX_RUN_THREADS))
+
+
+def map_runs(fn, items) -> list:
+    """[fn(x) for x in items], the calls spread over run_threads() threads, the results in order. For
+    independent runs that spend their time in the compiled kernels (each call computes what it would
+    alone, so the numbers are those of the serial loop, bit for bit). scipy's least_squares takes it as
+    `workers` for its finite-difference Jacobian."""
+    items = list(items)
+    n = run_threads()
+    if n == 1 or len(items) < 2 or threading.current_thread().name.startswith("shakeid-run"):
+        return [fn(x) for x in items]  # one core, one item, or already on a run thread: no nesting
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None or _POOL[:2] != (os.getpid(), n):
+            if _POOL is not None and _POOL[0] == os.getpid():
+                _POOL[2].shutdown(wait=False)  # its queued work still runs; new calls go to the new pool
+            _POOL = (os.getpid(), n, ThreadPoolExecutor(max_workers=n, thread_name_prefix="shakeid-run"))
+        pool = _POOL[2]
+    return list(pool.map(fn, items))

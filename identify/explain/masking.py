@@ -41,6 +41,7 @@ import numpy as np
 from .clustered import cr3_covariance, wald_p
 from .effects import CATALOG, Candidate
 from .structure import Fit, Fitter, Structure
+from ..threads import map_runs
 
 #: A masked effect is added only when the block bootstrap says it beats the explanation before it with at
 #: least this probability on the held-out segments (below the floor the held-out error is the evidence).
@@ -83,10 +84,10 @@ class _Runs:
         names = self.names if names is None else names
         coef = self.st.coefficients
         J = np.empty((r0.size, len(names)))
-        for j, t in enumerate(names):
-            h = sizes[j] if sizes is not None else TEST_STEP * max(abs(coef[t]), 1e-12)
-            r, steps, bad = self({t: coef[t] + h})
-            if bad or (sizes is None and steps != steps0):
+        steps = [sizes[j] if sizes is not None else TEST_STEP * max(abs(coef[t]), 1e-12) for j, t in enumerate(names)]
+        runs = map_runs(lambda th: self({th[0]: coef[th[0]] + th[1]}), zip(names, steps))  # columns side by side
+        for j, ((r, substeps, bad), h) in enumerate(zip(runs, steps)):
+            if bad or (sizes is None and substeps != steps0):
                 return None
             J[:, j] = (r - r0) / h
         return J
@@ -186,10 +187,14 @@ def masked_candidates(fitter: Fitter, cur: Structure, named: str, catalog: dict)
     terms at zero), with the reason in `rejected` (for the report)."""
     kept, dropped = screen(fitter, cur, _members(fitter, cur, named, catalog))
     out = []
-    for _, effect, cand, move in kept[:MASKED_REFITS]:
+
+    def refit(member):  # on the shooting error alone: the refits run side by side (identify.threads.map_runs)
+        _, _, cand, move = member
         start = dict(cur.coefficients, **move)
         st = fitter.refine(replace(cand.structure, coef=tuple((t, start[t]) for t in cand.structure.coefficients)))
-        se, p = shooting_test(fitter, st, cand.terms)
+        return (st, *shooting_test(fitter, st, cand.terms))
+
+    for (_, _, cand, _), (st, se, p) in zip(kept[:MASKED_REFITS], map_runs(refit, kept[:MASKED_REFITS])):
         eq = fitter.equation_fit(st)
         fit = Fit(dict(st.coefficients), {**eq.se, **se}, eq.cov, eq.names, eq.mse_heldout)
         # the equation error's Wald statistic no longer applies: p is the shooting test's

@@ -62,10 +62,11 @@ class ChannelChain:
         hz = p.get("hum_hz", 0.0)
         if not hz:
             return 0.0
-        if hz not in self._hum:
+        pair = self._hum.get(hz)
+        if pair is None:
             t = np.arange(self.rec.n_samples) / self.fs
-            self._hum[hz] = (self._chain(np.cos(2 * np.pi * hz * t)), self._chain(np.sin(2 * np.pi * hz * t)))
-        c, s = self._hum[hz]
+            pair = self._hum[hz] = (self._chain(np.cos(2 * np.pi * hz * t)), self._chain(np.sin(2 * np.pi * hz * t)))
+        c, s = pair
         return p.get(f"hum_{channel}_cos", 0.0) * c + p.get(f"hum_{channel}_sin", 0.0) * s
 
     def shifted(self, a: np.ndarray, tau: float) -> np.ndarray:
@@ -78,8 +79,9 @@ class ChannelChain:
     def signals(self, p: dict) -> StateSignals:
         """States as the rig had them if the recording had the faults `p` (PARAMS keys)."""
         key = tuple(round(float(p.get(k, 0.0)), 12) for k in PARAMS)
-        if key in self._cache:
-            return self._cache[key]
+        out = self._cache.get(key)  # .get, not `in` then [ ]: map_runs' threads share the cache
+        if out is not None:
+            return out
         gm, gt = 1 + p.get("mass_acc_gain", 0.0), 1 + p.get("table_acc_gain", 0.0)
         tau = p.get("channel_delay", 0.0)
         X = self._chain(self.shifted(self.rec.output, tau)) if tau else self.X

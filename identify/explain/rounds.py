@@ -12,6 +12,7 @@ from .effects import CATALOG, Candidate, Effect
 from .masking import MASKED_P_BEATS, masked_candidates
 from ..simulation.shooting import bootstrap_prob, trimmed_total
 from .structure import Fitter, Structure
+from ..threads import map_runs
 
 #: Candidates refit on the shooting error per round: the best REFINE_TOP - 1 by shooting error at their
 #: equation-error start and the best REFINE_TOP - 1 by held-out equation error (and the best a sign rule
@@ -92,8 +93,9 @@ class Rounds:
             by_eq = sorted(ok, key=lambda c: -c.score)
             chosen = list({id(c): c for c in ok[:REFINE_TOP - 1] + by_eq[:REFINE_TOP - 1]
                            + self._judged_after_refit(cands, ok, self.alpha)}.values())
-            for c in chosen:
-                refined = c.refit(fitter.refine(c.structure))
+            # the refits side by side (each its own; scored after, in order, as one after another would be)
+            for c, st in zip(chosen, map_runs(lambda c: fitter.refine(c.structure), chosen)):
+                refined = c.refit(st)
                 self._score(fitter, refined, cur, err, cur_se, mse_cur)
                 if refined.admissible and (not c.admissible or np.sum(refined.err[train]) < np.sum(c.err[train])):
                     cands[cands.index(c)] = refined

@@ -23,6 +23,7 @@ from ..regression.optimizers.base import least_squares
 from ..data.recording import Recording
 from ..simulation.shooting import ShootingData, segment_edges
 from ..simulation.simulate import simulate
+from ..threads import map_runs
 
 #: The gap is measured on what was measured: the relative acceleration for the accelerometer rig, the
 #: output y itself for a force-input layout (its second derivative is a noise-amplified derived signal).
@@ -171,7 +172,8 @@ class Fitter:
     def z_state(self, sig: StateSignals, hyst) -> np.ndarray:
         """Bouc-Wen state integrated from the measured velocity (valid rows), z(0) = 0."""
         key = (id(sig), hyst)  # the cache holds sig itself, so its id cannot be reused while cached
-        if key not in self._z:
+        hit = self._z.get(key)  # shared by map_runs' threads: .get, and the local returned
+        if hit is None:
             beta, gamma = hyst
             q1 = sig.q1[sig.valid]
             zm = SparseModel({"z_dot": {"v": 1.0, "av*z": -beta, "v*|z|": -gamma}}, states=("z",), inputs=("v", "av"))
@@ -180,8 +182,8 @@ class Fitter:
                            substeps=2, bound=1e3 * scale)
             if len(self._z) > 64:
                 self._z.clear()
-            self._z[key] = (sig, np.nan_to_num(res.states[:, 0]))
-        return self._z[key][1]
+            hit = self._z[key] = (sig, np.nan_to_num(res.states[:, 0]))
+        return hit[1]
 
     def names(self, st: Structure):
         states = ("q1", "q2", "z") if st.hyst is not None else ("q1", "q2")
@@ -294,8 +296,9 @@ class Fitter:
 
     def data(self, st: Structure, starts=None, stops=None) -> ShootingData:
         key = (st.meas, st.hyst, any("tau" in t for t in st.terms), starts is None)
-        if key in self._data:
-            return self._data[key]
+        hit = self._data.get(key)  # shared by map_runs' threads: .get, not `in` then [ ]
+        if hit is not None:
+            return hit
         sigs = self.signals(st)
         X, U = self.arrays(st, sigs)
         measured = self.pooled(sigs, "q1_dot" if self.gap == "q1_dot" else "q2")
@@ -362,7 +365,8 @@ class Fitter:
         r0 = resid(theta0)
         scale = np.maximum(np.abs(theta0), 1e-12)
         scale[k:] = 1.0
-        sol = nl_least_squares(resid, theta0, x_scale=scale, diff_step=1e-6, max_nfev=max_nfev, method="trf")
+        sol = nl_least_squares(resid, theta0, x_scale=scale, diff_step=1e-6, max_nfev=max_nfev, method="trf",
+                               workers=map_runs)  # the Jacobian's columns side by side, numbers as serial
         if not (np.all(np.isfinite(sol.x)) and 2 * sol.cost < float(r0 @ r0)):
             return st
         return build(sol.x)

@@ -84,7 +84,8 @@ class ShootingData:
         """The inputs every h/2 (simulate's inputs_fine), row r at index 2 substeps r: each recording's
         interpolated on its own, padded with its last value up to the next one's first row. Kept for the
         last `substeps` only, and only up to FINE_GRID_BYTES: None above (run builds each segment's own)."""
-        if substeps not in self._fine:
+        grid = self._fine.get(substeps)  # runs in threads share it (identify.threads.map_runs): one read
+        if grid is None:
             up = 2 * substeps
             if self.inputs.size * up * 8 > FINE_GRID_BYTES:
                 return None
@@ -93,8 +94,9 @@ class ShootingData:
             for i, piece in enumerate(pieces):
                 u = self._fine_piece(piece, substeps)
                 grids.append(u if i == len(pieces) - 1 else np.vstack([u, np.repeat(u[-1:], up - 1, axis=0)]))
-            self._fine = {substeps: np.ascontiguousarray(grids[0] if len(grids) == 1 else np.vstack(grids))}
-        return self._fine[substeps]
+            grid = np.ascontiguousarray(grids[0] if len(grids) == 1 else np.vstack(grids))
+            self._fine = {substeps: grid}
+        return grid
 
     @staticmethod
     def _fine_piece(piece: np.ndarray, substeps: int, mean=None) -> np.ndarray:
@@ -199,9 +201,10 @@ class ShootingData:
     def segment_rows(self, which: np.ndarray) -> np.ndarray:
         """The rows of the segments in `which`, segment after segment (made once per mask)."""
         key = np.asarray(which, dtype=bool).tobytes()
-        if key not in self._rows:
-            self._rows[key] = np.concatenate([np.arange(a, b) for a, b, w in zip(self.starts, self.stops, which) if w])
-        return self._rows[key]
+        rows = self._rows.get(key)
+        if rows is None:
+            rows = self._rows[key] = np.concatenate([np.arange(a, b) for a, b, w in zip(self.starts, self.stops, which) if w])
+        return rows
 
     def run_residuals(self, model: SparseModel, which: np.ndarray) -> tuple[np.ndarray, int, bool]:
         """(unscaled residuals simulated - measured over segment_rows(which), NaN where a segment's free run

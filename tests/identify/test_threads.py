@@ -3,6 +3,7 @@ threads of one process (a Dask worker's), and the process's own limit back when 
 import threading
 
 import numpy as np
+import pytest
 from threadpoolctl import threadpool_limits
 
 from identify.threads import blas_threads, one_blas_thread
@@ -66,3 +67,81 @@ def test_a_fit_runs_on_one_blas_thread_and_gives_the_limit_back():
             Library.evaluate = evaluate
         assert seen and set(seen) == {1}
         assert blas_threads() == 2
+
+
+# -- the explanation's shooting runs in threads (identify.threads.map_runs) ------------------------------
+
+def test_map_runs_keeps_the_order_runs_on_several_threads_and_does_not_nest(monkeypatch):
+    """Results in the order of the items, the calls spread over the pool's threads (each call sleeps a
+    little in a GIL-free wait, as the kernels run, so a single thread could not take them all), and a
+    map_runs called from a run thread runs its items right there (a bounded pool waiting on itself would
+    hang)."""
+    import time
+
+    import identify.threads as th
+
+    monkeypatch.setattr(th, "run_threads", lambda: 2)
+    names = set()
+
+    def inner(x):
+        return (x, threading.current_thread().name)
+
+    def outer(x):
+        time.sleep(0.05)
+        names.add(threading.current_thread().name)
+        return x * x, th.map_runs(inner, range(3))
+
+    out = th.map_runs(outer, range(6))
+    assert [o[0] for o in out] == [x * x for x in range(6)]
+    assert len(names) == 2 and all(n.startswith("shakeid-run") for n in names)
+    for _, nested in out:  # each nested item on the outer call's own thread
+        assert [x for x, _ in nested] == [0, 1, 2] and len({n for _, n in nested}) == 1
+    monkeypatch.setattr(th, "run_threads", lambda: 1)
+    assert {n for _, n in th.map_runs(inner, range(4))} == {threading.current_thread().name}
+
+
+def _child_maps(queue):
+    import identify.threads as th
+
+    th.run_threads = lambda: 2
+    queue.put(th.map_runs(lambda x: x + 1, range(5)))
+
+
+def test_map_runs_works_in_a_forked_child_of_a_process_that_used_it(monkeypatch):
+    """A job worker forked after the parent ran threads: the child's pool is its own (the parent's
+    threads do not exist in it), not a pool whose workers never answer."""
+    import multiprocessing
+
+    import identify.threads as th
+
+    monkeypatch.setattr(th, "run_threads", lambda: 2)
+    assert th.map_runs(lambda x: x, range(4)) == [0, 1, 2, 3]  # the parent's pool exists now
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_child_maps, args=(queue,))
+    child.start()
+    assert queue.get(timeout=60) == [1, 2, 3, 4, 5]
+    child.join(timeout=60)
+    assert child.exitcode == 0
+
+
+@pytest.mark.slow
+def test_an_explanation_in_threads_is_the_serial_one_to_the_last_digit(monkeypatch):
+    """The rounds' refits, their Jacobians' columns, the polish and the masking check's screen and refits run
+    side by side; each run computes what it would alone and the results are taken in order, so the whole
+    document is the serial one, float for float (Coulomb 0.1 N + quadratic damping 1 N s^2/m^2: every one
+    of those paths runs, test_masking)."""
+    import json
+
+    import identify.threads as th
+    from identify.explain.workflow import DiscrepancyAnalysis
+
+    from .test_explain_effects import _run
+
+    rec = _run({"coulomb_friction": 0.1, "quadratic_damping": 1.0})
+    docs = {}
+    for n in (1, 2):
+        monkeypatch.setattr(th, "run_threads", lambda: n)
+        docs[n] = json.dumps(DiscrepancyAnalysis().fit(rec).result(), sort_keys=True, default=str)
+    assert json.loads(docs[1])["effects"][1].get("masked_by") == "coulomb_friction"  # the masking path ran
+    assert docs[2] == docs[1]
