@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import admissibility
-from .effects import CATALOG, Candidate, Effect
+from .effects import CATALOG, Candidate
 from .masking import MASKED_P_BEATS, masked_candidates
 from ..simulation.shooting import bootstrap_prob, trimmed_total
 from .structure import Fitter, Structure
@@ -41,13 +41,9 @@ def closed_shares(gap_before: float, gap_after: float) -> dict:
 def all_candidates(fitter: Fitter, cur: Structure, catalog: dict) -> list[Candidate]:
     """Every effect of `catalog` ({name: Effect, or None for the registered one}) fitted on top of `cur`,
     those that apply (each effect proposes its own: identify.explain.effects)."""
-    out = []
-    for name, effect in catalog.items():
-        effect: Effect = effect if effect is not None else CATALOG[name]
-        c = effect.propose(fitter, cur)
-        if c is not None:
-            out.append(c)
-    return out
+    effects = [effect if effect is not None else CATALOG[name] for name, effect in catalog.items()]
+    # side by side (identify.threads.map_runs): each proposal reads the fitter's caches, computes what it would alone
+    return [c for c in map_runs(lambda effect: effect.propose(fitter, cur), effects) if c is not None]
 
 
 def coefficients(c: Candidate) -> dict:

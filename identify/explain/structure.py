@@ -9,6 +9,7 @@ error (identify.simulation.shooting), and can refit the coefficients on the shoo
 """
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -148,6 +149,7 @@ class Fitter:
         self._z: dict = {}
         self._data: dict = {}
         self._columns: dict = {}  # band_limited_columns' columns, insertion ordered (oldest evicted)
+        self._columns_lock = threading.Lock()  # its eviction iterates it: one thread at a time
         #: what an effect computes once per analysis from the recordings alone, by the effect's own key
         #: (mains hum's evidence: the same in every round)
         self.memo: dict = {}
@@ -236,7 +238,9 @@ class Fitter:
         # only the recording's own signals are kept (a fault candidate's corrected ones are new every trial)
         keep = sig is part.sig
         keys = [self._column_key(t, st, part) for t in lib.terms]
-        missing = [j for j, k in enumerate(keys) if not keep or k not in self._columns]
+        # read once, each key: the rounds' proposals run in threads (identify.threads.map_runs) and evict
+        cached = [self._columns.get(k) if keep else None for k in keys]
+        missing = [j for j, c in enumerate(cached) if c is None]
         fresh = {}
         if missing:
             n, v = part.rec.n_samples, sig.valid
@@ -249,11 +253,12 @@ class Fitter:
             A = lib.subset(missing).evaluate(np.column_stack(cols), np.column_stack(ins))
             for j, c in zip(missing, A.T):
                 fresh[j] = spectral_op(c, sig.fs_hz, sig.band_hz, 0, sig.taper_n)[v]
-        out = np.column_stack([fresh[j] if j in fresh else self._columns[k] for j, k in enumerate(keys)]) @ T
+        out = np.column_stack([fresh[j] if j in fresh else c for j, c in enumerate(cached)]) @ T
         if keep:
-            self._columns.update((keys[j], c) for j, c in fresh.items())
-            while len(self._columns) > BAND_LIMITED_CACHE:
-                self._columns.pop(next(iter(self._columns)))  # the oldest first
+            with self._columns_lock:
+                self._columns.update((keys[j], c) for j, c in fresh.items())
+                while len(self._columns) > BAND_LIMITED_CACHE:
+                    self._columns.pop(next(iter(self._columns)))  # the oldest first
         return out
 
     @staticmethod

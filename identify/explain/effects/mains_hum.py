@@ -61,9 +61,9 @@ class MainsHum(Effect):
         the supply's cycle), while a structure's fault parameters are one set for all recordings."""
         if self.name in cur.effects or fitter.chain is None or len(fitter.parts) > 1:
             return None
-        if self.name not in fitter.memo:
-            fitter.memo[self.name] = self.evidence(fitter.parts[0].rec)
-        ev = fitter.memo[self.name]
+        ev = fitter.memo.get(self.name, fitter.memo)  # the memo itself: not looked at yet (None: no hum)
+        if ev is fitter.memo:  # (read once: the rounds' proposals run in threads, identify.threads.map_runs)
+            ev = fitter.memo[self.name] = self.evidence(fitter.parts[0].rec)
         if ev is None:
             return None
         p = dict(cur.meas)
