@@ -23,6 +23,9 @@ Entries naming a nuisance the recording has (hum, quantisation) are passed over.
 physical names at confidence >= 0.5 (target 0) and measurement names at >= 0.5 where no such fault or
 nuisance exists (target 0).
 
+Each explanation runs its shooting runs on run_threads() threads (identify.threads: the cores the process
+may use), so `--workers 1` times one explanation as a user on the machine has it (wall = what the user
+waits); more workers finish sooner and share the cores (CPU figures hold, wall figures are with company).
 Runs PROCESSES in parallel (--workers, default os.cpu_count()), prints each case as it ends with progress,
 and writes every case (seed, drawn parameters, truth, answer, times) to --json after each case, so a run
 stopped by --budget-min (no new cases after that many minutes) or killed still leaves its cases.
@@ -43,6 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from identify.explain.workflow import DiscrepancyAnalysis  # noqa: E402
+from identify.threads import run_threads  # noqa: E402
 from sim.scenarios import MEASUREMENT, OUT_OF_CATALOG, PHYSICS, SURROGATE_GROUPS, make_scenario  # noqa: E402
 from sim.scoring import result_effects, score, spurious_measurement_names  # noqa: E402
 
@@ -283,7 +287,7 @@ def main(argv=None) -> int:
     cases = args.case if args.case else list(range(args.cases))
     # the command as run, with file arguments by name only: a result must not carry the machine's paths
     meta = {"command": " ".join([Path(sys.argv[0]).name, *(Path(a).name if "/" in a else a for a in sys.argv[1:])]),
-            "workers": args.workers,
+            "workers": args.workers, "run_threads": run_threads(),
             "cpu_count": os.cpu_count(), "load_at_start": os.getloadavg(),
             "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     print(f"seed {args.seed} (rerun with --seed {args.seed}); {len(cases)} cases on {args.workers} processes, "
