@@ -85,8 +85,19 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
+#: Environment variable that sets run_threads() (e.g. 1 in a job worker that shares its cores, or to time
+#: the serial explanation: the numbers are the same).
+RUN_THREADS_ENV = "SHAKEID_RUN_THREADS"
+
+
 def run_threads() -> int:
-    """How many threads map_runs uses: usable_cores(), at most MAX_RUN_THREADS."""
+    """How many threads map_runs uses: RUN_THREADS_ENV when set, else usable_cores(), at most
+    MAX_RUN_THREADS."""
+    value = os.environ.get(RUN_THREADS_ENV, "").strip()
+    if value:
+        if not (value.isdigit() and int(value) >= 1):
+            raise ValueError(f"{RUN_THREADS_ENV}={value!r}: give a whole number of threads, 1 or more")
+        return min(int(value), MAX_RUN_THREADS)
     return max(1, min(usable_cores(), MAX_RUN_THREADS))
 
 

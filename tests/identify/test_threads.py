@@ -145,3 +145,20 @@ def test_an_explanation_in_threads_is_the_serial_one_to_the_last_digit(monkeypat
         docs[n] = json.dumps(DiscrepancyAnalysis().fit(rec).result(), sort_keys=True, default=str)
     assert json.loads(docs[1])["effects"][1].get("masked_by") == "coulomb_friction"  # the masking path ran
     assert docs[2] == docs[1]
+
+
+def test_the_run_threads_follow_the_environment_and_refuse_nonsense(monkeypatch):
+    """SHAKEID_RUN_THREADS sets the count (capped at MAX_RUN_THREADS); unset, the usable cores; a value that
+    is not a whole number of threads is refused in words, not read as 0 or ignored."""
+    import identify.threads as th
+
+    monkeypatch.setenv(th.RUN_THREADS_ENV, "1")
+    assert th.run_threads() == 1
+    monkeypatch.setenv(th.RUN_THREADS_ENV, "64")
+    assert th.run_threads() == th.MAX_RUN_THREADS
+    monkeypatch.delenv(th.RUN_THREADS_ENV)
+    assert th.run_threads() == max(1, min(th.usable_cores(), th.MAX_RUN_THREADS))
+    for bad in ("0", "two", "-1", "1.5"):
+        monkeypatch.setenv(th.RUN_THREADS_ENV, bad)
+        with pytest.raises(ValueError, match="whole number of threads"):
+            th.run_threads()
