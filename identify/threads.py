@@ -78,15 +78,17 @@ _POOL_LOCK = threading.Lock()
 
 
 def usable_cores() -> int:
-    """The cores this process may run on (its affinity: a container's or taskset's limit, not the host's)."""
+    """The cores this process may run on: its CPU affinity (taskset, a container's --cpuset-cpus), not a CPU
+    quota (--cpus), which leaves every core visible; set RUN_THREADS_ENV where a quota applies."""
     try:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         return os.cpu_count() or 1
 
 
-#: Environment variable that sets run_threads() (e.g. 1 in a job worker that shares its cores, or to time
-#: the serial explanation: the numbers are the same).
+#: Environment variable that sets run_threads() (e.g. 1 in a worker that shares its cores with others, or
+#: to time the serial explanation: the numbers are the same). The service's job workers get their share of
+#: the cores (share_cores); docker-compose's Dask workers, one thread each, set it to 1.
 RUN_THREADS_ENV = "SHAKEID_RUN_THREADS"
 
 
@@ -95,10 +97,17 @@ def run_threads() -> int:
     MAX_RUN_THREADS."""
     value = os.environ.get(RUN_THREADS_ENV, "").strip()
     if value:
-        if not (value.isdigit() and int(value) >= 1):
+        if not (value.isascii() and value.isdigit() and int(value) >= 1):
             raise ValueError(f"{RUN_THREADS_ENV}={value!r}: give a whole number of threads, 1 or more")
         return min(int(value), MAX_RUN_THREADS)
     return max(1, min(usable_cores(), MAX_RUN_THREADS))
+
+
+def share_cores(processes: int) -> None:
+    """In one of `processes` worker processes on this machine: run_threads() becomes its share of the
+    cores (at least 1), unless RUN_THREADS_ENV is set already (a pool initializer: server.worker)."""
+    if not os.environ.get(RUN_THREADS_ENV, "").strip():
+        os.environ[RUN_THREADS_ENV] = str(max(1, usable_cores() // max(1, processes)))
 
 
 def map_runs(fn, items) -> list:
@@ -113,8 +122,19 @@ def map_runs(fn, items) -> list:
     global _POOL
     with _POOL_LOCK:
         if _POOL is None or _POOL[:2] != (os.getpid(), n):
-            if _POOL is not None and _POOL[0] == os.getpid():
-                _POOL[2].shutdown(wait=False)  # its queued work still runs; new calls go to the new pool
+            # a new count gets a new pool; the old one is not shut down (a call that took it just before may
+            # still be submitting to it): its idle threads end when it is collected
             _POOL = (os.getpid(), n, ThreadPoolExecutor(max_workers=n, thread_name_prefix="shakeid-run"))
         pool = _POOL[2]
     return list(pool.map(fn, items))
+
+
+def _after_fork_in_child() -> None:
+    """A forked child has none of the parent's threads, and a lock another thread held at the fork stays
+    held: the child starts with no pool and fresh locks."""
+    global _POOL, _POOL_LOCK, _LOCK
+    _POOL, _POOL_LOCK, _LOCK = None, threading.Lock(), threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork_in_child)

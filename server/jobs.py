@@ -64,7 +64,7 @@ class JobQueue:
             return DaskPool(self.scheduler, self.connect_timeout_s)
         # spawn, not fork: the service has threads (uvicorn, rig, dispatcher) a fork would copy mid-flight
         pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=worker.die_with_parent, initargs=(os.getpid(),))
+                                   initializer=worker.die_with_parent, initargs=(os.getpid(), self.workers))
         for _ in range(self.workers):
             pool.submit(worker.warm_up)  # imports numpy/scipy/matplotlib now, not in the first job
         return pool

@@ -19,14 +19,20 @@ from .catalog import RESULT_FILES
 from .schemas import IdentifyIn, ReadOptions
 
 
-def die_with_parent(parent_pid: int) -> None:
+def die_with_parent(parent_pid: int, workers: int = 1) -> None:
     """Pool initializer: the worker exits when the service that started it is gone (even after a
     SIGKILL, which gives the service no chance to stop its pool): a job left behind would hold memory
     and its files for nobody, and the catalog re-queues it on the next start anyway. Also: batch work
     runs at a lower CPU priority (nice +10), so the web server and the rig controller keep the cores.
     And a terminal's Ctrl-C, which reaches the whole process group, is the service's to handle: a worker
-    ignores SIGINT (it printed a KeyboardInterrupt traceback per worker; the service stops its pool)."""
+    ignores SIGINT (it printed a KeyboardInterrupt traceback per worker; the service stops its pool).
+    An explanation's shooting runs take this worker's share of the cores (identify.threads.share_cores:
+    `workers` processes side by side)."""
     import signal
+
+    from identify.threads import share_cores
+
+    share_cores(workers)
     import threading
     import time
 

@@ -72,30 +72,28 @@ def test_a_fit_runs_on_one_blas_thread_and_gives_the_limit_back():
 # -- the explanation's shooting runs in threads (identify.threads.map_runs) ------------------------------
 
 def test_map_runs_keeps_the_order_runs_on_several_threads_and_does_not_nest(monkeypatch):
-    """Results in the order of the items, the calls spread over the pool's threads (each call sleeps a
-    little in a GIL-free wait, as the kernels run, so a single thread could not take them all), and a
-    map_runs called from a run thread runs its items right there (a bounded pool waiting on itself would
-    hang)."""
-    import time
-
+    """Results in the order of the items; the first two calls meet at a barrier, so they must be on two
+    threads at once (one thread would time out there); a map_runs called from a run thread runs its items
+    right there, on that thread (a bounded pool waiting on itself would hang)."""
     import identify.threads as th
 
     monkeypatch.setattr(th, "run_threads", lambda: 2)
-    names = set()
+    monkeypatch.setattr(th, "_POOL", None)  # a pool of its own, not one an earlier test left
+    meet = threading.Barrier(2, timeout=30)
 
     def inner(x):
-        return (x, threading.current_thread().name)
+        return x, threading.current_thread().name
 
     def outer(x):
-        time.sleep(0.05)
-        names.add(threading.current_thread().name)
-        return x * x, th.map_runs(inner, range(3))
+        if x < 2:
+            meet.wait()  # BrokenBarrierError unless the other call runs at the same time
+        return x * x, threading.current_thread().name, th.map_runs(inner, range(3))
 
     out = th.map_runs(outer, range(6))
     assert [o[0] for o in out] == [x * x for x in range(6)]
-    assert len(names) == 2 and all(n.startswith("shakeid-run") for n in names)
-    for _, nested in out:  # each nested item on the outer call's own thread
-        assert [x for x, _ in nested] == [0, 1, 2] and len({n for _, n in nested}) == 1
+    assert out[0][1] != out[1][1] and all(name.startswith("shakeid-run") for _, name, _ in out)
+    for _, name, nested in out:  # each nested item on the outer call's own thread
+        assert nested == [(0, name), (1, name), (2, name)]
     monkeypatch.setattr(th, "run_threads", lambda: 1)
     assert {n for _, n in th.map_runs(inner, range(4))} == {threading.current_thread().name}
 
@@ -108,8 +106,8 @@ def _child_maps(queue):
 
 
 def test_map_runs_works_in_a_forked_child_of_a_process_that_used_it(monkeypatch):
-    """A job worker forked after the parent ran threads: the child's pool is its own (the parent's
-    threads do not exist in it), not a pool whose workers never answer."""
+    """A worker forked after the parent ran threads: the child's pool is its own (the parent's threads do
+    not exist in it), not a pool whose workers never answer."""
     import multiprocessing
 
     import identify.threads as th
@@ -118,11 +116,30 @@ def test_map_runs_works_in_a_forked_child_of_a_process_that_used_it(monkeypatch)
     assert th.map_runs(lambda x: x, range(4)) == [0, 1, 2, 3]  # the parent's pool exists now
     ctx = multiprocessing.get_context("fork")
     queue = ctx.Queue()
-    child = ctx.Process(target=_child_maps, args=(queue,))
+    child = ctx.Process(target=_child_maps, args=(queue,), daemon=True)
     child.start()
-    assert queue.get(timeout=60) == [1, 2, 3, 4, 5]
-    child.join(timeout=60)
-    assert child.exitcode == 0
+    try:
+        assert queue.get(timeout=60) == [1, 2, 3, 4, 5]
+        child.join(timeout=60)
+        assert child.exitcode == 0
+    finally:
+        if child.is_alive():
+            child.kill()
+
+
+def test_a_job_worker_takes_its_share_of_the_cores(monkeypatch):
+    """share_cores (the service's job-worker initializer): the cores split between the workers, at least one
+    thread each; a value the operator set stays."""
+    import identify.threads as th
+
+    monkeypatch.setattr(th, "usable_cores", lambda: 4)
+    for workers, threads in ((1, 4), (2, 2), (3, 1), (8, 1)):
+        monkeypatch.delenv(th.RUN_THREADS_ENV, raising=False)
+        th.share_cores(workers)
+        assert th.run_threads() == threads
+    monkeypatch.setenv(th.RUN_THREADS_ENV, "3")
+    th.share_cores(2)
+    assert th.run_threads() == 3
 
 
 @pytest.mark.slow
@@ -158,7 +175,7 @@ def test_the_run_threads_follow_the_environment_and_refuse_nonsense(monkeypatch)
     assert th.run_threads() == th.MAX_RUN_THREADS
     monkeypatch.delenv(th.RUN_THREADS_ENV)
     assert th.run_threads() == max(1, min(th.usable_cores(), th.MAX_RUN_THREADS))
-    for bad in ("0", "two", "-1", "1.5"):
+    for bad in ("0", "two", "-1", "1.5", "\u00b2"):
         monkeypatch.setenv(th.RUN_THREADS_ENV, bad)
         with pytest.raises(ValueError, match="whole number of threads"):
             th.run_threads()

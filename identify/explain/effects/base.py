@@ -105,7 +105,9 @@ class Effect:
     # -- parameters and their search --------------------------------------------------------------
     def propose(self, fitter, cur) -> Candidate | None:
         """The candidate on top of `cur` (identify.explain.structure.Structure) with equation-error coefficients,
-        or None when it does not apply (already there). Plain terms: one least-squares fit."""
+        or None when it does not apply (already there). Plain terms: one least-squares fit. Called for every
+        effect of a round side by side (identify.threads.map_runs): it must not change shared state but the
+        fitter's caches (which are made for that)."""
         if self.name in cur.effects or all(t in cur.terms for t in self.terms):
             return None
         return self.candidate(cur, cur.adding(self.name, self.terms), fitter)
