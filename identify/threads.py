@@ -92,10 +92,15 @@ def usable_cores() -> int:
 RUN_THREADS_ENV = "SHAKEID_RUN_THREADS"
 
 
+def _env_threads() -> str:
+    """RUN_THREADS_ENV as set ('' when not)."""
+    return os.environ.get(RUN_THREADS_ENV, "").strip()
+
+
 def run_threads() -> int:
     """How many threads map_runs uses: RUN_THREADS_ENV when set, else usable_cores(), at most
     MAX_RUN_THREADS."""
-    value = os.environ.get(RUN_THREADS_ENV, "").strip()
+    value = _env_threads()
     if value:
         if not (value.isascii() and value.isdigit() and int(value) >= 1):
             raise ValueError(f"{RUN_THREADS_ENV}={value!r}: give a whole number of threads, 1 or more")
@@ -106,7 +111,7 @@ def run_threads() -> int:
 def share_cores(processes: int) -> None:
     """In one of `processes` worker processes on this machine: run_threads() becomes its share of the
     cores (at least 1), unless RUN_THREADS_ENV is set already (a pool initializer: server.worker)."""
-    if not os.environ.get(RUN_THREADS_ENV, "").strip():
+    if not _env_threads():
         os.environ[RUN_THREADS_ENV] = str(max(1, usable_cores() // max(1, processes)))
 
 
