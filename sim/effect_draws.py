@@ -90,7 +90,7 @@ def second_mode(d: Draw, r) -> None:
     # put the mode below the band, where it reads as a constant mass-channel gain: seed 3485374292 cases 32,
     # 56, 104, 128, fa at 0.48 fn, all answered mass_acc_gain)
     top_hz = max(d.sweep.f_start_hz, d.sweep.f_end_hz)
-    fa = min(d.rng.uniform(1.3, 2.2), 0.85 * top_hz / fn) * fn
+    fa = min(d.rng.uniform(1.3, 2.2) * fn, 0.85 * top_hz)  # the cap exact, not 1 ulp over
     ka = ma * (2 * math.pi * fa) ** 2
     ca = 2 * d.rng.uniform(0.02, 0.08) * math.sqrt(ka * ma)
     d.fields.update(absorber_mass_kg=ma, absorber_stiffness_n_per_m=ka, absorber_damping_ns_per_m=ca)
