@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model import SparseModel
-from .simulate import choose_substeps, equation_rows, fine_grid_input, jumps_at_rest, sampled_q1_dot, simulate
+from .simulate import choose_step, equation_rows, fine_grid_input, jumps_at_rest, sampled_q1_dot, simulate
 
 #: Largest fine input grid a ShootingData keeps (bytes; one, for the last substeps). A model that needs
 #: many RK4 substeps (a refit's trial step far out, a stiff contact) multiplies the record by 2 x substeps:
@@ -31,6 +31,16 @@ FINE_GRID_BYTES = 32 * 2**20
 #: Rows either side of a segment its own fine grid is interpolated from (the band-limited filter's reach
 #: is 10 rows; resample_poly's Kaiser window).
 FINE_PAD = 32
+
+#: A segment's mean acceleration, which its offset matches (ShootingData.offsets), is read on every
+#: OFFSET_ROW_STEP-th row for a model whose force is smooth (no jumps_at_rest): a mean over a segment of
+#: hundreds of rows does not need every one. What it moves is the measurement noise's share of the mean:
+#: offsets within 4e-5 of the stroke of those on every row (the noise alone puts ~1.6e-4 of it on them at
+#: 0.5 % noise; 1.2e-4 at a step of 4); a friction's force steps where the mass turns, and sampled at
+#: every other row the offsets moved by 4e-4 of the stroke (tests/identify/test_explain_masking.py's
+#: Coulomb rig, 1000 Hz): every row there. Four passes of the model over all rows had cost a quarter
+#: of an explanation's CPU (an end stop beside cubic damping, 19 s at 2048 Hz: 2.9 of 11.6 s).
+OFFSET_ROW_STEP = 2
 
 #: Segment length in periods of the (linear) resonance.
 SEGMENT_PERIODS = 4.0
@@ -124,7 +134,10 @@ class ShootingData:
         per-segment squared error (diverged: 4x the segment's signal energy); substeps)."""
         n = self.states.shape[0]
         scale = 1.5 * self.state_max
-        substeps = choose_substeps(model, 1.0 / self.fs_hz, scale)
+        jumps = jumps_at_rest(model)  # once per run, not per segment
+        substeps, stride = choose_step(model, 1.0 / self.fs_hz, scale)
+        if jumps:  # a stuck mass's chatter must stay within a sample's reach (sampled_q1_dot)
+            stride = 1
         uf = self.fine(substeps)  # None: too large to hold, built per segment
         up = 2 * substeps
         out = np.full(n, np.nan)
@@ -132,14 +145,13 @@ class ShootingData:
         dt = 1.0 / self.fs_hz
         bad = []
         offsets = self.offsets(model, seg) if self.gap == "q1_dot" else np.zeros(len(self.starts))
-        jumps = jumps_at_rest(model)  # once per run, not per segment
         for i in seg:
             a, b = int(self.starts[i]), int(self.stops[i])
             x0 = self.states[a].copy()
             x0[1] += offsets[i]
             u = uf[a * up:(b - 1) * up + 1] if uf is not None else self.segment_fine(a, b, substeps)
             res = simulate(model, dt, x0, inputs_fine=u, substeps=substeps,
-                           n_samples=b - a, bound=self.bound)
+                           n_samples=b - a, bound=self.bound, stride=stride)
             if res.diverged:
                 bad.append(i)
                 continue
@@ -169,32 +181,42 @@ class ShootingData:
         An asymmetric force (q2^2, |q2|, a one-sided stop) shifts the mean displacement under vibration;
         the chain's band removes it from the measured q2, so a segment started from the measured state
         would start off the model's orbit and ring. The offset is where the model's mean acceleration
-        over the segment matches the measured one (two Newton steps; 0 for a symmetric model). Segments
+        over the segment matches the measured one (two chord steps; ~0 for a symmetric model). Segments
         need not be contiguous (those around a jump are left out, jump_segments). Only the segments `seg`
-        (None: all) are computed, each from its own rows (0 for the others)."""
+        (None: all) are computed, each from its rows (every OFFSET_ROW_STEP-th for a smooth model; 0 for the
+        others)."""
         n_seg = len(self.starts)
         idx = np.arange(n_seg) if seg is None else np.asarray(seg, dtype=int)
         out = np.zeros(n_seg)
         if idx.size == 0:
             return out
         h = 1e-3 * float(self.state_max[1]) + 1e-12
-        length = (self.stops[idx] - self.starts[idx]).astype(int)
-        rows = np.concatenate([np.arange(a, b) for a, b in zip(self.starts[idx], self.stops[idx])])
+        step = 1 if jumps_at_rest(model) else OFFSET_ROW_STEP
+        picked = [np.arange(a, b, step) for a, b in zip(self.starts[idx], self.stops[idx])]
+        length = np.array([p.size for p in picked])
+        rows = np.concatenate(picked)
         cuts = np.concatenate([[0], np.cumsum(length)[:-1]])
         x, u = self.states[rows].copy(), self.inputs[rows]
         seg_of_row = np.repeat(np.arange(idx.size), length)
         target = np.add.reduceat(self.measured[rows], cuts) / length
         d = np.zeros(idx.size)
 
+        q2 = x[:, 1].copy()
+
         def mean_rhs(shift):
-            x[:, 1] = self.states[rows, 1] + shift[seg_of_row]
+            x[:, 1] = q2 + shift[seg_of_row]
             return np.add.reduceat(equation_rows(model, x, u, 0), cuts) / length
 
-        for _ in range(2):  # Newton on all segments at once (each segment's own offset)
-            f0 = mean_rhs(d) - target
-            slope = (mean_rhs(d + h) - target - f0) / h
-            ok = np.isfinite(f0) & np.isfinite(slope) & (slope < 0)
-            d = np.where(ok, d - np.where(ok, f0 / np.where(ok, slope, 1.0), 0.0), d)
+        # two chord steps on all segments at once (each segment's own offset), the slope taken at 0
+        f0 = mean_rhs(d) - target
+        slope = (mean_rhs(d + h) - target - f0) / h
+        ok = np.isfinite(slope) & (slope < 0)
+        safe = np.where(ok, slope, 1.0)
+        for step in range(2):
+            if step:
+                f0 = mean_rhs(d) - target
+            good = ok & np.isfinite(f0)
+            d = np.where(good, d - np.where(good, f0, 0.0) / safe, d)
         out[idx] = np.clip(np.nan_to_num(d), -0.5 * h * 1e3, 0.5 * h * 1e3)
         return out
 
