@@ -60,7 +60,7 @@ TEST_STEP = 1e-5
 
 class _Runs:
     """The training segments' shooting residuals of a structure's model with some coefficients changed:
-    (residual rows, substeps, whether a segment diverged)."""
+    (residual rows, the integration's step (substeps, stride: ShootingData.run's), whether a segment diverged)."""
 
     def __init__(self, fitter: Fitter, st: Structure):
         self.fitter, self.st, self.train = fitter, st, ~fitter.seg_held
@@ -76,18 +76,18 @@ class _Runs:
         model = self.fitter.model(replace(self.st, coef=tuple((t, c[t]) for t in self.st.coefficients)))
         return self.data.run_residuals(model, self.train)
 
-    def jacobian(self, r0: np.ndarray, steps0: int, names=None, sizes=None) -> np.ndarray | None:
+    def jacobian(self, r0: np.ndarray, steps0: tuple, names=None, sizes=None) -> np.ndarray | None:
         """Forward differences of the residuals in `names` (default: every free coefficient) at steps
-        `sizes` (secants: a change of the integration's substeps is allowed, small beside the step) or
+        `sizes` (secants: a change of the integration's step is allowed, small beside the step) or
         TEST_STEP of each magnitude (derivatives: it is not); None where a run diverges, or a derivative's
-        run changes its substeps."""
+        run changes its integration step (substeps or samples per step)."""
         names = self.names if names is None else names
         coef = self.st.coefficients
         J = np.empty((r0.size, len(names)))
         steps = [sizes[j] if sizes is not None else TEST_STEP * max(abs(coef[t]), 1e-12) for j, t in enumerate(names)]
         runs = map_runs(lambda th: self({th[0]: coef[th[0]] + th[1]}), zip(names, steps))  # columns side by side
-        for j, ((r, substeps, bad), h) in enumerate(zip(runs, steps)):
-            if bad or (sizes is None and substeps != steps0):
+        for j, ((r, step, bad), h) in enumerate(zip(runs, steps)):
+            if bad or (sizes is None and step != steps0):
                 return None
             J[:, j] = (r - r0) / h
         return J
@@ -103,7 +103,7 @@ def shooting_test(fitter: Fitter, st: Structure, terms: list) -> tuple[dict, flo
     ~10 decades). A segment's leverage above clustered.MAX_LEVERAGE scales its whole H_s (exact for d = 1). The
     Bouc-Wen pair and a free end-stop travel, refit beside the coefficients by Fitter.refine, are held at
     their values here: their uncertainty is not in these standard errors. p = 1 where nothing is
-    determined (a run diverging, the integration's substeps changing, a curvature with condition number
+    determined (a run diverging, the integration's step changing, a curvature with condition number
     beyond MAX_CONDITION)."""
     runs = _Runs(fitter, st)
     r0, steps0, bad = runs()

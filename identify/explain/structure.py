@@ -33,7 +33,8 @@ GAP_SIGNAL = {"base": "q1_dot", "force": "q2"}
 #: are each capped at 1 / (this x the largest |q2|). A z saturating within 2 % of the stroke is a Coulomb
 #: friction (sign(q1) times its level), which the catalog has; and it is stiff: on a rig without
 #: hysteresis a refit drove beta to where the RK4 needed 158-256 substeps a sample (benchmark seed
-#: 1706589829, case 141: 122 s of CPU, 5.5 GB of fine inputs before shooting.FINE_GRID_BYTES).
+#: 1706589829, case 141: 122 s of CPU, 5.5 GB of fine inputs before shooting.FINE_GRID_BYTES; measured
+#: under STEP_OMEGA on every eigenvalue: STEP_DECAY now takes ~5x fewer for that real mode).
 #: The candidate's grid starts at 0.1 (identify.explain.effects.hysteresis.HYST_SATURATION).
 HYST_MIN_SATURATION = 0.02
 #: Band-limited library columns kept between equation fits (Fitter.band_limited_columns): the baseline's and

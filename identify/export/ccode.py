@@ -13,7 +13,8 @@ from . import render
 
 #: Longest internal RK4 step, s, of generated code that integrates across a communication step (the FMU):
 #: 10 steps per 1 ms. The Table 1 rig (omega ~ 31-40 rad/s) is then at h omega ~ 0.004, far inside RK4's
-#: accurate range; a faster model gets STEP_OMEGA / omega_max at small amplitude (STEP_SCALE) instead.
+#: accurate range; a faster model gets STEP_OMEGA / omega_max at small amplitude (STEP_SCALE) instead (on
+#: every eigenvalue: the free run's STEP_DECAY for real ones is not used here, the stricter step).
 MAX_STEP_S = 1e-4
 #: State magnitude at which the linear dynamics' fastest frequency is measured for the step (units of the states).
 STEP_SCALE = 1e-3

@@ -35,8 +35,10 @@ FINE_PAD = 32
 #: A segment's mean acceleration, which its offset matches (ShootingData.offsets), is read on every
 #: OFFSET_ROW_STEP-th row for a model whose force is smooth (no jumps_at_rest): a mean over a segment of
 #: hundreds of rows does not need every one. What it moves is the measurement noise's share of the mean:
-#: offsets within 4e-5 of the stroke of those on every row (the noise alone puts ~1.6e-4 of it on them at
-#: 0.5 % noise; 1.2e-4 at a step of 4); a friction's force steps where the mass turns, and sampled at
+#: offsets within 4e-5 of the stroke of those on every row (the smooth candidates of
+#: tests/identify/test_explain_masking.py's rig, 1000 Hz, 0.5 % noise, which alone puts ~1.6e-4 of it on
+#: them; 1.2e-4 at a step of 4; end stops count as smooth here, measured only through runs 21-22 of
+#: docs/discrepancy.md); a friction's force steps where the mass turns, and sampled at
 #: every other row the offsets moved by 4e-4 of the stroke (tests/identify/test_explain_masking.py's
 #: Coulomb rig, 1000 Hz): every row there. Four passes of the model over all rows had cost a quarter
 #: of an explanation's CPU (an end stop beside cubic damping, 19 s at 2048 Hz: 2.9 of 11.6 s).
@@ -131,7 +133,8 @@ class ShootingData:
 
     def run(self, model: SparseModel, which: np.ndarray | None = None):
         """Piecewise free run: (simulated gap signal over the valid rows, NaN outside the segments run;
-        per-segment squared error (diverged: 4x the segment's signal energy); substeps)."""
+        per-segment squared error (diverged: 4x the segment's signal energy); the integration's step as
+        (substeps per sample, samples per step): a caller differencing two runs tells a changed step by it)."""
         n = self.states.shape[0]
         scale = 1.5 * self.state_max
         jumps = jumps_at_rest(model)  # once per run, not per segment
@@ -144,7 +147,7 @@ class ShootingData:
         seg = np.arange(self.starts.size) if which is None else np.flatnonzero(which)
         dt = 1.0 / self.fs_hz
         bad = []
-        offsets = self.offsets(model, seg) if self.gap == "q1_dot" else np.zeros(len(self.starts))
+        offsets = self.offsets(model, seg, jumps) if self.gap == "q1_dot" else np.zeros(len(self.starts))
         for i in seg:
             a, b = int(self.starts[i]), int(self.stops[i])
             x0 = self.states[a].copy()
@@ -166,7 +169,7 @@ class ShootingData:
         err = np.where(np.isfinite(err), err, self.divergence_error())
         if which is not None:
             err = np.where(which, err, np.nan)
-        return out, err, substeps
+        return out, err, (substeps, stride)
 
     def divergence_error(self) -> np.ndarray:
         """Per segment, the error run() gives a segment whose free run diverged: 4x its signal energy
@@ -175,7 +178,7 @@ class ShootingData:
             self._worst = np.array([4 * np.sum(self.measured[a:b] ** 2) for a, b in zip(self.starts, self.stops)])
         return self._worst
 
-    def offsets(self, model: SparseModel, seg: np.ndarray) -> np.ndarray:
+    def offsets(self, model: SparseModel, seg: np.ndarray, jumps: bool | None = None) -> np.ndarray:
         """Per segment, the displacement offset the model implies but accelerometers cannot see.
 
         An asymmetric force (q2^2, |q2|, a one-sided stop) shifts the mean displacement under vibration;
@@ -191,8 +194,9 @@ class ShootingData:
         if idx.size == 0:
             return out
         h = 1e-3 * float(self.state_max[1]) + 1e-12
-        step = 1 if jumps_at_rest(model) else OFFSET_ROW_STEP
-        picked = [np.arange(a, b, step) for a, b in zip(self.starts[idx], self.stops[idx])]
+        jumps = jumps_at_rest(model) if jumps is None else jumps
+        row_step = 1 if jumps else OFFSET_ROW_STEP
+        picked = [np.arange(a, b, row_step) for a, b in zip(self.starts[idx], self.stops[idx])]
         length = np.array([p.size for p in picked])
         rows = np.concatenate(picked)
         cuts = np.concatenate([[0], np.cumsum(length)[:-1]])
@@ -212,8 +216,8 @@ class ShootingData:
         slope = (mean_rhs(d + h) - target - f0) / h
         ok = np.isfinite(slope) & (slope < 0)
         safe = np.where(ok, slope, 1.0)
-        for step in range(2):
-            if step:
+        for chord in range(2):
+            if chord:
                 f0 = mean_rhs(d) - target
             good = ok & np.isfinite(f0)
             d = np.where(good, d - np.where(good, f0, 0.0) / safe, d)
@@ -230,12 +234,12 @@ class ShootingData:
 
     def run_residuals(self, model: SparseModel, which: np.ndarray) -> tuple[np.ndarray, int, bool]:
         """(unscaled residuals simulated - measured over segment_rows(which), NaN where a segment's free run
-        diverged; substeps; whether one did or a residual is not finite)."""
-        out, err, substeps = self.run(model, which)
+        diverged; the step (run's); whether one did or a residual is not finite)."""
+        out, err, step = self.run(model, which)
         rows = self.segment_rows(which)
         r = out[rows] - self.measured[rows]
         diverged = bool(np.any(err[which] == self.divergence_error()[which])) or not np.all(np.isfinite(r))
-        return r, substeps, diverged
+        return r, step, diverged
 
     def residuals(self, model: SparseModel, which: np.ndarray) -> np.ndarray:
         """Scaled residual vector over the rows of the segments in `which` (for least squares); a diverged

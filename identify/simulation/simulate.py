@@ -29,7 +29,7 @@ STEP_OMEGA = 0.1
 #: period after period as an oscillation's does: RK4's per-step error on it is (h lambda)^5 / 120, 2.6e-4 of
 #: the mode at 0.5, well inside RK4's stability (2.78), and the slow states it follows move by far less. A
 #: Bouc-Wen candidate of a 5 Hz rig at 2048 Hz (lambda ~2600 1/s): 13 steps per sample under STEP_OMEGA, 3
-#: under this, the states then within 4e-5 of their largest value of a 52-step reference (1.8e-6 at 13;
+#: under this, q1 and q2 then within 4e-5 of their largest value of a 52-step reference, z 8e-4 (1.8e-6 at 13;
 #: the |q1| kink, not the eigenvalue, sets that error, which falls as h^2).
 STEP_DECAY = 0.5
 MAX_SUBSTEPS = 256

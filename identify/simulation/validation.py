@@ -74,7 +74,7 @@ def free_run(model: SparseModel, sig: StateSignals, substeps: int | None = None)
     u = sig.input[v][:, None]
     scale = 1.5 * np.array([np.max(np.abs(q1)), np.max(np.abs(q2))])
     dt = 1.0 / sig.fs_hz
-    # RK4 steps with h omega_max <= STEP_OMEGA: several per sample, or, for a model slow against the
+    # RK4 steps with h step_rate <= STEP_OMEGA: several per sample, or, for a model slow against the
     # sample rate, one per `stride` samples (identify.simulation.simulate.choose_step)
     substeps, stride = choose_step(model, dt, scale) if substeps is None else (int(substeps), 1)
     # the input between samples as the chain's band-limited input has it (StateSignals.input_fine)

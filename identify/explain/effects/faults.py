@@ -83,7 +83,8 @@ class ChannelFault(Effect):
         sandwich standard error of the training segments' shooting error, each segment's slope scaled by
         its leverage (CR3), against Student's t with segments - 1 degrees of freedom (module docstring).
         p = 1 where nothing is determined: the error not curved upwards there, a segment's free run
-        diverging or the integration's substeps changing between the three runs (a jump, not a slope)."""
+        diverging or the integration's step (substeps, samples per step) changing between the three runs (a
+        jump, not a slope)."""
         train = ~fitter.seg_held
         lo, hi = PARAMS[key]
         h = FAULT_STEP * (hi - lo)
@@ -91,11 +92,11 @@ class ChannelFault(Effect):
         for x in (value - h, value, value + h):
             st, _ = self.with_fault(fitter, cur, key, x, band_limited=False)
             data = fitter.data(st)
-            _, err, substeps = data.run(fitter.model(st), train)
+            _, err, step = data.run(fitter.model(st), train)
             if np.any(err[train] == data.divergence_error()[train]):
                 return 0.0, 1.0
             e.append(err[train])
-            steps.add(substeps)
+            steps.add(step)
         per_segment = (e[2] - 2 * e[1] + e[0]) / h ** 2
         curvature = float(np.sum(per_segment))
         if len(steps) > 1 or not curvature > 0 or e[0].size < 2:
