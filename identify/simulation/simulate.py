@@ -101,20 +101,25 @@ def state_jacobians(model: SparseModel, state_scale, n_grid: int = 6) -> np.ndar
     return jac
 
 
+def _eigenvalues(model: SparseModel, state_scale, n_grid: int) -> np.ndarray:
+    """Every eigenvalue of state_jacobians' Jacobians (empty for a model without states)."""
+    jac = state_jacobians(model, state_scale, n_grid)
+    return np.linalg.eigvals(jac).ravel() if jac.size else np.zeros(0)
+
+
 def max_frequency(model: SparseModel, state_scale, n_grid: int = 6) -> float:
     """Largest |eigenvalue| (rad/s) of the model's Jacobian over a grid of states within +-state_scale
     (state_jacobians' grid)."""
-    jac = state_jacobians(model, state_scale, n_grid)
-    return float(np.max(np.abs(np.linalg.eigvals(jac)))) if jac.size else 0.0
+    ev = _eigenvalues(model, state_scale, n_grid)
+    return float(np.max(np.abs(ev))) if ev.size else 0.0
 
 
 def step_rate(model: SparseModel, state_scale, n_grid: int = 6) -> float:
-    """The rate (1/s) RK4's step is held to, h step_rate <= STEP_OMEGA: over state_jacobians' grid, the
-    largest |eigenvalue|, a real one's scaled by STEP_OMEGA / STEP_DECAY (it may take STEP_DECAY)."""
-    jac = state_jacobians(model, state_scale, n_grid)
-    if not jac.size:
+    """The rate (1/s) RK4's step is held to, h step_rate <= STEP_OMEGA: max_frequency's, a real eigenvalue's
+    |lambda| scaled by STEP_OMEGA / STEP_DECAY (it may take STEP_DECAY)."""
+    ev = _eigenvalues(model, state_scale, n_grid)
+    if not ev.size:
         return 0.0
-    ev = np.linalg.eigvals(jac)
     real = np.abs(ev.imag) <= 1e-9 * np.abs(ev)
     return float(np.max(np.abs(ev) * np.where(real, STEP_OMEGA / STEP_DECAY, 1.0)))
 
