@@ -40,6 +40,7 @@ import numpy as np
 
 from .clustered import cr3_covariance, wald_p
 from .effects import CATALOG, Candidate
+from .effects.base import wrong_side
 from .structure import Fit, Fitter, Structure
 from ..threads import map_runs
 
@@ -140,11 +141,21 @@ def _members(fitter: Fitter, cur: Structure, named: str, catalog: dict) -> list:
     out = []
     for name, effect in catalog.items():
         effect = effect if effect is not None else CATALOG[name]
-        if group and effect.group == group and effect.plain and effect.kind == "physics" and effect.sign:
+        if group and effect.group == group and effect.plain and effect.kind == "physics" and effect.masked_sign:
             cand = effect.propose(fitter, cur)
             if cand is not None:
                 out.append((effect, cand))
     return out
+
+
+def masked_admissibility(effect, coef: dict, se: dict) -> str:
+    """'' when a masked member's terms stay on the side it is looked for on (Effect.masked_sign, judged as
+    the sign rules are: identify.explain.admissibility), else the reason; a sign-free effect's own
+    admissibility does not hold it there."""
+    for t in effect.terms:
+        if wrong_side(effect.masked_sign * -coef.get(t, 0.0), 0.0, se.get(t, 0.0)):
+            return f"its shooting refit takes {t} to {coef[t]:+.4g}, the side it is not looked for on under a mask"
+    return ""
 
 
 def screen(fitter: Fitter, cur: Structure, members: list) -> tuple[list, list]:
@@ -163,7 +174,7 @@ def screen(fitter: Fitter, cur: Structure, members: list) -> tuple[list, list]:
         new = cand.terms
         size = [max(abs(cand.fit.coef.get(t, 0.0)), MIN_START_SE * cand.fit.se.get(t, 0.0)) or 1e-12 for t in new]
         st = replace(cand.structure, coef=tuple((t, cur.coefficients.get(t, 0.0)) for t in cand.structure.coefficients))
-        cols = _Runs(fitter, st).jacobian(r0, steps0, new, [effect.sign * h for h in size])
+        cols = _Runs(fitter, st).jacobian(r0, steps0, new, [effect.masked_sign * h for h in size])
         A = None if cols is None else np.column_stack([J, cols])
         scale = None if A is None else np.linalg.norm(A, axis=0)
         if scale is None or not np.all(scale > 0):
@@ -171,7 +182,7 @@ def screen(fitter: Fitter, cur: Structure, members: list) -> tuple[list, list]:
             continue
         delta = np.linalg.lstsq(A / scale, -r0, rcond=None)[0] / scale  # on unit columns, as shooting_test
         move = delta[-len(new):]
-        if not np.all(effect.sign * move > 0):
+        if not np.all(effect.masked_sign * move > 0):
             dropped.append((cand, f"its Gauss-Newton step on the shooting error goes to the wrong side "
                                   f"({', '.join(f'{t} {m:+.4g}' for t, m in zip(new, move))})"))
             continue
@@ -194,11 +205,12 @@ def masked_candidates(fitter: Fitter, cur: Structure, named: str, catalog: dict)
         st = fitter.refine(replace(cand.structure, coef=tuple((t, start[t]) for t in cand.structure.coefficients)))
         return (st, *shooting_test(fitter, st, cand.terms))
 
-    for (_, _, cand, _), (st, se, p) in zip(kept[:MASKED_REFITS], map_runs(refit, kept[:MASKED_REFITS])):
+    for (_, effect, cand, _), (st, se, p) in zip(kept[:MASKED_REFITS], map_runs(refit, kept[:MASKED_REFITS])):
         eq = fitter.equation_fit(st)
         fit = Fit(dict(st.coefficients), {**eq.se, **se}, eq.cov, eq.names, eq.mse_heldout)
         # the equation error's Wald statistic no longer applies: p is the shooting test's
-        out.append(replace(cand, structure=st, fit=fit, p_value=p, wald=None))
+        out.append(replace(cand, structure=st, fit=fit, p_value=p, wald=None,
+                           rejected=masked_admissibility(effect, st.coefficients, fit.se)))
     for _, _, cand, _ in kept[MASKED_REFITS:]:
         dropped.append((cand, f"not refit (beyond MASKED_REFITS = {MASKED_REFITS})"))
     for cand, reason in dropped:

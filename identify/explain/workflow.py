@@ -43,6 +43,7 @@ from ..errors import IdentificationError
 from .rounds import SURROGATE_SHARE, Rounds, closed_shares
 from ..identifier import holdout_blocks
 from .localise import localise, remaining
+from .masking import masked_admissibility
 from ..model import SparseModel
 from ..noise.floor import noise_floor
 from ..data.recording import Recording
@@ -208,12 +209,15 @@ class DiscrepancyAnalysis(Rounds):
             if self.refine:
                 polished, perr = self._polish(fitter, cur, err)
                 # a masked term is weakly determined: a polish that takes it across zero is not kept
-                if not ("masked_by" in entry and CATALOG[best.name].admissibility(polished.coefficients, best.fit.se)):
+                if not ("masked_by" in entry and masked_admissibility(CATALOG[best.name], polished.coefficients, best.fit.se)):
                     cur, err = polished, perr
                 entry.update(gap_after=self._gap(err), **closed_shares(gap_prev, self._gap(err)))
             effects.append(entry)
             cur_se = fitter.equation_fit(cur).se
             self.noise_floor_ = min(self.noise_floor_, self._floor_after(fitter, cur))
+        if self.refine and len(effects) > 1:
+            cur, err, table = self._recheck(fitter, cur, err, effects)
+            rounds += [table] if table else []
         self.rounds_ = rounds
         self.candidates_ = rounds[0] if rounds else []
         return cur, err, effects

@@ -96,6 +96,12 @@ class Effect:
     def dissipative(self) -> bool:
         return self.sign < 0
 
+    @property
+    def masked_sign(self) -> int:
+        """The side a masked member of its group is looked for on (identify.explain.masking): its sign; a
+        sign-free effect may name the side its masked form takes (0: it is not looked for under a mask)."""
+        return self.sign
+
     # -- simulation -------------------------------------------------------------------------------
     @property
     def force(self) -> dict:
@@ -130,6 +136,11 @@ class Effect:
                 if wrong_side(coef.get(t, 0.0), 0.0, se.get(t, 0.0)):
                     return f"{t} has coefficient {coef[t]:+.4g} in dq1/dt: it injects energy instead of dissipating it"
         return ""
+
+    def without(self, st):
+        """`st` with this effect taken out of a finished explanation (identify.explain.rounds.Rounds._recheck),
+        or None where it is not taken out again (physics: each was judged against what was named before it)."""
+        return None
 
     # -- report fields ----------------------------------------------------------------------------
     def refit_fields(self, st) -> dict:

@@ -49,6 +49,11 @@ class ChannelFault(Effect):
             return None
         return self._fault(fitter, cur)
 
+    def without(self, st):
+        """`st` with this fault's parameters back at no fault and its name taken out."""
+        meas = dict(st.meas, **{k: 0.0 for k in self.params})
+        return replace(st, meas=tuple(sorted(meas.items())), effects=tuple(n for n in st.effects if n != self.name))
+
     def with_fault(self, fitter, cur, key: str, value: float, band_limited: bool = True):
         """The structure with fault parameter `key` = value, coefficients by equation error, and its fit."""
         p = dict(cur.meas)
