@@ -15,7 +15,8 @@ error.
 So once the reported (trimmed) gap is down at the floor (identify.explain.workflow.CONTINUE_FACTOR x it; a
 round on the plain sums may still have run and named nothing), the group of each named effect is checked once
 (DiscrepancyAnalysis._explain, with refine on): screen() takes each other plain-term member with a physical
-side (Effect.sign: Coulomb friction, quadratic and cubic damping)'s Gauss-Newton step on the training
+side (Effect.masked_sign: Coulomb friction, quadratic and cubic damping by their sign rule, displacement-
+dependent damping, sign-free in the rounds, dissipating)'s Gauss-Newton step on the training
 segments' shooting error from the explanation (one run per coefficient: the Jacobian of its coefficients, and
 a secant for the member's terms) and keeps those it moves to their physical side; up to MASKED_REFITS of them
 are refit on the shooting error from the explanation's coefficients and that step (not from the equation
@@ -134,8 +135,9 @@ def shooting_test(fitter: Fitter, st: Structure, terms: list) -> tuple[dict, flo
 
 def _members(fitter: Fitter, cur: Structure, named: str, catalog: dict) -> list:
     """(effect, candidate) of the other plain-term physics members of the named effect's group that have a
-    physical side (Effect.sign): below the floor the sign is a guard the held-out error alone is not (a
-    sign-free displacement-dependent damping, energy-injecting, was named on a Coulomb-only rig)."""
+    side to be looked for on (Effect.masked_sign): below the floor the sign is a guard the held-out error
+    alone is not (displacement-dependent damping looked for on either side, energy-injecting, was named on
+    a Coulomb-only rig)."""
     named_effect = catalog.get(named) or CATALOG.get(named)
     group = named_effect.group if named_effect is not None else ""
     out = []
@@ -162,7 +164,7 @@ def screen(fitter: Fitter, cur: Structure, members: list) -> tuple[list, list]:
     """([(predicted drop of the training shooting error, effect, candidate, start of its new terms)], largest
     first, of the members whose Gauss-Newton step from the explanation (its coefficients' Jacobian and the
     new terms' secants at one equation-error size, MIN_START_SE standard errors at least) moves the new
-    terms to their physical side (Effect.sign); [(candidate, reason)] of the others): one run per
+    terms to their physical side (Effect.masked_sign); [(candidate, reason)] of the others): one run per
     coefficient and member, where a refit is ~100."""
     runs = _Runs(fitter, cur)
     r0, steps0, bad = runs()
@@ -205,12 +207,11 @@ def masked_candidates(fitter: Fitter, cur: Structure, named: str, catalog: dict)
         st = fitter.refine(replace(cand.structure, coef=tuple((t, start[t]) for t in cand.structure.coefficients)))
         return (st, *shooting_test(fitter, st, cand.terms))
 
-    for (_, effect, cand, _), (st, se, p) in zip(kept[:MASKED_REFITS], map_runs(refit, kept[:MASKED_REFITS])):
+    for (_, _, cand, _), (st, se, p) in zip(kept[:MASKED_REFITS], map_runs(refit, kept[:MASKED_REFITS])):
         eq = fitter.equation_fit(st)
         fit = Fit(dict(st.coefficients), {**eq.se, **se}, eq.cov, eq.names, eq.mse_heldout)
         # the equation error's Wald statistic no longer applies: p is the shooting test's
-        out.append(replace(cand, structure=st, fit=fit, p_value=p, wald=None,
-                           rejected=masked_admissibility(effect, st.coefficients, fit.se)))
+        out.append(replace(cand, structure=st, fit=fit, p_value=p, wald=None))
     for _, _, cand, _ in kept[MASKED_REFITS:]:
         dropped.append((cand, f"not refit (beyond MASKED_REFITS = {MASKED_REFITS})"))
     for cand, reason in dropped:

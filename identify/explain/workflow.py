@@ -180,7 +180,8 @@ class DiscrepancyAnalysis(Rounds):
 
     def _explain(self, fitter, cur, err, catalog):
         """Explain until explained: rounds while the gap is above the floor (LOOK_FACTOR, then
-        CONTINUE_FACTOR), each adding the best candidate that closes enough, the whole refit after; once
+        CONTINUE_FACTOR), each adding the best candidate that closes enough, the whole refit after (and a
+        fault named before it judged again: Rounds._recheck); once
         the gap is down at the floor, the group of each named effect is checked once for an effect it masks
         (identify.explain.masking)."""
         effects, rounds, checked = [], [], set()
@@ -213,11 +214,11 @@ class DiscrepancyAnalysis(Rounds):
                     cur, err = polished, perr
                 entry.update(gap_after=self._gap(err), **closed_shares(gap_prev, self._gap(err)))
             effects.append(entry)
+            if self.refine and len(effects) > 1:  # a fault named before it may no longer be needed
+                cur, err, table = self._recheck(fitter, cur, err, effects)
+                rounds += [table] if table else []
             cur_se = fitter.equation_fit(cur).se
             self.noise_floor_ = min(self.noise_floor_, self._floor_after(fitter, cur))
-        if self.refine and len(effects) > 1:
-            cur, err, table = self._recheck(fitter, cur, err, effects)
-            rounds += [table] if table else []
         self.rounds_ = rounds
         self.candidates_ = rounds[0] if rounds else []
         return cur, err, effects
