@@ -41,7 +41,6 @@ import numpy as np
 
 from .clustered import cr3_covariance, wald_p
 from .effects import CATALOG, Candidate
-from .effects.base import wrong_side
 from .structure import Fit, Fitter, Structure
 from ..threads import map_runs
 
@@ -154,10 +153,8 @@ def masked_admissibility(effect, coef: dict, se: dict) -> str:
     """'' when a masked member's terms stay on the side it is looked for on (Effect.masked_sign, judged as
     the sign rules are: identify.explain.admissibility), else the reason; a sign-free effect's own
     admissibility does not hold it there."""
-    for t in effect.terms:
-        if wrong_side(effect.masked_sign * -coef.get(t, 0.0), 0.0, se.get(t, 0.0)):
-            return f"its shooting refit takes {t} to {coef[t]:+.4g}, the side it is not looked for on under a mask"
-    return ""
+    t = effect.off_side(coef, se, effect.masked_sign)
+    return f"its shooting refit takes {t} to {coef[t]:+.4g}, the side it is not looked for on under a mask" if t else ""
 
 
 def screen(fitter: Fitter, cur: Structure, members: list) -> tuple[list, list]:

@@ -131,11 +131,14 @@ class Effect:
     def admissibility(self, coef: dict, se: dict) -> str:
         """'' when the physics allows these coefficients, else the reason (identify.explain.admissibility: signs
         are judged statistically against the standard errors `se`)."""
-        if self.kind == "physics" and self.dissipative:
-            for t in self.terms:
-                if wrong_side(coef.get(t, 0.0), 0.0, se.get(t, 0.0)):
-                    return f"{t} has coefficient {coef[t]:+.4g} in dq1/dt: it injects energy instead of dissipating it"
-        return ""
+        t = self.off_side(coef, se, self.sign) if self.kind == "physics" and self.dissipative else None
+        return f"{t} has coefficient {coef[t]:+.4g} in dq1/dt: it injects energy instead of dissipating it" if t else ""
+
+    def off_side(self, coef: dict, se: dict, sign: int) -> str | None:
+        """The first of its terms whose coefficient is off the side `sign` (-1: negative in dq1/dt) beyond
+        SIGN_Z_WRONG standard errors (wrong_side), or None: the one sign rule, here and under a mask
+        (identify.explain.masking.masked_admissibility)."""
+        return next((t for t in self.terms if wrong_side(-sign * coef.get(t, 0.0), 0.0, se.get(t, 0.0))), None)
 
     def without(self, st):
         """`st` with this effect taken out of a finished explanation (identify.explain.rounds.Rounds._recheck),
