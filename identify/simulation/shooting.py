@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model import SparseModel
-from .simulate import choose_step, equation_rows, fine_grid_input, jumps_at_rest, sampled_q1_dot, simulate
+from .simulate import choose_step, equation_rows, fine_grid_input, jumps_at_rest, sampled_q1_dot, sign_jump_terms, simulate
 
 #: Largest fine input grid a ShootingData keeps (bytes; one, for the last substeps). A model that needs
 #: many RK4 substeps (a refit's trial step far out, a stiff contact) multiplies the record by 2 x substeps:
@@ -137,7 +137,8 @@ class ShootingData:
         (substeps per sample, samples per step): a caller differencing two runs tells a changed step by it)."""
         n = self.states.shape[0]
         scale = 1.5 * self.state_max
-        jumps = jumps_at_rest(model)  # once per run, not per segment
+        jump_terms = sign_jump_terms(model)  # once per run, not per segment
+        jumps = bool(jump_terms.any())
         substeps, stride = choose_step(model, 1.0 / self.fs_hz, scale)
         if jumps:  # a stuck mass's chatter must stay within a sample's reach (sampled_q1_dot)
             stride = 1
@@ -158,7 +159,7 @@ class ShootingData:
             if res.diverged:
                 bad.append(i)
                 continue
-            out[a:b] = (sampled_q1_dot(model, res.states, self.inputs[a:b], dt, jumps) if self.gap == "q1_dot"
+            out[a:b] = (sampled_q1_dot(model, res.states, self.inputs[a:b], dt, jump_terms) if self.gap == "q1_dot"
                         else res.states[:, 1])
         if self.lowpass is not None:
             ok = np.isfinite(out)

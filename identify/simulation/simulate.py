@@ -35,6 +35,13 @@ STEP_DECAY = 0.5
 MAX_SUBSTEPS = 256
 #: Longest RK4 step, in samples, of a smooth model slow against the sample rate (choose_step).
 MAX_STRIDE = 4
+#: |q1| that stands for "at rest, on one side of 0" where sampled_q1_dot reads a jump's two sides: sign(q1)
+#: takes the side, and every power of it up to the 5th (1e-300) is still a normal number, so a term with q1
+#: in it adds nothing a double can hold (1e-60 of it) and costs nothing. np.finfo(float).tiny did the same
+#: but made every product with it subnormal: on Intel cores each such operation takes a microcode assist,
+#: and the two side evaluations cost 4.3x the plain one (240 against 56 us per 2000 rows of a Coulomb model;
+#: a third of a Coulomb case's explanation went there).
+AT_REST_Q1 = 1e-60
 
 
 @dataclass
@@ -148,20 +155,26 @@ def has_end_stops(model: SparseModel) -> bool:
     return bool(np.any(np.asarray(feat) >= 3 * len(model.states) + len(model.inputs)))
 
 
-def jumps_at_rest(model: SparseModel) -> bool:
-    """Whether the q1_dot equation's force jumps where q1 crosses 0: a kept term with an odd power of
-    sign(q1) (Coulomb friction), FeatureSpace's feature 2."""
+def sign_jump_terms(model: SparseModel) -> np.ndarray:
+    """Per term, whether it makes the q1_dot equation's force jump where q1 crosses 0: a kept term with an
+    odd power of sign(q1) (Coulomb friction), FeatureSpace's feature 2."""
     ptr, feat, powr = (np.asarray(a) for a in model.space.encode(model.terms))
-    return any(model.coef_[0, j] != 0 and np.any((feat[ptr[j]:ptr[j + 1]] == 2) & (powr[ptr[j]:ptr[j + 1]] % 2 == 1))
-               for j in range(len(model.terms)))
+    return np.array([model.coef_[0, j] != 0 and bool(np.any((feat[ptr[j]:ptr[j + 1]] == 2)
+                                                            & (powr[ptr[j]:ptr[j + 1]] % 2 == 1)))
+                     for j in range(len(model.terms))], dtype=bool)
+
+
+def jumps_at_rest(model: SparseModel) -> bool:
+    """Whether the q1_dot equation's force jumps where q1 crosses 0 (sign_jump_terms)."""
+    return bool(sign_jump_terms(model).any())
 
 
 def sampled_q1_dot(model: SparseModel, states: np.ndarray, inputs: np.ndarray, dt_s: float,
-                   jumps: bool | None = None) -> np.ndarray:
+                   jump_terms: np.ndarray | None = None) -> np.ndarray:
     """q1_dot (m/s^2) at the samples of a run the kernel integrated (states (n, n_states), inputs (n,
     n_inputs), dt_s apart), as an accelerometer reads it: equation_rows, except where the mass sticks.
 
-    Where the force jumps at q1 = 0 (jumps_at_rest: Coulomb friction's sign(q1)) and the other forces
+    Where the force jumps at q1 = 0 (sign_jump_terms: Coulomb friction's sign(q1)) and the other forces
     cannot overcome it, both one-sided accelerations point at q1 = 0 (q1_dot(0+) < 0 < q1_dot(0-),
     Filippov's sliding condition): the mass sticks and the true q1_dot is 0. RK4 steps through the jump, so
     there its q1 chatters about 0 within a step's worth of the jump (the states stay right to that) while
@@ -169,43 +182,53 @@ def sampled_q1_dot(model: SparseModel, states: np.ndarray, inputs: np.ndarray, d
     content of the friction's size that no rig has. Samples with |q1| within (q1_dot(0-) - q1_dot(0+)) dt_s
     of 0 that meet the sliding condition read 0. The simulated rig's mass accelerometer reads its truth
     this way (sim.physics.mass_acceleration) and the shooting error a model's runs (identify.simulation.shooting).
-    jumps: jumps_at_rest(model) when the caller knows it (a shooting run reads every segment of one model)."""
+    The two sides are read only on the rows within reach of the jump, -2 x the jumping terms at 0+ (the
+    rest of the force is the same on both sides): a shooting run reads every segment of a Coulomb model.
+    jump_terms: sign_jump_terms(model) when the caller knows it (once per run, not per segment)."""
     states = np.asarray(states, dtype=float)
     qdd = equation_rows(model, states, inputs, 0)
-    if not (jumps_at_rest(model) if jumps is None else jumps):
+    jump_terms = sign_jump_terms(model) if jump_terms is None else jump_terms
+    if not jump_terms.any():
         return qdd
-    side = {}
-    for sign in (1.0, -1.0):
-        at_rest = states.copy()
-        at_rest[:, 0] = sign * np.finfo(float).tiny
-        side[sign] = equation_rows(model, at_rest, inputs, 0)
-    jump = side[-1.0] - side[1.0]
-    stuck = (side[1.0] < 0) & (side[-1.0] > 0) & (np.abs(states[:, 0]) <= jump * dt_s)
-    qdd[stuck] = 0.0
+    rest = list(states.T)  # the states as columns, q1 replaced by AT_REST_Q1: no copy of the others
+    rest[0] = np.full(states.shape[0], AT_REST_Q1)
+    # rows that can stick: the sliding condition needs |the smooth force| < |the jump's half|, so there the
+    # two-sided difference below equals this one to rounding of the jump itself (1e-9: generous)
+    reach = -2.0 * equation_rows(model, rest, inputs, 0, terms=jump_terms) * dt_s
+    near = np.flatnonzero(np.abs(states[:, 0]) <= reach * (1.0 + 1e-9))
+    if near.size:
+        u = np.asarray(inputs, dtype=float)[near]
+        side = {}
+        for sign in (1.0, -1.0):
+            side[sign] = equation_rows(model, [np.full(near.size, sign * AT_REST_Q1)] + [c[near] for c in rest[1:]], u, 0)
+        stuck = (side[1.0] < 0) & (side[-1.0] > 0) & (np.abs(states[near, 0]) <= (side[-1.0] - side[1.0]) * dt_s)
+        qdd[near[stuck]] = 0.0
     return qdd
 
 
-def equation_rows(model: SparseModel, states, inputs, equation: int = 0) -> np.ndarray:
+def equation_rows(model: SparseModel, states, inputs, equation: int = 0, terms: np.ndarray | None = None) -> np.ndarray:
     """model.rhs(states, inputs)[:, equation] (the equation's derivative, e.g. q1_dot in m/s^2) at n
     independent rows, in the compiled kernel: one pass, none of the library's intermediate columns.
 
     states : sequence of n_states 1-D arrays (n,) (strided views are fine), or an (n, n_states) array;
     inputs : (n, n_inputs) array, a sequence of columns, or one column (n,). End-stop features take each
-    row's own side."""
+    row's own side. terms: a mask of the model's terms to sum (None: all)."""
     def columns(a):
         if isinstance(a, np.ndarray):
             return list(a.T) if a.ndim == 2 else [a]
         return list(a)
 
-    cols = columns(states) + columns(inputs)
-    cols = [np.asarray(c, dtype=float) for c in cols]
+    cols = [c if isinstance(c, np.ndarray) and c.dtype == np.float64 else np.asarray(c, dtype=float)
+            for c in columns(states) + columns(inputs)]  # (called per shooting segment: no needless copies)
     n = cols[0].shape[0] if cols else 0
     if len(cols) != len(model.states) + len(model.inputs):
         raise ValueError(f"{len(cols)} columns; model has states {model.states} and inputs {model.inputs}")
     coef = np.zeros_like(model.coef_)
     coef[equation] = model.coef_[equation]  # the other equations' terms are not evaluated at all
+    if terms is not None:
+        coef[equation, ~np.asarray(terms, dtype=bool)] = 0.0
     out = np.empty(n)
-    if n == 0 or not np.any(coef):
+    if n == 0 or not coef.any():
         out[:] = 0.0
         return out
     ptr, feat, powr, travel = model.kernel_terms()

@@ -75,3 +75,30 @@ def test_stick_slip_reads_zero_only_while_stuck():
     # and while the mass slides (|q1| beyond a step's worth) the read-out is the equation's
     sliding = np.abs(res.states[:, 0]) > jump * dt
     assert np.array_equal(qdd[sliding], equation_rows(model, res.states, zdd, 0)[sliding])
+
+
+def test_the_rows_within_reach_of_the_jump_are_all_the_rows_that_can_stick():
+    """sampled_q1_dot reads the two sides only where |q1| is within the jump's reach, the jump taken from the
+    jumping terms alone (-2 x their value at 0+): the same read-out, sample for sample, as the sliding
+    condition applied to every row with both sides evaluated. A friction whose level depends on q2
+    (sign(q1) q2^2 beside sign(q1)), a stick-slip drive, and q1 set exactly onto the reach's edge on some
+    rows (where rounding decides) so the edge is exercised."""
+    model = SparseModel({"q1_dot": {"q1": -C_NS_PER_M / MASS_KG, "q2": -K_N_PER_M / MASS_KG,
+                                    "sign(q1)": -FC_N / MASS_KG, "sign(q1)*q2^2": -2e3, "zdd": -1.0},
+                         "q2_dot": {"q1": 1.0}})
+    zdd, dt = _table(1.5 * FC_N / MASS_KG), 1 / FS_HZ
+    states = simulate(model, dt, [0.0, 0.0], zdd, substeps=4).states.copy()
+    sides = {}
+    for sign in (1.0, -1.0):
+        at_rest = states.copy()
+        at_rest[:, 0] = sign * 1e-60
+        sides[sign] = equation_rows(model, at_rest, zdd, 0)
+    reach = (sides[-1.0] - sides[1.0]) * dt
+    rng = np.random.default_rng(0)
+    edge = rng.choice(states.shape[0], 200, replace=False)
+    states[edge, 0] = rng.choice([-1.0, 1.0], edge.size) * reach[edge]
+    brute = equation_rows(model, states, zdd, 0)
+    brute[(sides[1.0] < 0) & (sides[-1.0] > 0) & (np.abs(states[:, 0]) <= reach)] = 0.0
+    qdd = sampled_q1_dot(model, states, zdd, dt)
+    assert 0.05 < np.mean(qdd == 0.0) < 0.95  # sticking and sliding both present
+    assert np.array_equal(qdd, brute)
