@@ -4,7 +4,7 @@ kernel's q1 does about 0 in the meantime; a mass that slides reads the equation'
 import numpy as np
 
 from identify.model import SparseModel
-from identify.simulation.simulate import equation_rows, jumps_at_rest, sampled_q1_dot, simulate
+from identify.simulation.simulate import AT_REST_Q1, equation_rows, jumps_at_rest, sampled_q1_dot, simulate
 from sim.physics import mass_acceleration
 
 FS_HZ = 1000.0
@@ -91,7 +91,7 @@ def test_the_rows_within_reach_of_the_jump_are_all_the_rows_that_can_stick():
     sides = {}
     for sign in (1.0, -1.0):
         at_rest = states.copy()
-        at_rest[:, 0] = sign * 1e-60
+        at_rest[:, 0] = sign * AT_REST_Q1
         sides[sign] = equation_rows(model, at_rest, zdd, 0)
     reach = (sides[-1.0] - sides[1.0]) * dt
     rng = np.random.default_rng(0)
