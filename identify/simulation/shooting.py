@@ -44,6 +44,11 @@ FINE_PAD = 32
 #: of an explanation's CPU (an end stop beside cubic damping, 19 s at 2048 Hz: 2.9 of 11.6 s).
 OFFSET_ROW_STEP = 2
 
+#: Most masks ShootingData.segment_rows keeps the rows of (each a record's worth of indices).
+ROW_CACHE = 32
+#: Most segment sets ShootingData.offsets keeps its rows' states and inputs for (each a copy of them).
+PLAN_CACHE = 4
+
 #: Segment length in periods of the (linear) resonance.
 SEGMENT_PERIODS = 4.0
 MIN_SEGMENT = 48
@@ -87,6 +92,7 @@ class ShootingData:
         self._piece_means: list[float] | None = None  # segment_fine's recording means, once
         self._worst: np.ndarray | None = None  # divergence_error's, once
         self._rows: dict = {}  # segment_rows' by segment mask, once each (a refit asks ~100 times)
+        self._plans: dict = {}  # _offset_plan's, likewise
         #: each state's largest |value| over the rows: once, not per run (an abs and a max over the whole
         #: record were 6 % of an explanation's CPU)
         self.state_max = np.max(np.abs(self.states), axis=0)
@@ -147,8 +153,9 @@ class ShootingData:
         out = np.full(n, np.nan)
         seg = np.arange(self.starts.size) if which is None else np.flatnonzero(which)
         dt = 1.0 / self.fs_hz
-        bad = []
         offsets = self.offsets(model, seg, jumps) if self.gap == "q1_dot" else np.zeros(len(self.starts))
+        states = np.empty((n, self.states.shape[1]))  # the runs' states, segment by segment
+        ran = []  # the segments whose run did not diverge
         for i in seg:
             a, b = int(self.starts[i]), int(self.stops[i])
             x0 = self.states[a].copy()
@@ -156,11 +163,16 @@ class ShootingData:
             u = uf[a * up:(b - 1) * up + 1] if uf is not None else self.segment_fine(a, b, substeps)
             res = simulate(model, dt, x0, inputs_fine=u, substeps=substeps,
                            n_samples=b - a, bound=self.bound, stride=stride)
-            if res.diverged:
-                bad.append(i)
-                continue
-            out[a:b] = (sampled_q1_dot(model, res.states, self.inputs[a:b], dt, jump_terms) if self.gap == "q1_dot"
-                        else res.states[:, 1])
+            if not res.diverged:
+                states[a:b] = res.states
+                ran.append(i)
+        mask = np.zeros(self.starts.size, dtype=bool)
+        mask[ran] = True
+        if ran:  # the read-out in one pass over every segment's rows (row by row, the same numbers as per
+            # segment; per segment it was ~80 calls a run and a tenth of a Coulomb case's CPU in call overhead)
+            rows = self.segment_rows(mask)
+            out[rows] = (sampled_q1_dot(model, states[rows], self.inputs[rows], dt, jump_terms)
+                         if self.gap == "q1_dot" else states[rows, 1])
         if self.lowpass is not None:
             ok = np.isfinite(out)
             filled = np.where(ok, out, self.measured)
@@ -196,21 +208,13 @@ class ShootingData:
             return out
         h = 1e-3 * float(self.state_max[1]) + 1e-12
         jumps = jumps_at_rest(model) if jumps is None else jumps
-        row_step = 1 if jumps else OFFSET_ROW_STEP
-        picked = [np.arange(a, b, row_step) for a, b in zip(self.starts[idx], self.stops[idx])]
-        length = np.array([p.size for p in picked])
-        rows = np.concatenate(picked)
-        cuts = np.concatenate([[0], np.cumsum(length)[:-1]])
-        x, u = self.states[rows].copy(), self.inputs[rows]
-        seg_of_row = np.repeat(np.arange(idx.size), length)
-        target = np.add.reduceat(self.measured[rows], cuts) / length
+        plan = self._offset_plan(idx, 1 if jumps else OFFSET_ROW_STEP)
+        cols, u, cuts, length, seg_of_row, target = plan
         d = np.zeros(idx.size)
 
-        q2 = x[:, 1].copy()
-
         def mean_rhs(shift):
-            x[:, 1] = q2 + shift[seg_of_row]
-            return np.add.reduceat(equation_rows(model, x, u, 0), cuts) / length
+            shifted = [cols[0], cols[1] + shift[seg_of_row], *cols[2:]]
+            return np.add.reduceat(equation_rows(model, shifted, u, 0), cuts) / length
 
         # two chord steps on all segments at once (each segment's own offset), the slope taken at 0
         f0 = mean_rhs(d) - target
@@ -225,11 +229,33 @@ class ShootingData:
         out[idx] = np.clip(np.nan_to_num(d), -0.5 * h * 1e3, 0.5 * h * 1e3)
         return out
 
+    def _offset_plan(self, idx: np.ndarray, row_step: int):
+        """offsets' rows of the segments idx, every row_step-th, once per (segments, step): the states and
+        inputs there as columns, each segment's first row among them (cuts), its row count, each row's
+        segment, each segment's measured mean acceleration. A refit asks for the same segments ~100 times,
+        and gathering them was a fifth of the offsets' time."""
+        key = (idx.tobytes(), row_step)
+        plan = self._plans.get(key)
+        if plan is None:
+            if len(self._plans) >= PLAN_CACHE:  # each holds the rows' states: a few at most
+                self._plans.clear()
+            picked = [np.arange(a, b, row_step) for a, b in zip(self.starts[idx], self.stops[idx])]
+            length = np.array([p.size for p in picked])
+            rows = np.concatenate(picked)
+            cuts = np.concatenate([[0], np.cumsum(length)[:-1]])
+            cols = [np.ascontiguousarray(c) for c in self.states[rows].T]
+            u = np.ascontiguousarray(self.inputs[rows])
+            target = np.add.reduceat(self.measured[rows], cuts) / length
+            plan = self._plans[key] = (cols, u, cuts, length, np.repeat(np.arange(idx.size), length), target)
+        return plan
+
     def segment_rows(self, which: np.ndarray) -> np.ndarray:
         """The rows of the segments in `which`, segment after segment (made once per mask)."""
         key = np.asarray(which, dtype=bool).tobytes()
         rows = self._rows.get(key)
         if rows is None:
+            if len(self._rows) >= ROW_CACHE:  # diverging trial runs make masks of their own: keep it bounded
+                self._rows.clear()
             rows = self._rows[key] = np.concatenate([np.arange(a, b) for a, b, w in zip(self.starts, self.stops, which) if w])
         return rows
 
