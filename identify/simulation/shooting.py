@@ -44,7 +44,8 @@ FINE_PAD = 32
 #: of an explanation's CPU (an end stop beside cubic damping, 19 s at 2048 Hz: 2.9 of 11.6 s).
 OFFSET_ROW_STEP = 2
 
-#: Most masks ShootingData.segment_rows keeps the rows of (each a record's worth of indices).
+#: Most masks ShootingData.segment_rows and .spans keep theirs for (segment_rows': a record's worth of
+#: indices each).
 ROW_CACHE = 32
 #: Most segment sets ShootingData.offsets keeps its rows' states and inputs for (each a copy of them).
 PLAN_CACHE = 4
@@ -91,7 +92,7 @@ class ShootingData:
         self._fine: dict[int, np.ndarray] = {}
         self._piece_means: list[float] | None = None  # segment_fine's recording means, once
         self._worst: np.ndarray | None = None  # divergence_error's, once
-        self._rows: dict = {}  # segment_rows' by segment mask, once each (a refit asks ~100 times)
+        self._rows: dict = {}  # segment_rows' and spans' by segment mask, once each (a refit asks ~100 times)
         self._plans: dict = {}  # _offset_plan's, likewise
         #: each state's largest |value| over the rows: once, not per run (an abs and a max over the whole
         #: record were 6 % of an explanation's CPU)
@@ -168,11 +169,11 @@ class ShootingData:
                 ran.append(i)
         mask = np.zeros(self.starts.size, dtype=bool)
         mask[ran] = True
-        if ran:  # the read-out in one pass over every segment's rows (row by row, the same numbers as per
-            # segment; per segment it was ~80 calls a run and a tenth of a Coulomb case's CPU in call overhead)
-            rows = self.segment_rows(mask)
-            out[rows] = (sampled_q1_dot(model, states[rows], self.inputs[rows], dt, jump_terms)
-                         if self.gap == "q1_dot" else states[rows, 1])
+        # the read-out span by span of adjoining segments (row by row, the same numbers as segment by
+        # segment, which was ~80 calls a run and a third of a Coulomb case's CPU in their overhead)
+        for a, b in self.spans(mask):
+            out[a:b] = (sampled_q1_dot(model, states[a:b], self.inputs[a:b], dt, jump_terms) if self.gap == "q1_dot"
+                        else states[a:b, 1])
         if self.lowpass is not None:
             ok = np.isfinite(out)
             filled = np.where(ok, out, self.measured)
@@ -248,6 +249,22 @@ class ShootingData:
             target = np.add.reduceat(self.measured[rows], cuts) / length
             plan = self._plans[key] = (cols, u, cuts, length, np.repeat(np.arange(idx.size), length), target)
         return plan
+
+    def spans(self, which: np.ndarray) -> list[tuple[int, int]]:
+        """The segments in `which` as (first row, end row) spans of adjoining segments (once per mask)."""
+        key = ("spans", np.asarray(which, dtype=bool).tobytes())
+        spans = self._rows.get(key)
+        if spans is None:
+            if len(self._rows) >= ROW_CACHE:
+                self._rows.clear()
+            spans = []
+            for a, b in zip(self.starts[which], self.stops[which]):
+                if spans and spans[-1][1] == a:
+                    spans[-1] = (spans[-1][0], int(b))
+                else:
+                    spans.append((int(a), int(b)))
+            self._rows[key] = spans
+        return spans
 
     def segment_rows(self, which: np.ndarray) -> np.ndarray:
         """The rows of the segments in `which`, segment after segment (made once per mask)."""
