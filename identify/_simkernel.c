@@ -292,7 +292,6 @@ static __attribute__((noinline)) Py_ssize_t strided_run(const model_t *m, const 
     if (n_out <= 0) return 0;
     for (i = 0; i < ns; i++) out[i] = x[i] = x0[i];
     written = 1;
-    Py_BEGIN_ALLOW_THREADS
     for (t0 = 0; t0 < n_out - 1;) {
         int w = (int)(n_out - 1 - t0 < stride ? n_out - 1 - t0 : stride), ok = 1;
         double h = w * dt;
@@ -319,86 +318,103 @@ static __attribute__((noinline)) Py_ssize_t strided_run(const model_t *m, const 
         t0 += w;
         written = t0 + 1;
     }
-    Py_END_ALLOW_THREADS
     return written;
+}
+
+/* One free run of n_out samples from x0, `substeps` RK4 steps per sample (end-stop models step by
+   stop_substep), or strided_run's steps of `stride` samples: the samples written, fewer than n_out if a
+   state left [-bound, bound] or went NaN. Called with the GIL released. Not inlined, like strided_run. */
+static __attribute__((noinline)) Py_ssize_t free_run(const model_t *m, const double *x0, const double *u, Py_ssize_t n_out,
+                                                     int substeps, int stride, double dt, double bound, double *out) {
+    double x[MAX_STATES], xs[MAX_STATES], xt[MAX_STATES], kk[3][MAX_STATES], k4[MAX_STATES];
+    double h = dt / substeps;
+    int s, i, ni = m->n_inputs, mode[MAX_STATES];
+    Py_ssize_t t, written = 0;
+    if (stride > 1) return strided_run(m, x0, u, n_out, stride, dt, bound, out);
+    for (i = 0; i < m->n_states; i++) x[i] = x0[i];
+    for (i = 0; i < m->n_states; i++) mode[i] = side(m, x, i);
+    if (n_out > 0) {
+        for (i = 0; i < m->n_states; i++) out[i] = x[i];
+        written = 1;
+    }
+    for (t = 1; t < n_out; t++) {
+        int ok = 1;
+        for (s = 0; s < substeps; s++) {
+            const double *u0 = u + ((t - 1) * 2 * (Py_ssize_t)substeps + 2 * s) * ni;
+            if (m->has_stops) {
+                stop_substep(m, x, h, u0, mode);
+                for (i = 0; i < m->n_states; i++)
+                    if (!(fabs(x[i]) <= bound)) ok = 0;
+                continue;
+            }
+            /* xs = x + h/2 k1, xt = x + h/2 k2, xs = x + h k3 (as (0.5 * h) * k, the same numbers) */
+            stage(m, x, x, u0, 0.5 * h, kk[0], xs, NULL);
+            stage(m, x, xs, u0 + ni, 0.5 * h, kk[1], xt, NULL);
+            stage(m, x, xt, u0 + ni, h, kk[2], xs, NULL);
+            stage(m, x, xs, u0 + 2 * ni, h / 6.0, k4, x, (const double (*)[MAX_STATES])kk);
+            for (i = 0; i < m->n_states; i++)
+                if (!(fabs(x[i]) <= bound)) ok = 0; /* also catches NaN */
+        }
+        if (!ok) break;
+        for (i = 0; i < m->n_states; i++) out[t * m->n_states + i] = x[i];
+        written = t + 1;
+    }
+    return written;
+}
+
+/* The model from simulate's and simulate_segments' buffers: 0 (and a ValueError set) if they disagree. */
+static int model_from(model_t *m, Py_buffer *b_ptr, Py_buffer *b_feat, Py_buffer *b_pow, Py_buffer *b_coef,
+                      int n_states, int n_inputs, Py_buffer *b_travel) {
+    int i, has_travel = b_travel->buf != NULL;
+    m->ptr = (const int *)b_ptr->buf;
+    m->feat = (const int *)b_feat->buf;
+    m->pow = (const int *)b_pow->buf;
+    m->n_terms = (int)(b_ptr->len / sizeof(int)) - 1;
+    m->n_states = n_states;
+    m->n_inputs = n_inputs;
+    if (n_states < 1 || n_states > MAX_STATES || n_inputs < 0 || n_inputs > MAX_INPUTS ||
+        (has_travel && b_travel->len != (Py_ssize_t)sizeof(double) * n_states) ||
+        b_coef->len != (Py_ssize_t)(sizeof(double) * n_states * m->n_terms) || m->n_terms > MAX_NZ ||
+        !prepare(m, (const double *)b_coef->buf)) {
+        PyErr_SetString(PyExc_ValueError, "simulate: inconsistent buffer sizes or model too large");
+        return 0;
+    }
+    for (i = 0; i < n_states; i++) m->travel[i] = has_travel ? ((const double *)b_travel->buf)[i] : HUGE_VAL;
+    return 1;
+}
+
+static int check_step(const model_t *m, int substeps, int stride) {
+    if (substeps < 1 || stride < 1 || (stride > 1 && (substeps != 1 || m->has_stops))) {
+        PyErr_SetString(PyExc_ValueError, "simulate: substeps >= 1; a stride of several samples needs substeps 1 and no end stops");
+        return 0;
+    }
+    return 1;
 }
 
 static PyObject *simulate(PyObject *self, PyObject *args) {
     Py_buffer b_ptr, b_feat, b_pow, b_coef, b_x0, b_u, b_out, b_travel = {0};
-    int n_inputs, substeps, stride, i;
-    Py_ssize_t n_out;
+    int n_inputs, substeps, stride;
+    Py_ssize_t n_out, written;
     double dt, bound;
     if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*iniiddw*|y*", &b_ptr, &b_feat, &b_pow, &b_coef, &b_x0, &b_u,
                           &n_inputs, &n_out, &substeps, &stride, &dt, &bound, &b_out, &b_travel))
         return NULL;
     model_t m;
-    m.ptr = (const int *)b_ptr.buf;
-    m.feat = (const int *)b_feat.buf;
-    m.pow = (const int *)b_pow.buf;
-    m.n_terms = (int)(b_ptr.len / sizeof(int)) - 1;
-    m.n_states = (int)(b_x0.len / sizeof(double));
-    m.n_inputs = n_inputs;
-    const double *u = (const double *)b_u.buf;
-    double *out = (double *)b_out.buf;
-    Py_ssize_t need_u = (n_out > 0 ? (n_out - 1) * 2 * (Py_ssize_t)substeps + 1 : 0) * n_inputs;
     PyObject *result = NULL;
-    int has_travel = b_travel.buf != NULL;
-    if (m.n_states < 1 || m.n_states > MAX_STATES || n_inputs < 0 || n_inputs > MAX_INPUTS || substeps < 1 ||
-        (has_travel && b_travel.len != (Py_ssize_t)sizeof(double) * m.n_states) ||
-        b_coef.len != (Py_ssize_t)(sizeof(double) * m.n_states * m.n_terms) ||
-        b_u.len < (Py_ssize_t)sizeof(double) * need_u ||
-        b_out.len < (Py_ssize_t)sizeof(double) * n_out * m.n_states || m.n_terms > MAX_NZ ||
-        !prepare(&m, (const double *)b_coef.buf)) {
+    int n_states = (int)(b_x0.len / sizeof(double));
+    if (!model_from(&m, &b_ptr, &b_feat, &b_pow, &b_coef, n_states, n_inputs, &b_travel) ||
+        !check_step(&m, substeps, stride))
+        goto done;
+    Py_ssize_t need_u = (n_out > 0 ? (n_out - 1) * 2 * (Py_ssize_t)substeps + 1 : 0) * n_inputs;
+    if (b_u.len < (Py_ssize_t)sizeof(double) * need_u || b_out.len < (Py_ssize_t)sizeof(double) * n_out * n_states) {
         PyErr_SetString(PyExc_ValueError, "simulate: inconsistent buffer sizes or model too large");
         goto done;
     }
-    if (stride < 1 || (stride > 1 && (substeps != 1 || m.has_stops))) {
-        PyErr_SetString(PyExc_ValueError, "simulate: a stride of several samples needs substeps 1 and no end stops");
-        goto done;
-    }
-    for (i = 0; i < m.n_states; i++) m.travel[i] = has_travel ? ((const double *)b_travel.buf)[i] : HUGE_VAL;
-    if (stride > 1) {
-        result = PyLong_FromSsize_t(strided_run(&m, (const double *)b_x0.buf, u, n_out, stride, dt, bound, out));
-        goto done;
-    }
-    {
-        double x[MAX_STATES], xs[MAX_STATES], xt[MAX_STATES], kk[3][MAX_STATES],
-            k4[MAX_STATES];
-        double h = dt / substeps;
-        int s, ni = n_inputs, mode[MAX_STATES];
-        Py_ssize_t t, written = 0;
-        for (i = 0; i < m.n_states; i++) x[i] = ((const double *)b_x0.buf)[i];
-        for (i = 0; i < m.n_states; i++) mode[i] = side(&m, x, i);
-        Py_BEGIN_ALLOW_THREADS
-        if (n_out > 0) {
-            for (i = 0; i < m.n_states; i++) out[i] = x[i];
-            written = 1;
-        }
-        for (t = 1; t < n_out; t++) {
-            int ok = 1;
-            for (s = 0; s < substeps; s++) {
-                const double *u0 = u + ((t - 1) * 2 * (Py_ssize_t)substeps + 2 * s) * ni;
-                if (m.has_stops) {
-                    stop_substep(&m, x, h, u0, mode);
-                    for (i = 0; i < m.n_states; i++)
-                        if (!(fabs(x[i]) <= bound)) ok = 0;
-                    continue;
-                }
-                /* xs = x + h/2 k1, xt = x + h/2 k2, xs = x + h k3 (as (0.5 * h) * k, the same numbers) */
-                stage(&m, x, x, u0, 0.5 * h, kk[0], xs, NULL);
-                stage(&m, x, xs, u0 + ni, 0.5 * h, kk[1], xt, NULL);
-                stage(&m, x, xt, u0 + ni, h, kk[2], xs, NULL);
-                stage(&m, x, xs, u0 + 2 * ni, h / 6.0, k4, x, (const double (*)[MAX_STATES])kk);
-                for (i = 0; i < m.n_states; i++)
-                    if (!(fabs(x[i]) <= bound)) ok = 0; /* also catches NaN */
-            }
-            if (!ok) break;
-            for (i = 0; i < m.n_states; i++) out[t * m.n_states + i] = x[i];
-            written = t + 1;
-        }
-        Py_END_ALLOW_THREADS
-        result = PyLong_FromSsize_t(written);
-    }
+    Py_BEGIN_ALLOW_THREADS
+    written = free_run(&m, (const double *)b_x0.buf, (const double *)b_u.buf, n_out, substeps, stride, dt, bound,
+                       (double *)b_out.buf);
+    Py_END_ALLOW_THREADS
+    result = PyLong_FromSsize_t(written);
 done:
     PyBuffer_Release(&b_ptr);
     PyBuffer_Release(&b_feat);
@@ -407,7 +423,65 @@ done:
     PyBuffer_Release(&b_x0);
     PyBuffer_Release(&b_u);
     PyBuffer_Release(&b_out);
-    if (has_travel) PyBuffer_Release(&b_travel);
+    if (b_travel.buf != NULL) PyBuffer_Release(&b_travel);
+    return result;
+}
+
+/* simulate_segments(term_ptr, fac_feat, fac_pow, coef, x0s, u_fine, n_inputs, starts, stops, substeps,
+   stride, dt, bound, out, written [, travel]): simulate for k segments of one record at once (multiple
+   shooting), the GIL released for all of them: segment j runs from x0s[j] (k x n_states float64) over the
+   record's samples starts[j] .. stops[j] - 1 (int64), reading u_fine (the whole record's h/2 grid, sample r
+   at row 2 substeps r) from its first sample on, and writes its states into out's rows starts[j] ..
+   (out: the record's n_rows x n_states float64, writable) and its samples written into written[j] (int64,
+   writable). The same numbers as k calls of simulate, without k calls' overhead. */
+static PyObject *simulate_segments(PyObject *self, PyObject *args) {
+    Py_buffer b_ptr, b_feat, b_pow, b_coef, b_x0, b_u, b_starts, b_stops, b_out, b_written, b_travel = {0};
+    int n_inputs, substeps, stride;
+    double dt, bound;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*iy*y*iiddw*w*|y*", &b_ptr, &b_feat, &b_pow, &b_coef, &b_x0, &b_u,
+                          &n_inputs, &b_starts, &b_stops, &substeps, &stride, &dt, &bound, &b_out, &b_written,
+                          &b_travel))
+        return NULL;
+    model_t m;
+    PyObject *result = NULL;
+    Py_ssize_t k = b_starts.len / (Py_ssize_t)sizeof(long long), j, up = 2 * (Py_ssize_t)substeps;
+    const long long *starts = (const long long *)b_starts.buf, *stops = (const long long *)b_stops.buf;
+    long long *written = (long long *)b_written.buf;
+    int n_states = k > 0 ? (int)(b_x0.len / (Py_ssize_t)sizeof(double) / k) : 1;
+    if (!model_from(&m, &b_ptr, &b_feat, &b_pow, &b_coef, n_states, n_inputs, &b_travel) ||
+        !check_step(&m, substeps, stride))
+        goto done;
+    Py_ssize_t rows_u = n_inputs > 0 ? b_u.len / (Py_ssize_t)sizeof(double) / n_inputs : 0;
+    Py_ssize_t rows_out = b_out.len / (Py_ssize_t)sizeof(double) / n_states;
+    int ok = b_stops.len == b_starts.len && b_written.len == b_starts.len &&
+             b_x0.len == (Py_ssize_t)sizeof(double) * n_states * k;
+    for (j = 0; ok && j < k; j++)
+        ok = starts[j] >= 0 && stops[j] > starts[j] && stops[j] <= rows_out &&
+             (n_inputs == 0 || (stops[j] - 1) * up + 1 <= rows_u);
+    if (!ok) {
+        PyErr_SetString(PyExc_ValueError, "simulate_segments: inconsistent buffer sizes or segments");
+        goto done;
+    }
+    Py_BEGIN_ALLOW_THREADS
+    for (j = 0; j < k; j++)
+        written[j] = free_run(&m, (const double *)b_x0.buf + j * n_states,
+                              (const double *)b_u.buf + starts[j] * up * n_inputs, stops[j] - starts[j], substeps,
+                              stride, dt, bound, (double *)b_out.buf + starts[j] * n_states);
+    Py_END_ALLOW_THREADS
+    Py_INCREF(Py_None);
+    result = Py_None;
+done:
+    PyBuffer_Release(&b_ptr);
+    PyBuffer_Release(&b_feat);
+    PyBuffer_Release(&b_pow);
+    PyBuffer_Release(&b_coef);
+    PyBuffer_Release(&b_x0);
+    PyBuffer_Release(&b_u);
+    PyBuffer_Release(&b_starts);
+    PyBuffer_Release(&b_stops);
+    PyBuffer_Release(&b_out);
+    PyBuffer_Release(&b_written);
+    if (b_travel.buf != NULL) PyBuffer_Release(&b_travel);
     return result;
 }
 
@@ -480,6 +554,7 @@ done:
 
 static PyMethodDef methods[] = {
     {"simulate", simulate, METH_VARARGS, "Fixed-step RK4 free run of a sparse term model."},
+    {"simulate_segments", simulate_segments, METH_VARARGS, "simulate for several segments of one record in one call."},
     {"rhs_rows", rhs_rows, METH_VARARGS, "One equation of a sparse term model's right-hand side at independent rows."},
     {NULL, NULL, 0, NULL}};
 

@@ -20,7 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model import SparseModel
-from .simulate import choose_step, equation_rows, fine_grid_input, jumps_at_rest, sampled_q1_dot, sign_jump_terms, simulate
+from ..threads import map_runs, run_threads
+from .simulate import (choose_step, equation_rows, fine_grid_input, jumps_at_rest, sampled_q1_dot, sign_jump_terms, simulate,
+                       simulate_segments)
 
 #: Largest fine input grid a ShootingData keeps (bytes; one, for the last substeps). A model that needs
 #: many RK4 substeps (a refit's trial step far out, a stiff contact) multiplies the record by 2 x substeps:
@@ -150,25 +152,27 @@ class ShootingData:
         if jumps:  # a stuck mass's chatter must stay within a sample's reach (sampled_q1_dot)
             stride = 1
         uf = self.fine(substeps)  # None: too large to hold, built per segment
-        up = 2 * substeps
         out = np.full(n, np.nan)
         seg = np.arange(self.starts.size) if which is None else np.flatnonzero(which)
         dt = 1.0 / self.fs_hz
         offsets = self.offsets(model, seg, jumps) if self.gap == "q1_dot" else np.zeros(len(self.starts))
         states = np.empty((n, self.states.shape[1]))  # the runs' states, segment by segment
-        ran = []  # the segments whose run did not diverge
-        for i in seg:
-            a, b = int(self.starts[i]), int(self.stops[i])
-            x0 = self.states[a].copy()
-            x0[1] += offsets[i]
-            u = uf[a * up:(b - 1) * up + 1] if uf is not None else self.segment_fine(a, b, substeps)
-            res = simulate(model, dt, x0, inputs_fine=u, substeps=substeps,
-                           n_samples=b - a, bound=self.bound, stride=stride)
-            if not res.diverged:
-                states[a:b] = res.states
-                ran.append(i)
+        x0s = self.states[self.starts[seg]]
+        x0s[:, 1] += offsets[seg]
         mask = np.zeros(self.starts.size, dtype=bool)
-        mask[ran] = True
+        if uf is not None:  # the segments in one compiled call per run thread, the GIL released throughout
+            def part(j):  # (on a run thread already, e.g. a Jacobian's column: map_runs runs these in turn)
+                return simulate_segments(model, dt, x0s[j], uf, substeps, self.starts[seg[j]], self.stops[seg[j]],
+                                         states, bound=self.bound, stride=stride)
+            written = np.concatenate(map_runs(part, np.array_split(np.arange(seg.size), run_threads())))
+            mask[seg] = written == self.stops[seg] - self.starts[seg]
+        else:
+            for i, x0 in zip(seg, x0s):
+                a, b = int(self.starts[i]), int(self.stops[i])
+                res = simulate(model, dt, x0, inputs_fine=self.segment_fine(a, b, substeps), substeps=substeps,
+                               n_samples=b - a, bound=self.bound, stride=stride)
+                states[a:b] = res.states
+                mask[i] = not res.diverged
         # the read-out span by span of adjoining segments (row by row, the same numbers as segment by
         # segment, which was ~80 calls a run and a third of a Coulomb case's CPU in their overhead)
         for a, b in self.spans(mask):

@@ -236,6 +236,33 @@ def equation_rows(model: SparseModel, states, inputs, equation: int = 0, terms: 
     return out
 
 
+def simulate_segments(model: SparseModel, dt: float, x0s: np.ndarray, inputs_fine: np.ndarray, substeps: int,
+                      starts: np.ndarray, stops: np.ndarray, out: np.ndarray, *, bound: float, stride: int = 1) -> np.ndarray:
+    """simulate for segments of one record in one compiled call (multiple shooting: identify.simulation.
+    shooting): segment j from state x0s[j] over the record's samples starts[j] .. stops[j] - 1, its input
+    read from inputs_fine (the whole record's h/2 grid, fine_grid_input's rows) from sample starts[j] on,
+    its states written into out[starts[j]:stops[j]] (out: (n_rows, n_states), C-contiguous float64). Returns
+    the samples written per segment (fewer than its length: it diverged, and the rest of its rows are
+    not written). The same numbers as simulate segment by segment."""
+    x0s = np.ascontiguousarray(x0s, dtype=float)
+    u = np.ascontiguousarray(inputs_fine, dtype=float)
+    u = u[:, None] if u.ndim == 1 else u
+    if x0s.ndim != 2 or x0s.shape[1] != len(model.states) or u.shape[1] != len(model.inputs):
+        raise ValueError(f"x0s {x0s.shape} and inputs {u.shape}; model has states {model.states} and inputs {model.inputs}")
+    if not (out.flags.c_contiguous and out.dtype == np.float64 and out.ndim == 2 and out.shape[1] == x0s.shape[1]):
+        raise ValueError("out must be a C-contiguous (n_rows, n_states) float64 array")
+    starts = np.ascontiguousarray(starts, dtype=np.int64)
+    stops = np.ascontiguousarray(stops, dtype=np.int64)
+    written = np.zeros(starts.size, dtype=np.int64)
+    if starts.size == 0:
+        return written
+    ptr, feat, powr, travel = model.kernel_terms()
+    _simkernel.simulate_segments(ptr, feat, powr, np.ascontiguousarray(model.coef_).tobytes(), x0s.tobytes(),
+                                 u.reshape(-1), u.shape[1], starts, stops, int(substeps), int(stride), float(dt),
+                                 float(bound), out.reshape(-1), written, travel)
+    return written
+
+
 def simulate(model: SparseModel, dt: float, x0, inputs=None, *, inputs_fine=None, substeps: int | None = None,
              interpolation: str = "bandlimited", state_scale=None, n_samples: int | None = None,
              bound: float | None = None, stride: int = 1) -> SimulationResult:

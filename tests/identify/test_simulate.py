@@ -184,3 +184,46 @@ def test_a_fast_real_mode_takes_longer_steps_and_stays_accurate():
     err = np.max(np.abs(runs[0] - runs[1]), axis=0) / peak
     assert np.all(peak > 0.1 * np.array(scale) / 1.5), peak  # the run moves the states as the record did
     assert err[0] < 1e-4 and err[1] < 1e-4 and err[2] < 2e-3, err
+
+
+@pytest.mark.parametrize("equations, travel, substeps, stride", [
+    (TABLE1, None, 1, 2),  # steps of two samples
+    (TABLE1, None, 3, 1),
+    ({"q1_dot": {"q2": -900.0, "stop(q2)": -5e5, "q1*contact(q2)": -30.0, "sign(q1)": -0.3, "zdd": -1.0},
+      "q2_dot": {"q1": 1.0}}, {"q2": 0.004}, 2, 1),  # end stops (cut steps) and a friction
+])
+def test_segments_in_one_call_are_the_segment_by_segment_runs(equations, travel, substeps, stride):
+    """simulate_segments (multiple shooting's runs in one compiled call) against simulate per segment, bit
+    for bit: each segment from its own state over its stretch of the record's fine input, segments of
+    unequal length that need not adjoin, one of them diverging (its samples written count short, the rows
+    of the others untouched)."""
+    from identify.simulation.simulate import simulate_segments
+
+    rng = np.random.default_rng(5)
+    fs, n = 1000.0, 3000
+    model = SparseModel(equations, travel=travel)
+    t = np.arange(n) / fs
+    u = (-4.0 * np.sin(2 * np.pi * (3 * t + 2 * t**2)))[:, None]
+    fine = fine_grid_input(u, substeps)
+    starts = np.array([0, 400, 1000, 1700, 2500])
+    stops = np.array([400, 950, 1700, 2400, 3000])  # 950 -> 1000 and 2400 -> 2500 are not run
+    x0s = rng.standard_normal((starts.size, 2)) * [0.1, 0.003]
+    x0s[3] = [1e4, 0.5]  # far outside the bound: diverges
+    bound = 10.0
+    out = np.full((n, 2), 7.0)
+    written = simulate_segments(model, 1 / fs, x0s, fine, substeps, starts, stops, out, bound=bound, stride=stride)
+    up = 2 * substeps
+    for j, (a, b) in enumerate(zip(starts, stops)):
+        one = simulate(model, 1 / fs, x0s[j], inputs_fine=fine[a * up:(b - 1) * up + 1], substeps=substeps,
+                       n_samples=b - a, bound=bound, stride=stride)
+        assert written[j] == one.n_valid
+        np.testing.assert_array_equal(out[a:a + one.n_valid], one.states[:one.n_valid])
+    whole = written == stops - starts
+    assert not whole[3] and whole[[0, 1, 2, 4]].all()
+    assert np.all(out[950:1000] == 7.0) and np.all(out[2400:2500] == 7.0)
+    if travel:  # the stops are hit
+        assert np.max(np.abs(out[:950, 1])) > travel["q2"]
+    assert simulate_segments(model, 1 / fs, x0s[:0], fine, substeps, starts[:0], stops[:0], out, bound=bound).size == 0
+    with pytest.raises(ValueError, match="segments"):  # a segment past the record's input
+        simulate_segments(model, 1 / fs, x0s[:1], fine[:100], substeps, starts[:1], stops[:1], out, bound=bound,
+                          stride=stride)
