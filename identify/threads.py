@@ -21,7 +21,8 @@ threadpoolctl is the standard control (scikit-learn uses it the same way).
 Threads that do pay: the explanation's shooting runs (map_runs). A shooting refit's finite-difference
 Jacobian is one full multiple-shooting run per coefficient, each independent of the others, and the
 compiled kernels that do most of a run release the GIL; so the columns, a round's candidate refits and the
-masking check's refits run side by side on the cores this process may use (usable_cores, at most
+masking check's refits run side by side on the cores this process may use, and a run asked for outside the
+threads (a refit's trial step, a one-column Jacobian) splits its segments over them (usable_cores, at most
 MAX_RUN_THREADS). Each run computes what it would alone and the results are taken in order: the numbers
 are those of the serial loop, bit for bit (tests/identify/test_threads.py)."""
 from __future__ import annotations
@@ -69,8 +70,9 @@ def blas_threads() -> int:
 
 #: Most threads one explanation's shooting runs use at once (identify.explain: the columns of a finite-
 #: difference Jacobian, each a full multiple-shooting run of the model with one coefficient moved). The
-#: compiled kernels (identify/_simkernel.c) release the GIL for a segment's run and a pass over the rows,
-#: which are ~75 % of a run's time, so two columns run side by side on two cores.
+#: compiled kernels (identify/_simkernel.c) release the GIL for a run's segments (one call per run thread,
+#: simulate_segments) and a pass over the rows, most of a run's time, so two columns run side by side on two
+#: cores, and a run asked for outside the threads splits its segments over them.
 MAX_RUN_THREADS = 4
 
 _POOL = None  # (pid, threads, ThreadPoolExecutor): made on first use, again in a forked child (its threads are gone)
