@@ -95,14 +95,16 @@ class RigController:
             os.chmod(addr, 0o600)
         sock.listen(64)
         self._listener = sock
+        # the stop listener before the key: every hello names its port (a web server that attached while it
+        # was still opening, under load, held a session without it and /api/health never named stop_url)
+        self.stop_listener = open_listener(self.settings.stop_host, self.settings.stop_port, self.settings.tokens,
+                                           lambda: self.handle({"op": "estop"}))
         path = key_path(self.settings.data_dir)
         tmp = path.with_suffix(".tmp")
         tmp.write_text(self.key + "\n")
         tmp.chmod(0o600)
         os.replace(tmp, path)  # written last: a client that reads the key finds the socket listening
         threading.Thread(target=self._accept, name="controller-accept", daemon=True).start()
-        self.stop_listener = open_listener(self.settings.stop_host, self.settings.stop_port, self.settings.tokens,
-                                           lambda: self.handle({"op": "estop"}))
         if self.parent_pid:
             threading.Thread(target=self._watch_parent, name="controller-parent", daemon=True).start()
         return self

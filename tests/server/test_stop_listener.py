@@ -161,3 +161,45 @@ def test_the_stop_port_is_the_web_port_plus_the_offset_unless_set():
         Settings.load(env={"SHAKEID_STOP_PORT": "70000"})
     assert stop_url("http://rig-pc:8000") == f"http://rig-pc:{8000 + STOP_PORT_OFFSET}{ESTOP_PATH}"
     assert stop_url("http://rig-pc:8000", "http://other:9") == f"http://other:9{ESTOP_PATH}"
+
+
+def test_a_web_server_attaching_while_the_controller_starts_is_told_the_stop_port(tmp_path, monkeypatch):
+    """The rig controller opens its stop listener before it writes its key: a web server that attaches
+    as soon as it can (RigLink polls for the key) is told the listener's port in the first hello. The stop
+    listener is slowed here to open that window wide; with the key written first, the web server attached
+    while the listener was still opening, held a session without its port, and /api/health never named
+    stop_url (seen: this module's tests failing under load, the controller's log saying the listener was up).
+    An in-process controller on its simulated rig, a real socket, the web server's own handshake."""
+    import threading
+    import time
+
+    import server.controller as controller_module
+    from server.ipc import connect, read_key
+
+    settings = Settings.load(data_dir=tmp_path / "data", env={})
+    settings.stop_host, settings.stop_port = "127.0.0.1", free_port()
+    real_open = controller_module.open_listener
+
+    def slow_open(*args, **kwargs):
+        time.sleep(1.0)  # a loaded machine: the listener's thread and socket take their time
+        return real_open(*args, **kwargs)
+
+    monkeypatch.setattr(controller_module, "open_listener", slow_open)
+    ctl = controller_module.RigController(settings)
+    hellos = []
+
+    def attach():  # what server.rigclient.RigLink._keep_session does, from the first moment a key exists
+        line = connect(ctl.address, read_key(controller_module.key_path(settings.data_dir), wait_s=30), "session")
+        hellos.append(line.hello)
+        line.close()
+
+    web = threading.Thread(target=attach)
+    web.start()
+    ctl.start()
+    try:
+        web.join(30)
+        assert hellos and hellos[0]["stop_port"] == settings.stop_port, hellos
+        assert ctl.stop_listener is not None and ctl.stop_listener.port == settings.stop_port
+    finally:
+        ctl.stop("the test is over")
+        ctl.run()
