@@ -287,7 +287,7 @@ static void stop_substep(const model_t *m, double *x, double h, const double *u0
    step's own local error (x(t + th h) = x + h (b1 k1 + b2 (k2 + k3) + b4 k4), Hairer, Norsett & Wanner,
    Solving ODEs I, II.6): a smooth model slow against the sample rate (omega dt <= STEP_OMEGA / stride,
    identify.simulate.choose_step) takes stride times fewer right-hand sides on its chain of dependencies.
-   The last step may be shorter. Returns the samples written, as simulate. Not inlined into simulate: inlined,
+   The last step may be shorter. Returns the samples written, as simulate. Not inlined into free_run: inlined,
    its loop ran 8-10 % slower (code layout; measured on the Table 1 model, steps of 3 samples). */
 static __attribute__((noinline)) Py_ssize_t strided_run(const model_t *m, const double *x0, const double *u, Py_ssize_t n_out, int stride,
                               double dt, double bound, double *out) {
@@ -368,8 +368,8 @@ static __attribute__((noinline)) Py_ssize_t free_run(const model_t *m, const dou
 }
 
 /* The model from simulate's and simulate_segments' buffers: 0 (and a ValueError set) if they disagree. */
-static int model_from(model_t *m, Py_buffer *b_ptr, Py_buffer *b_feat, Py_buffer *b_pow, Py_buffer *b_coef,
-                      int n_states, int n_inputs, Py_buffer *b_travel) {
+static int model_from(const char *caller, model_t *m, Py_buffer *b_ptr, Py_buffer *b_feat, Py_buffer *b_pow,
+                      Py_buffer *b_coef, int n_states, int n_inputs, Py_buffer *b_travel) {
     int i, has_travel = b_travel->buf != NULL;
     m->ptr = (const int *)b_ptr->buf;
     m->feat = (const int *)b_feat->buf;
@@ -381,16 +381,17 @@ static int model_from(model_t *m, Py_buffer *b_ptr, Py_buffer *b_feat, Py_buffer
         (has_travel && b_travel->len != (Py_ssize_t)sizeof(double) * n_states) ||
         b_coef->len != (Py_ssize_t)(sizeof(double) * n_states * m->n_terms) || m->n_terms > MAX_NZ ||
         !prepare(m, (const double *)b_coef->buf)) {
-        PyErr_SetString(PyExc_ValueError, "simulate: inconsistent buffer sizes or model too large");
+        PyErr_Format(PyExc_ValueError, "%s: inconsistent buffer sizes or model too large", caller);
         return 0;
     }
     for (i = 0; i < n_states; i++) m->travel[i] = has_travel ? ((const double *)b_travel->buf)[i] : HUGE_VAL;
     return 1;
 }
 
-static int check_step(const model_t *m, int substeps, int stride) {
+static int check_step(const char *caller, const model_t *m, int substeps, int stride) {
     if (substeps < 1 || stride < 1 || (stride > 1 && (substeps != 1 || m->has_stops))) {
-        PyErr_SetString(PyExc_ValueError, "simulate: substeps >= 1; a stride of several samples needs substeps 1 and no end stops");
+        PyErr_Format(PyExc_ValueError, "%s: substeps >= 1; a stride of several samples needs substeps 1 and no end stops",
+                     caller);
         return 0;
     }
     return 1;
@@ -407,8 +408,8 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
     model_t m;
     PyObject *result = NULL;
     int n_states = (int)(b_x0.len / sizeof(double));
-    if (!model_from(&m, &b_ptr, &b_feat, &b_pow, &b_coef, n_states, n_inputs, &b_travel) ||
-        !check_step(&m, substeps, stride))
+    if (!model_from("simulate", &m, &b_ptr, &b_feat, &b_pow, &b_coef, n_states, n_inputs, &b_travel) ||
+        !check_step("simulate", &m, substeps, stride))
         goto done;
     Py_ssize_t need_u = (n_out > 0 ? (n_out - 1) * 2 * (Py_ssize_t)substeps + 1 : 0) * n_inputs;
     if (b_u.len < (Py_ssize_t)sizeof(double) * need_u || b_out.len < (Py_ssize_t)sizeof(double) * n_out * n_states) {
@@ -438,7 +439,9 @@ done:
    record's samples starts[j] .. stops[j] - 1 (int64), reading u_fine (the whole record's h/2 grid, sample r
    at row 2 substeps r) from its first sample on, and writes its states into out's rows starts[j] ..
    (out: the record's n_rows x n_states float64, writable) and its samples written into written[j] (int64,
-   writable). The same numbers as k calls of simulate, without k calls' overhead. */
+   writable). The segments must not overlap (each non-empty; identify.simulation.simulate.simulate_segments
+   checks both): callers in several threads write disjoint rows of one `out`. The same numbers as k calls of
+   simulate, without k calls' overhead. */
 static PyObject *simulate_segments(PyObject *self, PyObject *args) {
     Py_buffer b_ptr, b_feat, b_pow, b_coef, b_x0, b_u, b_starts, b_stops, b_out, b_written, b_travel = {0};
     int n_inputs, substeps, stride;
@@ -453,8 +456,8 @@ static PyObject *simulate_segments(PyObject *self, PyObject *args) {
     const long long *starts = (const long long *)b_starts.buf, *stops = (const long long *)b_stops.buf;
     long long *written = (long long *)b_written.buf;
     int n_states = k > 0 ? (int)(b_x0.len / (Py_ssize_t)sizeof(double) / k) : 1;
-    if (!model_from(&m, &b_ptr, &b_feat, &b_pow, &b_coef, n_states, n_inputs, &b_travel) ||
-        !check_step(&m, substeps, stride))
+    if (!model_from("simulate_segments", &m, &b_ptr, &b_feat, &b_pow, &b_coef, n_states, n_inputs, &b_travel) ||
+        !check_step("simulate_segments", &m, substeps, stride))
         goto done;
     Py_ssize_t rows_u = n_inputs > 0 ? b_u.len / (Py_ssize_t)sizeof(double) / n_inputs : 0;
     Py_ssize_t rows_out = b_out.len / (Py_ssize_t)sizeof(double) / n_states;

@@ -62,7 +62,7 @@ class SparseModel:
     def kernel_terms(self) -> tuple[bytes, bytes, bytes, bytes]:
         """The terms as the compiled kernel reads them (identify/_simkernel.c: term pointers, features and
         powers as int32 bytes) and the travels (float64 bytes): packed once per model, not per call (a
-        shooting refit calls the kernel for every segment, ~55,000 times in one explanation)."""
+        shooting refit calls the kernel and the read-out thousands of times in one explanation)."""
         if self._kernel_terms is None:
             ptr, feat, powr = self.space.encode(self.terms)
             self._kernel_terms = tuple(np.asarray(a, dtype=np.int32).tobytes() for a in (ptr, feat, powr)) + (

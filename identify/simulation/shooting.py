@@ -50,7 +50,7 @@ OFFSET_ROW_STEP = 2
 #: indices each).
 ROW_CACHE = 32
 #: Most segment sets ShootingData.offsets keeps its rows' states and inputs for (each a copy of them).
-PLAN_CACHE = 4
+OFFSET_ROWS_CACHE = 4
 
 #: Segment length in periods of the (linear) resonance.
 SEGMENT_PERIODS = 4.0
@@ -94,8 +94,9 @@ class ShootingData:
         self._fine: dict[int, np.ndarray] = {}
         self._piece_means: list[float] | None = None  # segment_fine's recording means, once
         self._worst: np.ndarray | None = None  # divergence_error's, once
-        self._rows: dict = {}  # segment_rows' and spans' by segment mask, once each (a refit asks ~100 times)
-        self._plans: dict = {}  # _offset_plan's, likewise
+        self._rows: dict = {}  # segment_rows' by segment mask, once each (a refit asks ~100 times)
+        self._spans: dict = {}  # spans', likewise
+        self._offset_sets: dict = {}  # _offset_rows's, likewise
         #: each state's largest |value| over the rows: once, not per run (an abs and a max over the whole
         #: record were 6 % of an explanation's CPU)
         self.state_max = np.max(np.abs(self.states), axis=0)
@@ -160,19 +161,22 @@ class ShootingData:
         x0s = self.states[self.starts[seg]]
         x0s[:, 1] += offsets[seg]
         mask = np.zeros(self.starts.size, dtype=bool)
-        if uf is not None:  # the segments in one compiled call per run thread, the GIL released throughout
-            def part(j):  # (on a run thread already, e.g. a Jacobian's column: map_runs runs these in turn)
+        def part(j):  # a share of the segments (on a run thread already, e.g. a Jacobian's column, map_runs
+            # runs the shares in turn): with the record's fine grid held, one compiled call, the GIL released
+            # throughout; without it, each segment's own grid and run
+            if uf is not None:
                 return simulate_segments(model, dt, x0s[j], uf, substeps, self.starts[seg[j]], self.stops[seg[j]],
                                          states, bound=self.bound, stride=stride)
-            written = np.concatenate(map_runs(part, np.array_split(np.arange(seg.size), run_threads())))
-            mask[seg] = written == self.stops[seg] - self.starts[seg]
-        else:
-            for i, x0 in zip(seg, x0s):
+            written = np.zeros(j.size, dtype=np.int64)
+            for k, i in enumerate(seg[j]):
                 a, b = int(self.starts[i]), int(self.stops[i])
-                res = simulate(model, dt, x0, inputs_fine=self.segment_fine(a, b, substeps), substeps=substeps,
+                res = simulate(model, dt, x0s[j[k]], inputs_fine=self.segment_fine(a, b, substeps), substeps=substeps,
                                n_samples=b - a, bound=self.bound, stride=stride)
-                states[a:b] = res.states
-                mask[i] = not res.diverged
+                states[a:b], written[k] = res.states, res.n_valid
+            return written
+
+        written = np.concatenate(map_runs(part, np.array_split(np.arange(seg.size), run_threads())))
+        mask[seg] = written == self.stops[seg] - self.starts[seg]
         # the read-out span by span of adjoining segments (row by row, the same numbers as segment by
         # segment, which was ~80 calls a run and a third of a Coulomb case's CPU in their overhead)
         for a, b in self.spans(mask):
@@ -213,8 +217,7 @@ class ShootingData:
             return out
         h = 1e-3 * float(self.state_max[1]) + 1e-12
         jumps = jumps_at_rest(model) if jumps is None else jumps
-        plan = self._offset_plan(idx, 1 if jumps else OFFSET_ROW_STEP)
-        cols, u, cuts, length, seg_of_row, target = plan
+        cols, u, cuts, length, seg_of_row, target = self._offset_rows(idx, 1 if jumps else OFFSET_ROW_STEP)
         d = np.zeros(idx.size)
 
         def mean_rhs(shift):
@@ -234,16 +237,16 @@ class ShootingData:
         out[idx] = np.clip(np.nan_to_num(d), -0.5 * h * 1e3, 0.5 * h * 1e3)
         return out
 
-    def _offset_plan(self, idx: np.ndarray, row_step: int):
+    def _offset_rows(self, idx: np.ndarray, row_step: int):
         """offsets' rows of the segments idx, every row_step-th, once per (segments, step): the states and
         inputs there as columns, each segment's first row among them (cuts), its row count, each row's
         segment, each segment's measured mean acceleration. A refit asks for the same segments ~100 times,
         and gathering them was a fifth of the offsets' time."""
         key = (idx.tobytes(), row_step)
-        plan = self._plans.get(key)
+        plan = self._offset_sets.get(key)
         if plan is None:
-            if len(self._plans) >= PLAN_CACHE:  # each holds the rows' states: a few at most
-                self._plans.clear()
+            if len(self._offset_sets) >= OFFSET_ROWS_CACHE:  # each holds the rows' states: a few at most
+                self._offset_sets.clear()
             picked = [np.arange(a, b, row_step) for a, b in zip(self.starts[idx], self.stops[idx])]
             length = np.array([p.size for p in picked])
             rows = np.concatenate(picked)
@@ -251,23 +254,23 @@ class ShootingData:
             cols = [np.ascontiguousarray(c) for c in self.states[rows].T]
             u = np.ascontiguousarray(self.inputs[rows])
             target = np.add.reduceat(self.measured[rows], cuts) / length
-            plan = self._plans[key] = (cols, u, cuts, length, np.repeat(np.arange(idx.size), length), target)
+            plan = self._offset_sets[key] = (cols, u, cuts, length, np.repeat(np.arange(idx.size), length), target)
         return plan
 
     def spans(self, which: np.ndarray) -> list[tuple[int, int]]:
         """The segments in `which` as (first row, end row) spans of adjoining segments (once per mask)."""
-        key = ("spans", np.asarray(which, dtype=bool).tobytes())
-        spans = self._rows.get(key)
+        key = np.asarray(which, dtype=bool).tobytes()  # run()'s: the segments that did not diverge
+        spans = self._spans.get(key)
         if spans is None:
-            if len(self._rows) >= ROW_CACHE:
-                self._rows.clear()
+            if len(self._spans) >= ROW_CACHE:  # diverging trial runs make masks of their own: keep it bounded
+                self._spans.clear()
             spans = []
             for a, b in zip(self.starts[which], self.stops[which]):
                 if spans and spans[-1][1] == a:
                     spans[-1] = (spans[-1][0], int(b))
                 else:
                     spans.append((int(a), int(b)))
-            self._rows[key] = spans
+            self._spans[key] = spans
         return spans
 
     def segment_rows(self, which: np.ndarray) -> np.ndarray:
@@ -275,7 +278,7 @@ class ShootingData:
         key = np.asarray(which, dtype=bool).tobytes()
         rows = self._rows.get(key)
         if rows is None:
-            if len(self._rows) >= ROW_CACHE:  # diverging trial runs make masks of their own: keep it bounded
+            if len(self._rows) >= ROW_CACHE:
                 self._rows.clear()
             rows = self._rows[key] = np.concatenate([np.arange(a, b) for a, b, w in zip(self.starts, self.stops, which) if w])
         return rows

@@ -219,7 +219,7 @@ def equation_rows(model: SparseModel, states, inputs, equation: int = 0, terms: 
         return list(a)
 
     cols = [c if isinstance(c, np.ndarray) and c.dtype == np.float64 else np.asarray(c, dtype=float)
-            for c in columns(states) + columns(inputs)]  # (called per shooting segment: no needless copies)
+            for c in columns(states) + columns(inputs)]  # (called per shooting span: no needless copies)
     n = cols[0].shape[0] if cols else 0
     if len(cols) != len(model.states) + len(model.inputs):
         raise ValueError(f"{len(cols)} columns; model has states {model.states} and inputs {model.inputs}")
@@ -241,7 +241,8 @@ def simulate_segments(model: SparseModel, dt: float, x0s: np.ndarray, inputs_fin
     """simulate for segments of one record in one compiled call (multiple shooting: identify.simulation.
     shooting): segment j from state x0s[j] over the record's samples starts[j] .. stops[j] - 1, its input
     read from inputs_fine (the whole record's h/2 grid, fine_grid_input's rows) from sample starts[j] on,
-    its states written into out[starts[j]:stops[j]] (out: (n_rows, n_states), C-contiguous float64). Returns
+    its states written into out[starts[j]:stops[j]] (out: (n_rows, n_states), C-contiguous float64; the segments
+    in order and not overlapping, so callers in several threads write disjoint rows). Returns
     the samples written per segment (fewer than its length: it diverged, and the rest of its rows are
     not written). The same numbers as simulate segment by segment."""
     x0s = np.ascontiguousarray(x0s, dtype=float)
@@ -251,15 +252,21 @@ def simulate_segments(model: SparseModel, dt: float, x0s: np.ndarray, inputs_fin
         raise ValueError(f"x0s {x0s.shape} and inputs {u.shape}; model has states {model.states} and inputs {model.inputs}")
     if not (out.flags.c_contiguous and out.dtype == np.float64 and out.ndim == 2 and out.shape[1] == x0s.shape[1]):
         raise ValueError("out must be a C-contiguous (n_rows, n_states) float64 array")
-    starts = np.ascontiguousarray(starts, dtype=np.int64)
-    stops = np.ascontiguousarray(stops, dtype=np.int64)
+    starts = np.asarray(starts, dtype=np.int64)
+    stops = np.asarray(stops, dtype=np.int64)
+    if np.any(starts[1:] < stops[:-1]):  # threads write their segments' rows of one `out` side by side
+        raise ValueError("segments must be in order and must not overlap")
     written = np.zeros(starts.size, dtype=np.int64)
-    if starts.size == 0:
+    run = np.flatnonzero(stops > starts)  # an empty segment has nothing to write (as simulate: 0 samples)
+    if run.size == 0:
         return written
     ptr, feat, powr, travel = model.kernel_terms()
-    _simkernel.simulate_segments(ptr, feat, powr, np.ascontiguousarray(model.coef_).tobytes(), x0s.tobytes(),
-                                 u.reshape(-1), u.shape[1], starts, stops, int(substeps), int(stride), float(dt),
-                                 float(bound), out.reshape(-1), written, travel)
+    done = np.zeros(run.size, dtype=np.int64)
+    _simkernel.simulate_segments(ptr, feat, powr, np.ascontiguousarray(model.coef_).tobytes(), x0s[run].tobytes(),
+                                 u.reshape(-1), u.shape[1], np.ascontiguousarray(starts[run]),
+                                 np.ascontiguousarray(stops[run]), int(substeps), int(stride), float(dt),
+                                 float(bound), out.reshape(-1), done, travel)
+    written[run] = done
     return written
 
 

@@ -223,7 +223,16 @@ def test_segments_in_one_call_are_the_segment_by_segment_runs(equations, travel,
     assert np.all(out[950:1000] == 7.0) and np.all(out[2400:2500] == 7.0)
     if travel:  # the stops are hit
         assert np.max(np.abs(out[:950, 1])) > travel["q2"]
+    assert np.all(out[starts[3] + written[3]:stops[3]] == 7.0)  # the diverged segment's rows past its last
     assert simulate_segments(model, 1 / fs, x0s[:0], fine, substeps, starts[:0], stops[:0], out, bound=bound).size == 0
-    with pytest.raises(ValueError, match="segments"):  # a segment past the record's input
-        simulate_segments(model, 1 / fs, x0s[:1], fine[:100], substeps, starts[:1], stops[:1], out, bound=bound,
-                          stride=stride)
+    empty = simulate_segments(model, 1 / fs, x0s[:2], fine, substeps, [0, 400], [0, 950], out, bound=bound,
+                              stride=stride)  # an empty segment writes nothing, as simulate with 0 samples
+    assert list(empty) == [0, 550]
+    b = int(stops[0])
+    simulate_segments(model, 1 / fs, x0s[:1], fine[:(b - 1) * up + 1], substeps, starts[:1], stops[:1], out,
+                      bound=bound, stride=stride)  # exactly the input the segment reads
+    with pytest.raises(ValueError, match="segments"):  # one row short of it
+        simulate_segments(model, 1 / fs, x0s[:1], fine[:(b - 1) * up], substeps, starts[:1], stops[:1], out,
+                          bound=bound, stride=stride)
+    with pytest.raises(ValueError, match="overlap"):  # threads write segments' rows side by side
+        simulate_segments(model, 1 / fs, x0s[:2], fine, substeps, [0, 300], [400, 950], out, bound=bound)
