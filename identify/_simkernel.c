@@ -367,6 +367,12 @@ static __attribute__((noinline)) Py_ssize_t free_run(const model_t *m, const dou
     return written;
 }
 
+/* Every buffer an entry point parsed, released (an optional one left unfilled, {0}, has no object: a no-op). */
+static void release(Py_buffer *const *views, size_t n) {
+    for (size_t i = 0; i < n; i++) PyBuffer_Release(views[i]);
+}
+#define RELEASE(...) do { Py_buffer *const views_[] = {__VA_ARGS__}; release(views_, sizeof views_ / sizeof *views_); } while (0)
+
 /* The model from simulate's and simulate_segments' buffers: 0 (and a ValueError set) if they disagree. */
 static int model_from(const char *caller, model_t *m, Py_buffer *b_ptr, Py_buffer *b_feat, Py_buffer *b_pow,
                       Py_buffer *b_coef, int n_states, int n_inputs, Py_buffer *b_travel) {
@@ -422,14 +428,7 @@ static PyObject *simulate(PyObject *self, PyObject *args) {
     Py_END_ALLOW_THREADS
     result = PyLong_FromSsize_t(written);
 done:
-    PyBuffer_Release(&b_ptr);
-    PyBuffer_Release(&b_feat);
-    PyBuffer_Release(&b_pow);
-    PyBuffer_Release(&b_coef);
-    PyBuffer_Release(&b_x0);
-    PyBuffer_Release(&b_u);
-    PyBuffer_Release(&b_out);
-    if (b_travel.buf != NULL) PyBuffer_Release(&b_travel);
+    RELEASE(&b_ptr, &b_feat, &b_pow, &b_coef, &b_x0, &b_u, &b_out, &b_travel);
     return result;
 }
 
@@ -479,17 +478,7 @@ static PyObject *simulate_segments(PyObject *self, PyObject *args) {
     Py_INCREF(Py_None);
     result = Py_None;
 done:
-    PyBuffer_Release(&b_ptr);
-    PyBuffer_Release(&b_feat);
-    PyBuffer_Release(&b_pow);
-    PyBuffer_Release(&b_coef);
-    PyBuffer_Release(&b_x0);
-    PyBuffer_Release(&b_u);
-    PyBuffer_Release(&b_starts);
-    PyBuffer_Release(&b_stops);
-    PyBuffer_Release(&b_out);
-    PyBuffer_Release(&b_written);
-    if (b_travel.buf != NULL) PyBuffer_Release(&b_travel);
+    RELEASE(&b_ptr, &b_feat, &b_pow, &b_coef, &b_x0, &b_u, &b_starts, &b_stops, &b_out, &b_written, &b_travel);
     return result;
 }
 
@@ -551,12 +540,7 @@ static PyObject *rhs_rows(PyObject *self, PyObject *args) {
     result = Py_None;
 done:
     for (i = 0; i < n_cols; i++) PyBuffer_Release(&cols[i]);
-    PyBuffer_Release(&b_ptr);
-    PyBuffer_Release(&b_feat);
-    PyBuffer_Release(&b_pow);
-    PyBuffer_Release(&b_coef);
-    PyBuffer_Release(&b_out);
-    if (has_travel) PyBuffer_Release(&b_travel);
+    RELEASE(&b_ptr, &b_feat, &b_pow, &b_coef, &b_out, &b_travel);
     return result;
 }
 

@@ -161,6 +161,7 @@ class ShootingData:
         x0s = self.states[self.starts[seg]]
         x0s[:, 1] += offsets[seg]
         mask = np.zeros(self.starts.size, dtype=bool)
+
         def part(j):  # a share of the segments (on a run thread already, e.g. a Jacobian's column, map_runs
             # runs the shares in turn): with the record's fine grid held, one compiled call, the GIL released
             # throughout; without it, each segment's own grid and run
@@ -178,7 +179,7 @@ class ShootingData:
         written = np.concatenate(map_runs(part, np.array_split(np.arange(seg.size), run_threads())))
         mask[seg] = written == self.stops[seg] - self.starts[seg]
         # the read-out span by span of adjoining segments (row by row, the same numbers as segment by
-        # segment, which was ~80 calls a run and a third of a Coulomb case's CPU in their overhead)
+        # segment: ~80 calls a run, whose overhead was ~28 % of a Coulomb case's CPU, docs/discrepancy.md "Time")
         for a, b in self.spans(mask):
             out[a:b] = (sampled_q1_dot(model, states[a:b], self.inputs[a:b], dt, jump_terms) if self.gap == "q1_dot"
                         else states[a:b, 1])
@@ -243,8 +244,8 @@ class ShootingData:
         segment, each segment's measured mean acceleration. A refit asks for the same segments ~100 times,
         and gathering them was a fifth of the offsets' time."""
         key = (idx.tobytes(), row_step)
-        plan = self._offset_sets.get(key)
-        if plan is None:
+        found = self._offset_sets.get(key)
+        if found is None:
             if len(self._offset_sets) >= OFFSET_ROWS_CACHE:  # each holds the rows' states: a few at most
                 self._offset_sets.clear()
             picked = [np.arange(a, b, row_step) for a, b in zip(self.starts[idx], self.stops[idx])]
@@ -254,8 +255,8 @@ class ShootingData:
             cols = [np.ascontiguousarray(c) for c in self.states[rows].T]
             u = np.ascontiguousarray(self.inputs[rows])
             target = np.add.reduceat(self.measured[rows], cuts) / length
-            plan = self._offset_sets[key] = (cols, u, cuts, length, np.repeat(np.arange(idx.size), length), target)
-        return plan
+            found = self._offset_sets[key] = (cols, u, cuts, length, np.repeat(np.arange(idx.size), length), target)
+        return found
 
     def spans(self, which: np.ndarray) -> list[tuple[int, int]]:
         """The segments in `which` as (first row, end row) spans of adjoining segments (once per mask)."""
@@ -274,13 +275,13 @@ class ShootingData:
         return spans
 
     def segment_rows(self, which: np.ndarray) -> np.ndarray:
-        """The rows of the segments in `which`, segment after segment (made once per mask)."""
+        """The rows of the segments in `which`, segment after segment (spans' rows; made once per mask)."""
         key = np.asarray(which, dtype=bool).tobytes()
         rows = self._rows.get(key)
         if rows is None:
             if len(self._rows) >= ROW_CACHE:
                 self._rows.clear()
-            rows = self._rows[key] = np.concatenate([np.arange(a, b) for a, b, w in zip(self.starts, self.stops, which) if w])
+            rows = self._rows[key] = np.concatenate([np.arange(a, b) for a, b in self.spans(which)])
         return rows
 
     def run_residuals(self, model: SparseModel, which: np.ndarray) -> tuple[np.ndarray, int, bool]:
