@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo test check bench venv clean tools
 
-$(STAMP): pyproject.toml setup.py identify/_simkernel.c identify/_polyrows.c
+$(STAMP): pyproject.toml setup.py identify/_simkernel.c identify/_simkernel_run.h identify/_polyrows.c
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test]'

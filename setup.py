@@ -10,7 +10,8 @@ from setuptools import Extension, setup
 
 setup(
     ext_modules=[
-        Extension("identify._simkernel", sources=["identify/_simkernel.c"], extra_compile_args=["-O3"]),
+        Extension("identify._simkernel", sources=["identify/_simkernel.c"], depends=["identify/_simkernel_run.h"],
+                  extra_compile_args=["-O3"]),
         Extension("identify._polyrows", sources=["identify/_polyrows.c"], extra_compile_args=["-O3"]),
     ]
 )
