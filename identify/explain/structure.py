@@ -23,7 +23,7 @@ from ..model import SparseModel
 from ..regression.optimizers.base import least_squares
 from ..data.recording import Recording
 from ..simulation.shooting import ShootingData, segment_edges
-from ..simulation.simulate import simulate
+from ..simulation.simulate import fine_grid_input, simulate
 from ..threads import map_runs
 
 #: The gap is measured on what was measured: the relative acceleration for the accelerometer rig, the
@@ -37,6 +37,8 @@ GAP_SIGNAL = {"base": "q1_dot", "force": "q2"}
 #: under STEP_OMEGA on every eigenvalue: STEP_DECAY now takes ~5x fewer for that real mode).
 #: The candidate's grid starts at 0.1 (identify.explain.effects.hysteresis.HYST_SATURATION).
 HYST_MIN_SATURATION = 0.02
+#: RK4 steps per sample of the Bouc-Wen state's integration from the measured velocity (Fitter.z_state).
+Z_SUBSTEPS = 2
 #: Band-limited library columns kept between equation fits (Fitter.band_limited_columns): the baseline's and
 #: the round's terms are the same for every candidate, each a band operation over the whole record.
 BAND_LIMITED_CACHE = 32
@@ -148,6 +150,8 @@ class Fitter:
         self.tau = np.concatenate([p.tau for p in self.parts])
         self.rows_held = np.repeat(self.held, np.diff(self.edges))
         self._z: dict = {}
+        self._z_input: dict = {}  # per recording (the id of its own signals, which live as long as the
+        # fitter), the z integration's input on its h/2 grid
         self._data: dict = {}
         self._columns: dict = {}  # band_limited_columns' columns, insertion ordered (oldest evicted)
         self._columns_lock = threading.Lock()  # its eviction iterates it: one thread at a time
@@ -181,8 +185,15 @@ class Fitter:
             q1 = sig.q1[sig.valid]
             zm = SparseModel({"z_dot": {"v": 1.0, "av*z": -beta, "v*|z|": -gamma}}, states=("z",), inputs=("v", "av"))
             scale = float(np.max(np.abs(q1))) / max(beta + gamma, 1e-9) + 1e-9
-            res = simulate(zm, 1.0 / sig.fs_hz, [0.0], np.column_stack([q1, np.abs(q1)]), interpolation="linear",
-                           substeps=2, bound=1e3 * scale)
+            # the input (v, |v|) on the h/2 grid is the same for every pair a search tries: made once per
+            # recording (a fault's trial corrections, new signals every trial, make their own)
+            fine = self._z_input.get(id(sig))
+            if fine is None:
+                fine = fine_grid_input(np.column_stack([q1, np.abs(q1)]), Z_SUBSTEPS, "linear")
+                if any(sig is p.sig for p in self.parts):
+                    self._z_input[id(sig)] = fine
+            res = simulate(zm, 1.0 / sig.fs_hz, [0.0], inputs_fine=fine, substeps=Z_SUBSTEPS, n_samples=q1.size,
+                           bound=1e3 * scale)
             if len(self._z) > 64:
                 self._z.clear()
             hit = self._z[key] = (sig, np.nan_to_num(res.states[:, 0]))
@@ -212,26 +223,33 @@ class Fitter:
     def equation_fit(self, st: Structure, band_limited: bool = True) -> Fit:
         sigs = self.signals(st)
         lib = self.library(st)
-        X, U = self.arrays(st, sigs)
         T = self.tie_matrix(st, lib.names)  # all coefficients = T @ the free ones
+        # the free columns and the target q1_dot side by side, made in place (a record-sized array per fit:
+        # stacking, tying and appending the target had copied it three more times)
+        target = self.pooled(sigs, "q1_dot")
+        M = np.empty((target.size, T.shape[1] + 1))
         if band_limited:  # each recording's columns through its own band, over its whole record
-            A = np.vstack([self.band_limited_columns(lib, T, st, s, p) for s, p in zip(sigs, self.parts)])
+            for s, p in zip(sigs, self.parts):
+                self.band_limited_columns(lib, T, st, s, p, out=M[p.offset:p.offset + p.n, :-1])
         else:
-            A = lib.evaluate(X, U) @ T
-        gram = BlockGram(np.column_stack([A, self.pooled(sigs, "q1_dot")]), 1, self.edges)
+            X, U = self.arrays(st, sigs)
+            M[:, :-1] = lib.evaluate(X, U) @ T
+        M[:, -1] = target
+        gram = BlockGram(M, 1, self.edges)
         train, heldout = gram.equations(~self.held), gram.equations(self.held)
-        support = np.ones(A.shape[1], bool)
+        support = np.ones(T.shape[1], bool)
         x = least_squares(train.G, train.B[:, 0], support)
-        S = np.arange(A.shape[1])
+        S = np.arange(T.shape[1])
         cov = T @ sandwich_covariance(gram, ~self.held, train.G, S, x, 0) @ T.T
         mse = float(heldout.mse(x[:, None], 0)[0])
         x = T @ x
         se = np.sqrt(np.maximum(np.diag(cov), 0.0))
         return Fit(dict(zip(lib.names, map(float, x))), dict(zip(lib.names, map(float, se))), cov, lib.names, mse)
 
-    def band_limited_columns(self, lib: Library, T: np.ndarray, st: Structure, sig: StateSignals, part: Part):
-        """The library's columns of one recording through its chain's band, on its valid rows. The
-        columns are built over the whole record, as the chain built the target q1_dot from the whole raw
+    def band_limited_columns(self, lib: Library, T: np.ndarray, st: Structure, sig: StateSignals, part: Part,
+                             out: np.ndarray):
+        """The library's columns of one recording through its chain's band, on its valid rows, tied (@ T)
+        and written into `out` (valid rows, free terms), which is returned. The columns are built over the whole record, as the chain built the target q1_dot from the whole raw
         record: cut to the valid rows first, a record loud at the edge of its valid rows (a down-sweep
         starting at its top frequency) rang through the band (with the true coefficients: a band-limited
         residual of 10 (m/s^2)^2 over the first eighth of a 20-1 Hz down-sweep, 2e-5 built whole). The
@@ -254,7 +272,12 @@ class Fitter:
             A = lib.subset(missing).evaluate(np.column_stack(cols), np.column_stack(ins))
             for j, c in zip(missing, A.T):
                 fresh[j] = spectral_op(c, sig.fs_hz, sig.band_hz, 0, sig.taper_n)[v]
-        out = np.column_stack([fresh[j] if j in fresh else c for j, c in enumerate(cached)]) @ T
+        columns = [fresh[j] if j in fresh else c for j, c in enumerate(cached)]
+        if T.shape[0] == T.shape[1] and np.array_equal(T, np.eye(T.shape[0])):
+            for j, c in enumerate(columns):  # no ties: the columns themselves (what @ T gives, without a product)
+                out[:, j] = c
+        else:
+            out[...] = np.column_stack(columns) @ T
         if keep:
             with self._columns_lock:
                 self._columns.update((keys[j], c) for j, c in fresh.items())
