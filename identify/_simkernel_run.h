@@ -1,6 +1,7 @@
 /*
  * The free-run kernel of identify/_simkernel.c: the model, its right-hand side and the RK4 steps (included
- * by that file alone, so every function here stays static and inlinable in its one translation unit).
+ * by that file alone, after <Python.h> and <math.h>, so every function here stays static and inlinable in
+ * its one translation unit).
  *
  * A term is a product of small integer powers of features; the features of state i are
  * q_i, |q_i|, sign(q_i) (indices 3i, 3i+1, 3i+2), then the inputs (index 3*n_states + j), then the

@@ -60,7 +60,7 @@ class SparseModel:
         self._kernel_terms: tuple | None = None
 
     def kernel_terms(self) -> tuple[bytes, bytes, bytes, bytes]:
-        """The terms as the compiled kernel reads them (identify/_simkernel.c: term pointers, features and
+        """The terms as the compiled kernel reads them (identify/_simkernel_run.h: term pointers, features and
         powers as int32 bytes) and the travels (float64 bytes): packed once per model, not per call (a
         shooting refit calls the kernel and the read-out thousands of times in one explanation)."""
         if self._kernel_terms is None:

@@ -22,7 +22,7 @@ from .measurement import ZERO, ChannelChain
 from ..model import SparseModel
 from ..regression.optimizers.base import least_squares
 from ..data.recording import Recording
-from ..simulation.shooting import ShootingData, segment_edges
+from ..simulation.shooting import FINE_GRID_BYTES, ShootingData, segment_edges
 from ..simulation.simulate import fine_grid_input, simulate
 from ..threads import map_runs
 
@@ -190,7 +190,7 @@ class Fitter:
             fine = self._z_input.get(id(sig))
             if fine is None:
                 fine = fine_grid_input(np.column_stack([q1, np.abs(q1)]), Z_SUBSTEPS, "linear")
-                if any(sig is p.sig for p in self.parts):
+                if any(sig is p.sig for p in self.parts) and fine.nbytes <= FINE_GRID_BYTES:  # as the runs' own
                     self._z_input[id(sig)] = fine
             res = simulate(zm, 1.0 / sig.fs_hz, [0.0], inputs_fine=fine, substeps=Z_SUBSTEPS, n_samples=q1.size,
                            bound=1e3 * scale)
@@ -249,11 +249,12 @@ class Fitter:
     def band_limited_columns(self, lib: Library, T: np.ndarray, st: Structure, sig: StateSignals, part: Part,
                              out: np.ndarray):
         """The library's columns of one recording through its chain's band, on its valid rows, tied (@ T)
-        and written into `out` (valid rows, free terms), which is returned. The columns are built over the whole record, as the chain built the target q1_dot from the whole raw
-        record: cut to the valid rows first, a record loud at the edge of its valid rows (a down-sweep
-        starting at its top frequency) rang through the band (with the true coefficients: a band-limited
-        residual of 10 (m/s^2)^2 over the first eighth of a 20-1 Hz down-sweep, 2e-5 built whole). The
-        hysteresis state, integrated over the valid rows from z = 0, is 0 before them and held after."""
+        and written into `out` (valid rows, free terms), which is returned. The columns are built over
+        the whole record, as the chain built the target q1_dot from the whole raw record: cut to the valid
+        rows first, a record loud at the edge of its valid rows (a down-sweep starting at its top
+        frequency) rang through the band (with the true coefficients: a band-limited residual of 10
+        (m/s^2)^2 over the first eighth of a 20-1 Hz down-sweep, 2e-5 built whole). The hysteresis state,
+        integrated over the valid rows from z = 0, is 0 before them and held after."""
         # only the recording's own signals are kept (a fault candidate's corrected ones are new every trial)
         keep = sig is part.sig
         keys = [self._column_key(t, st, part) for t in lib.terms]
