@@ -79,25 +79,17 @@ def _load(args, plan, out: Path):
 
 
 def _local(args, plan) -> int:
-    from daq.campaign import CampaignControl, plan_violation, run_campaign
-    from daq.plc import open_plc
-    from daq.devices import DeviceError
-    from daq.realtime import CONTROLLER_PRIORITY, make_realtime
+    """The plan on the rig of --config: refused before anything reaches the PLC if a sweep breaks a limit
+    or is predicted to; crashed recordings in --out marked aborted; then the sweeps one after another."""
+    from daq.campaign import plan_prediction, plan_violation
+    from daq.preflight import nominal_response
     from daq.recorder import recover_directory
-    from daq.sweep import SweepRefused, SweepRunner
     from sim.config import load_config
-    from protocol.plc import Fault, State
-
-    from .lab import _sweep_devices
-    from .progress import Progress
 
     cfg = load_config(args.config)
     problem = plan_violation(cfg.limits, plan)
     if problem:
         raise ShakeidError(f"{args.plan}: campaign refused: {problem} (nothing was sent to the PLC)")
-    from daq.campaign import plan_prediction
-    from daq.preflight import nominal_response
-
     response = nominal_response(cfg)  # every sweep predicted now, and again by its runner before it starts
     problem, warnings = plan_prediction(response, cfg.limits, plan)
     if problem:
@@ -108,58 +100,108 @@ def _local(args, plan) -> int:
     out.mkdir(parents=True, exist_ok=True)
     for path in recover_directory(out):  # crashed recordings, found on start
         print(f"{path}: was left running by a crash; marked aborted, its data kept")
-    campaign = _load(args, plan, out)
-    state_path = _state_path(out, plan.name)
-    make_realtime(CONTROLLER_PRIORITY, round_robin=True)  # where allowed: the heartbeat is never late
-    control = CampaignControl()
-    current: dict = {}
+    return _LocalCampaign(args, plan, cfg, response, out).run()
 
-    def on_sigint(*_):  # the table is stopped by the sweep's own path; no next sweep starts
-        control.abort(CTRL_C)
-        runner = current.get("runner")
+
+class _LocalCampaign:
+    """One campaign run here: its sweeps through the SweepRunner, its state saved after every change, the
+    PLC checked between sweeps, Ctrl-C stopping the table (daq.campaign.run_campaign calls back into it)."""
+
+    def __init__(self, args, plan, cfg, response, out: Path):
+        from daq.campaign import CampaignControl
+
+        self.args, self.plan, self.cfg, self.response, self.out = args, plan, cfg, response, out
+        self.campaign = _load(args, plan, out)
+        self.state_path = _state_path(out, plan.name)
+        self.control = CampaignControl()
+        self.runner = None  # the sweep running now
+        self.status_plc = None  # the link check() polls between sweeps
+
+    def run(self) -> int:
+        from daq.campaign import run_campaign
+        from daq.realtime import CONTROLLER_PRIORITY, make_realtime
+
+        args, plan, campaign = self.args, self.plan, self.campaign
+        make_realtime(CONTROLLER_PRIORITY, round_robin=True)  # where allowed: the heartbeat is never late
+        print(f"campaign {plan.name}: {campaign.total} sweeps ({campaign.done} done), rig of {args.config} -> "
+              f"{self.out}", flush=True)
+        previous = signal.signal(signal.SIGINT, self.on_sigint)
+        try:
+            run_campaign(campaign, self.run_sweep, self.control, self.save, self.check)
+        finally:
+            signal.signal(signal.SIGINT, previous)
+            if self.status_plc is not None:
+                self.status_plc.close()
+        print(f"campaign {plan.name}: {campaign.state}, {campaign.done} of {campaign.total} sweeps complete"
+              + (f"; {campaign.reason}" if campaign.reason else "") + f" ({self.state_path})")
+        if campaign.state == "paused":
+            print(f"to go on: reset the PLC if needed (`shakeid rig reset --config {args.config}`), then "
+                  f"`shakeid campaign {args.plan} --config {args.config} --out {args.out} --resume`")
+            return 1
+        if campaign.state == "aborted":
+            return 130 if campaign.reason == CTRL_C else 1
+        return 0
+
+    def on_sigint(self, *_) -> None:
+        """No next sweep starts; the running one is stopped by the sweep's own path."""
+        self.control.abort(CTRL_C)
+        runner = self.runner
         if runner is not None:
             runner.abort(CTRL_C)
 
-    def save(c) -> None:
-        tmp = state_path.with_suffix(".tmp")
+    def save(self, c) -> None:
+        tmp = self.state_path.with_suffix(".tmp")
         tmp.write_text(json.dumps({**c.to_dict(), "updated": time.time()}, indent=1))
-        os.replace(tmp, state_path)
+        os.replace(tmp, self.state_path)
 
-    def run_sweep(planned, item) -> dict:
-        path = out / f"{plan.name}-{planned.index}.h5"
-        if path.exists():  # an earlier attempt of this sweep: kept beside it
+    def _path(self, planned, item) -> Path:
+        """OUT/<name>-<k>.h5; an earlier attempt's file moved aside (<name>-<k>.attempt-<j>.h5), its
+        attempt entry following it."""
+        path = self.out / f"{self.plan.name}-{planned.index}.h5"
+        if path.exists():
             j = 1
-            while (aside := out / f"{plan.name}-{planned.index}.attempt-{j}.h5").exists():
+            while (aside := self.out / f"{self.plan.name}-{planned.index}.attempt-{j}.h5").exists():
                 j += 1
             path.rename(aside)
             for attempt in item["attempts"]:
                 if attempt.get("path") == str(path):
                     attempt["path"] = str(aside)
-        print(f"{planned.label(campaign.total)}: {planned.f_start_hz:g} -> {planned.f_end_hz:g} Hz over "
+        return path
+
+    def run_sweep(self, planned, item) -> dict:
+        from daq.devices import DeviceError
+        from daq.plc import open_plc
+        from daq.sweep import SweepRefused, SweepRunner
+
+        from .lab import sweep_devices
+        from .progress import Progress
+
+        cfg, total = self.cfg, self.campaign.total
+        path = self._path(planned, item)
+        print(f"{planned.label(total)}: {planned.f_start_hz:g} -> {planned.f_end_hz:g} Hz over "
               f"{planned.duration_s:g} s -> {path}", flush=True)
         try:
-            plc, source = _sweep_devices(cfg)
+            plc, source = sweep_devices(cfg)
         except DeviceError as exc:
             return {"status": "refused", "reason": f"rig not reachable: {exc}"}
-        devices = [plc, source]
-        progress = None
+        devices, progress = [plc, source], None
         try:
             devices.append(open_plc(cfg.plc))  # the heartbeat's own link: never behind a status poll
-            progress = Progress(f"sweep {planned.index} of {campaign.total}:", planned.duration_s)
+            progress = Progress(f"sweep {planned.index} of {total}:", planned.duration_s)
             runner = SweepRunner(plc, source, cfg.limits, float(cfg.stream["sensitivity_counts_per_ms2"]),
                                  cfg.channels, on_progress=progress.sweep_status, heartbeat_plc=devices[2],
-                                 rig_config=cfg.recording_metadata(), response=response)
-            if control.held():
+                                 rig_config=cfg.recording_metadata(), response=self.response)
+            if self.control.held():
                 return {"status": "held"}
-            current["runner"] = runner
-            note = f"campaign {plan.name}: {planned.label(campaign.total)}" + (f"; {plan.note}" if plan.note else "")
-            result = runner.run(planned.request(args.operator, note), path)
+            self.runner = runner
+            note = f"campaign {self.plan.name}: {planned.label(total)}" + (f"; {self.plan.note}" if self.plan.note else "")
+            result = runner.run(planned.request(self.args.operator, note), path)
         except SweepRefused as exc:
             return {"status": "refused", "reason": str(exc)}
         except DeviceError as exc:
             return {"status": "refused", "reason": f"rig not reachable: {exc}"}
         finally:
-            current.pop("runner", None)
+            self.runner = None
             if progress is not None:
                 progress.close()
             for dev in devices:
@@ -169,40 +211,23 @@ def _local(args, plan) -> int:
         return {"status": result["status"], "reason": result["reason"], "quality": result.get("quality"),
                 "path": str(path)}
 
-    links: dict = {}
-
-    def check() -> str | None:
+    def check(self) -> str | None:
         """Between sweeps: the PLC in estop or fault, or the table moving, pauses the campaign."""
+        from daq.devices import DeviceError
+        from daq.plc import open_plc
+        from protocol.plc import Fault, State
+
         try:
-            if "plc" not in links:
-                links["plc"] = open_plc(cfg.plc)
-            st = links["plc"].status()
+            if self.status_plc is None:
+                self.status_plc = open_plc(self.cfg.plc)
+            st = self.status_plc.status()
         except DeviceError as exc:
-            links.pop("plc", None)
+            self.status_plc = None
             return f"the PLC does not answer: {exc}"
         if st.state in (State.IDLE, State.DONE):
             return None
         return ("the PLC is in emergency stop" if st.state == State.ESTOP else "the table is moving"
                 if st.state == State.RUNNING else f"the PLC is in fault ({Fault(st.fault_code).name.lower()})")
-
-    print(f"campaign {plan.name}: {campaign.total} sweeps ({campaign.done} done), rig of {args.config} -> {out}",
-          flush=True)
-    previous = signal.signal(signal.SIGINT, on_sigint)
-    try:
-        run_campaign(campaign, run_sweep, control, save, check)
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        if "plc" in links:
-            links["plc"].close()
-    print(f"campaign {plan.name}: {campaign.state}, {campaign.done} of {campaign.total} sweeps complete"
-          + (f"; {campaign.reason}" if campaign.reason else "") + f" ({state_path})")
-    if campaign.state == "paused":
-        print(f"to go on: reset the PLC if needed (`shakeid rig reset --config {args.config}`), then "
-              f"`shakeid campaign {args.plan} --config {args.config} --out {args.out} --resume`")
-        return 1
-    if campaign.state == "aborted":
-        return 130 if campaign.reason == CTRL_C else 1
-    return 0
 
 
 def _remote(args, plan) -> int:

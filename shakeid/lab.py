@@ -92,7 +92,7 @@ def truth_lines(identified: dict, truth: dict, design_k3_per_kg: float) -> list[
     return lines
 
 
-def _sweep_devices(cfg):
+def sweep_devices(cfg):
     """PLC and accelerometer backends from a rig configuration."""
     from daq.plc import open_plc
     from daq.sources import open_source
@@ -129,7 +129,7 @@ def cmd_sweep(args) -> int:
     from .progress import Progress
 
     make_realtime(CONTROLLER_PRIORITY, round_robin=True)  # where allowed: the heartbeat is never late
-    plc, source = _sweep_devices(cfg)
+    plc, source = sweep_devices(cfg)
     beat_plc = open_plc(cfg.plc)  # the heartbeat's own link: never behind a status poll
     progress = Progress("sweep", args.duration_s)
     from daq.preflight import nominal_response
