@@ -26,6 +26,12 @@ def add_sweep_shape(q, required: bool) -> None:
 
 
 def add_lab_parsers(sub) -> None:
+    """The lab's commands: sweep, recordings, rig, sim, serve, controller, demo (one function each below)."""
+    for add in (_add_sweep, _add_recordings, _add_rig, _add_sim, _add_serve, _add_controller, _add_demo):
+        add(sub)
+
+
+def _add_sweep(sub) -> None:
     q = sub.add_parser("sweep", help="run a sweep on the rig of --config and record it to HDF5, or through a "
                                      "running shakeid serve (--server)")
     where = q.add_mutually_exclusive_group(required=True)
@@ -41,6 +47,9 @@ def add_lab_parsers(sub) -> None:
     q.add_argument("--out", metavar="FILE.h5", help="the recording (needed with --config; with --server: a copy, "
                                                     "downloaded; default: none)")
     q.set_defaults(func=cmd_sweep)
+
+
+def _add_recordings(sub) -> None:
     q = sub.add_parser("recordings", help="inspect HDF5 recordings (metadata, status, gaps, quality flags), or list "
                                           "a service's recordings (--server)")
     q.add_argument("files", nargs="*", metavar="FILE.h5", help="recordings written by a sweep or the service")
@@ -53,6 +62,9 @@ def add_lab_parsers(sub) -> None:
                    help="add processed signals: relative acceleration, velocity, displacement (/entry/processed)")
     q.add_argument("--json", action="store_true", help="one JSON object per file instead of text")
     q.set_defaults(func=cmd_recordings)
+
+
+def _add_rig(sub) -> None:
     q = sub.add_parser("rig", help="the rig's PLC: status, reset, estop; through a running service (--server) or "
                                    "directly (--config: works while the service is wedged)")
     actions = q.add_subparsers(dest="action", required=True, metavar="ACTION")
@@ -70,6 +82,9 @@ def add_lab_parsers(sub) -> None:
                            "route is used when nothing answers there")
         a.add_argument("--json", action="store_true", help="one JSON object instead of text")
         a.set_defaults(func=cmd_rig)
+
+
+def _add_sim(sub) -> None:
     q = sub.add_parser("sim", help="run the simulated rig: PLC over Modbus TCP, accelerometer stream over TCP")
     q.add_argument("--config", metavar="RIG.toml", help="rig configuration, e.g. examples/sim-rig.toml "
                                                         "(default: the built-in simulated rig)")
@@ -81,6 +96,9 @@ def add_lab_parsers(sub) -> None:
     q.add_argument("--speed", type=positive, metavar="X", help="rig seconds per wall-clock second, for the PLC and the "
                                                             "streams (default: the config's [sim] speed, else 1)")
     q.set_defaults(func=cmd_sim)
+
+
+def _add_serve(sub) -> None:
     q = sub.add_parser("serve", help="the HTTP service: sweeps, recordings, models (FastAPI + uvicorn)")
     q.add_argument("--config", metavar="RIG.toml", help="rig + [server] configuration (default: none, an "
                                                         "embedded simulated rig)")
@@ -97,6 +115,9 @@ def add_lab_parsers(sub) -> None:
                    help="attach to a rig controller that runs on its own (`shakeid controller`), e.g. "
                         "unix:/run/shakeid/controller.sock or tcp:127.0.0.1:8765 (default: start one as a child)")
     q.set_defaults(func=cmd_serve)
+
+
+def _add_controller(sub) -> None:
     q = sub.add_parser("controller", help="the rig controller process: sweeps, heartbeat, emergency stop (the "
                                           "service starts one itself; run it alone for a separate deployment)")
     q.add_argument("--config", metavar="RIG.toml", help="rig configuration (default: none, an embedded simulated rig)")
@@ -108,6 +129,9 @@ def add_lab_parsers(sub) -> None:
                                                                 "wall-clock second (default: as serve's)")
     q.add_argument("--parent-pid", type=int, help=argparse.SUPPRESS)  # set by `shakeid serve` for its child
     q.set_defaults(func=cmd_controller)
+
+
+def _add_demo(sub) -> None:
     q = sub.add_parser("demo", help="sweep the simulated rig (10x real time) over Modbus, record HDF5, identify, "
                                     "report")
     q.add_argument("--out", default="demo-output", metavar="DIR",
