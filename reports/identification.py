@@ -184,13 +184,28 @@ def _shade(ax, t, mask):
 
 
 def _index_html(out: Path, ident, result: dict) -> str:
-    rec, sig, labels = ident.recording_, ident.states_, _labels(ident)
-    base = sig.input_name == "zdd"
-    chain = result.get("chain") or {}
+    rec = ident.recording_
     # the file's name, not its path: a report the service wrote would show the server's folders
     page = Page(f"Identification report: {Path(str(rec.source)).name}", "identification")
     if result.get("status") == "failed":
         page.paragraph(f"MODEL FAILED its validation: {result['reason']}")
+    _data_section(page, ident, result)
+    _model_section(page, ident, result)
+    _validation_section(page, ident, result)
+    _physical_section(page, ident, result)
+    _selection_section(page, ident, result)
+    _figures_section(page, out, ident)
+    if "frf" in result:  # after the figures the text numbers (Figure 3, ...)
+        add_side_by_side(page, result["frf"], OVERLAY_FIGURE if (out / OVERLAY_FIGURE).exists() else None)
+    page.links([("model.json", "model.json (the whole result)"), ("coefficients.md", "coefficients.md")])
+    return page.render()
+
+
+def _data_section(page: Page, ident, result: dict) -> None:
+    """The recording and the part of it the identification used."""
+    rec, sig = ident.recording_, ident.states_
+    base = sig.input_name == "zdd"
+    chain = result.get("chain") or {}
     band = chain.get("band_hz") or list(sig.band_hz)
     page.heading("Data")
     page.table(["quantity", "value"], [
@@ -205,6 +220,11 @@ def _index_html(out: Path, ident, result: dict) -> str:
                                  f"({chain.get('holdout', 'held out')})"],
     ], "The recording and the part of it the identification used. Held-out samples are never used for "
        "fitting; the validation below is on them.")
+
+
+def _model_section(page: Page, ident, result: dict) -> None:
+    """The coefficients with their standard errors and P(kept), what was left out, the LaTeX."""
+    base = ident.states_.input_name == "zdd"
     page.heading("Identified model")
     n_place = (result.get("uncertainty") or {}).get("placements")
     headers, rows = coefficient_rows(result)
@@ -219,6 +239,11 @@ def _index_html(out: Path, ident, result: dict) -> str:
         page.paragraph(line)
     page.code(latex_equations(ident.model_), "The model's equations in the paper's notation, LaTeX for a paper "
               "(amsmath's align; `shakeid export model.json --format latex` writes the same as a file):")
+
+
+def _validation_section(page: Page, ident, result: dict) -> None:
+    """The free run against the measurement, held out and on all samples."""
+    labels = _labels(ident)
     val = result.get("validation")
     if val:
         page.heading("Validation")
@@ -237,6 +262,11 @@ def _index_html(out: Path, ident, result: dict) -> str:
                    f"fit = 100 (1 − NRMSE) %. Held-out: {val['heldout_samples']} samples not used for fitting."
                    + (f" One-step equation error of the acceleration (not simulated): fit {fit_text(one_step)}."
                       if one_step else "") + (" The simulation diverged." if val.get("diverged") else ""))
+
+
+def _physical_section(page: Page, ident, result: dict) -> None:
+    """Damping, stiffness, cubic stiffness from the q1_dot equation (base layout)."""
+    base = ident.states_.input_name == "zdd"
     phys = result.get("physical")
     if phys and base:
         page.heading("Physical parameters")
@@ -247,6 +277,10 @@ def _index_html(out: Path, ident, result: dict) -> str:
                    f"Physical parameters from the q1_dot equation with the moving mass {mass_text(phys)} "
                    f"(c = −m·coef(q1), k = −m·coef(q2), k3 = −m·coef(q2³); b from k). The design column: "
                    + DESIGN_K3_NOTE + ".")
+
+
+def _selection_section(page: Page, ident, result: dict) -> None:
+    """Where on the path each equation's model was chosen."""
     sel = result.get("selection") or {}
     srows = []
     for e, (eq, s) in enumerate(ident.selections_.items()):  # the path's own parameter (lambda or threshold)
@@ -261,6 +295,11 @@ def _index_html(out: Path, ident, result: dict) -> str:
                    srows, f"Where on the path each equation's model was chosen, by the {sel.get('rule')} rule "
                           f"({result.get('method')}, {plural(n_path, 'path point')}): the sparsest point whose score is "
                           "within the tolerance (Figure 3). Points are counted from 1 (the JSON's index from 0).")
+
+
+def _figures_section(page: Page, out: Path, ident) -> None:
+    """The figures written beside the page, with their captions."""
+    rec, base = ident.recording_, ident.states_.input_name == "zdd"
     page.heading("Figures")
     captions = {
         "input.png": "Input: " + ("the table acceleration over the whole record, as the accelerometer on the table "
@@ -282,7 +321,3 @@ def _index_html(out: Path, ident, result: dict) -> str:
     for f in FIGURES:
         if (out / f).exists():
             page.figure(f, captions[f])
-    if "frf" in result:  # after the figures the text numbers (Figure 3, ...)
-        add_side_by_side(page, result["frf"], OVERLAY_FIGURE if (out / OVERLAY_FIGURE).exists() else None)
-    page.links([("model.json", "model.json (the whole result)"), ("coefficients.md", "coefficients.md")])
-    return page.render()
