@@ -25,7 +25,13 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
 class OneLineErrors(argparse.ArgumentParser):
     """A usage error is one line, as every other shakeid error ("shakeid: error: argument --mass-kg: must be
-    > 0, got 0"), pointing at --help rather than printing the whole usage (identify's is 16 lines)."""
+    > 0, got 0"), pointing at --help rather than printing the whole usage (identify's is 16 lines).
+    Options are taken whole, never abbreviated: argparse's default read `shakeid explain ... --output V2
+    --out DIR` as a second --output, the channel "DIR", and failed naming a missing variable DIR."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message):
         self.exit(2, f"shakeid: error: {message} (`{self.prog} --help` lists the options)\n")
