@@ -7,6 +7,7 @@ composes them (and the web stack) but never imports the command-line package sha
 everything. Within shakeid/ no modules import each other in a circle (function-level imports count: a
 circle there is a circle in the design). Checked on the source, so a stray import fails here."""
 import ast
+import re
 import sys
 from pathlib import Path
 
@@ -159,3 +160,25 @@ def test_no_module_much_over_400_lines():
         if ".venv" in f.parts or f.relative_to(REPO).parts[0] == "build":  # the environment; pip's build copies
             continue
         assert len(f.read_text().splitlines()) <= 450, f
+
+
+#: how the README names a distribution whose import name differs
+_README_NAMES = {"python-can": "can", "pyserial": "serial", "npTDMS": "nptdms"}
+
+
+def test_the_readme_layout_states_the_rule():
+    """README.md's Layout table ("may import") says what ALLOWED enforces, package by package, and its
+    server row names every router module (the table had drifted: threadpoolctl, scipy, pydantic, uvicorn,
+    distributed and the frf router missing)."""
+    rows = {}
+    for line in (REPO / "README.md").read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 3 and cells[0].startswith("`") and cells[0].endswith("/`"):
+            rows[cells[0].strip("`/")] = cells
+    for package, allowed in ALLOWED.items():
+        said = {_README_NAMES.get(w, w) for w in re.findall(r"[A-Za-z][\w-]*", rows[package][2].split("(")[0])}
+        assert said == allowed - {package}, f"README's {package}/ row: says {sorted(said)}, the rule is " \
+                                            f"{sorted(allowed - {package})}"
+    routers = {f.stem for f in (REPO / "server" / "routers").glob("*.py")} - {"__init__"}
+    listed = set(re.search(r"`routers/`: ([^)]*)\)", rows["server"][1]).group(1).replace(" ", "").split(","))
+    assert listed == routers, f"README's server/ row lists routers {sorted(listed)}, server/routers has {sorted(routers)}"
