@@ -62,6 +62,11 @@ def _panel(ax, entry: dict, doc: dict) -> None:
             p = j["predicted"][label]
             if p["fold_hz"] and p["bias_hz"] is not None:
                 ax.axvspan(*sorted((p["fold_hz"], p["fold_hz"] + p["bias_hz"])), color=colour, alpha=0.12, lw=0)
+            elif p["fold_hz"] is None and p.get("model_sweep_jump_hz") is not None:
+                # no fold to start from (no jump in the steady state, or its branch ends at the validity limit):
+                # the model's own run over the sweep is what the measured jump is compared with
+                ax.axvline(p["model_sweep_jump_hz"], color=colour, ls="-.", lw=1.2,
+                           label=f"{label}: its own run over the sweep jumps")
     limit = (next(iter(entry["predicted"].values())).get("validity") or {}).get("damping_negative_above_mm")
     if limit and limit < 1.5 * max(max(b["amplitude_mm"]) for r in entry["predicted"].values() for b in r["branches"]):
         ax.axhline(limit, color="grey", ls=":", lw=1, label="model's damping < 0 above (validity)")
@@ -77,7 +82,7 @@ def _panel(ax, entry: dict, doc: dict) -> None:
     ax.plot([], [], "--", color="grey", label="unstable")
     ax.plot([], [], "o", mfc="none", mec="grey", label="fold (steady state)")
     ax.fill_between([], [], color="grey", alpha=0.2, label="fold .. fold + sweep-rate bias")
-    ax.set_xlim(*_zoom(entry))
+    ax.set_xlim(*_zoom(entry, _jumps(entry, doc)))
     ax.set_ylim(bottom=0)
     ax.set_title(f"table amplitude {entry['amplitude_mm']:.3g} mm", fontsize=10)
     ax.set_xlabel("excitation frequency f, Hz")
@@ -97,25 +102,34 @@ def _sorted(f, a):
     return f[i], a[i]
 
 
-def _zoom(entry: dict) -> tuple[float, float]:
-    """Frequencies where a predicted or measured response exceeds ZOOM_LEVEL of the largest, widened."""
+def _zoom(entry: dict, jumps: list) -> tuple[float, float]:
+    """Frequencies where a predicted or measured response exceeds ZOOM_LEVEL of the largest, and the
+    panel's jumps (measured, with their uncertainty; the models' folds + bias and own sweep runs), widened."""
     pairs = [(b["frequency_hz"], b["amplitude_mm"]) for r in entry["predicted"].values() for b in r["branches"]]
     pairs += [(m["frequency_hz"], m["response_mm"]) for m in entry["measured"]]
     peak = max(max((a for a in amps if a is not None), default=0.0) for _, amps in pairs)
     f_in = [f for fs, amps in pairs for f, a in zip(fs, amps) if a is not None and a >= ZOOM_LEVEL * peak]
+    for j in jumps:
+        if j["measured_hz"] is not None:
+            f_in += [j["measured_hz"] - j["uncertainty_hz"], j["measured_hz"] + j["uncertainty_hz"]]
+        for p in j["predicted"].values():
+            f_in += [f for f in (p["fold_hz"], p.get("model_sweep_jump_hz")) if f is not None]
+            if p["fold_hz"] is not None and p["bias_hz"] is not None:
+                f_in.append(p["fold_hz"] + p["bias_hz"])
     lo, hi = min(f_in), max(f_in)
     span = hi - lo or lo
     return max(entry["band_hz"][0], lo - ZOOM_MARGIN * span), min(entry["band_hz"][1], hi + ZOOM_MARGIN * span)
 
 
 def jump_rows(doc: dict) -> list[list[str]]:
-    """The jump table's rows: per sweep, measured jump and each model's fold, bias, miss, verdict."""
+    """The jump table's rows: per sweep, measured jump and each model's fold, bias, own sweep run's jump,
+    miss, verdict."""
     rows = []
     for j in doc["jumps"]:
         measured = "none" if j["measured_hz"] is None else f"{j['measured_hz']:.3f} ± {j['uncertainty_hz']:.3f}"
         for label, p in j["predicted"].items():
             rows.append([f"{j['source']}, {j['direction']}", f"{j['amplitude_mm']:.3g}", measured, label,
-                         _f(p["fold_hz"]), _f(p["bias_hz"], "+.3f"), _f(p["miss_hz"]),
+                         _f(p["fold_hz"]), _f(p["bias_hz"], "+.3f"), _f(p.get("model_sweep_jump_hz")), _f(p["miss_hz"]),
                          {True: "agrees", False: "MISSES", None: "-"}[p["agrees"]]])
     return rows
 
@@ -134,18 +148,21 @@ def add_side_by_side(page: Page, doc: dict | None, figure: str | None, heading: 
         judged = doc["judged"] if doc["judged"].endswith("model") else f"{doc['judged']} model"
         page.paragraph(f"The {judged}'s jumps agree with every sweep's within the sweep-rate bias and "
                        "the measurement's uncertainty.")
-    page.table(["sweep", "table mm", "measured jump, Hz", "model", "fold, Hz", "sweep-rate bias, Hz", "miss, Hz",
-                "verdict"], jump_rows(doc),
+    page.table(["sweep", "table mm", "measured jump, Hz", "model", "fold, Hz", "sweep-rate bias, Hz",
+                "model's own sweep jumps, Hz", "miss, Hz", "verdict"], jump_rows(doc),
                "Each sweep's jump (up-sweep: jump-down; down-sweep: jump-up) against each model's steady-state fold at "
                "the recorded table amplitude. A sweep passes a fold at a finite rate and jumps later, by the bias (the "
                "model's own run over the same sweep, minus its fold): the measured jump agrees when it lies between "
                "the fold and the fold + bias, give or take its uncertainty (half the frequency the sweep covers "
-               "during the transition). docs/frf.md.")
+               "during the transition). Where the model has no fold there (no jump in its steady state, or its "
+               "branch ends at its validity limit first), the measured jump is compared with the model's own run "
+               "over the sweep directly, within both uncertainties. docs/frf.md.")
     if figure:
         page.figure(figure, "Per table amplitude: the predicted steady-state response (stable solid, unstable dashed, "
                     "folds circled; shaded from the fold to the fold + sweep-rate bias, where the sweep should jump), "
                     "the measured response per table cycle (triangles up / down: the sweep's direction) and the "
-                    "measured jump (red x, bar: its uncertainty). A sweep's envelope lags the steady state near the "
+                    "measured jump (red x, bar: its uncertainty); where a model has no fold, the jump of its own run "
+                    "over the sweep (dash-dotted). A sweep's envelope lags the steady state near the "
                     "resonance: compare the jumps, not the curves point by point.")
 
 
