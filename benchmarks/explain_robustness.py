@@ -4,6 +4,10 @@ Wilson 95 % intervals, whether its stated confidence means what it says, and how
     python benchmarks/explain_robustness.py                        # 150 cases, a new seed (printed)
     python benchmarks/explain_robustness.py --cases 8              # a smoke run
     python benchmarks/explain_robustness.py --seed S --case K      # reproduce case K of a printed run
+    python benchmarks/explain_robustness.py --duration-s 58 --workers 1   # every record 60 s (58 s sweeps + settle)
+
+A run with --duration-s draws its cases with the length fixed (the rest of each draw shifts with it):
+reproduce its cases with the same --duration-s (the JSON keeps it).
 
 Every run draws a new seed (printed first) unless --seed is given: the suite is never tuned on one draw.
 Case K's scenario comes from default_rng([S, K]) and its sensor noise from [S, K, 1], and its category
@@ -228,15 +232,16 @@ def print_summary(s: dict) -> None:
             print(f"  {row['confidence']:10s} {row['n']:3d}   {rate:>22s}  {mc:>15s}")
 
 
-def run_all(seed: int, cases: list[int], workers: int, budget_s: float, out: Path | None, meta: dict) -> list[dict]:
+def run_all(seed: int, cases: list[int], workers: int, budget_s: float, out: Path | None, meta: dict,
+            duration_s: float | None = None) -> list[dict]:
     """Run `cases` on `workers` processes (at most `workers` in flight; none started after budget_s),
-    printing each as it ends and rewriting `out` after each."""
+    printing each as it ends and rewriting `out` after each; duration_s fixes every record's length."""
     t0, records, todo = time.perf_counter(), [], list(cases)
     with ProcessPoolExecutor(max_workers=workers) as pool:
         running = set()
         while todo or running:
             while todo and len(running) < workers and time.perf_counter() - t0 < budget_s:
-                running.add(pool.submit(run_case, seed, todo.pop(0)))
+                running.add(pool.submit(run_case, seed, todo.pop(0), duration_s))
             if not running:
                 break
             done, running = wait(running, return_when=FIRST_COMPLETED)
@@ -278,6 +283,9 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=os.cpu_count(), help="processes (default: os.cpu_count())")
     ap.add_argument("--budget-min", type=float, default=float("inf"), help="start no case after this many minutes")
     ap.add_argument("--json", help="write every case and the summary here (rewritten after each case)")
+    ap.add_argument("--duration-s", type=float, metavar="S",
+                    help="every sweep this long, the rest drawn as usual; the record adds its settle time, 2 s "
+                         "(issue 32 item 9 times a 60 s recording: 58; default: drawn, 15-120 s)")
     ap.add_argument("--summarise", nargs="+", metavar="JSON", help="print the summary of written runs, and pooled")
     args = ap.parse_args(argv)
     if args.summarise:
@@ -287,12 +295,13 @@ def main(argv=None) -> int:
     cases = args.case if args.case else list(range(args.cases))
     # the command as run, with file arguments by name only: a result must not carry the machine's paths
     meta = {"command": " ".join([Path(sys.argv[0]).name, *(Path(a).name if "/" in a else a for a in sys.argv[1:])]),
-            "workers": args.workers, "run_threads": run_threads(),
+            "workers": args.workers, "run_threads": run_threads(), "duration_s": args.duration_s,
             "cpu_count": os.cpu_count(), "load_at_start": os.getloadavg(),
             "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     print(f"seed {args.seed} (rerun with --seed {args.seed}); {len(cases)} cases on {args.workers} processes, "
           f"load {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores", flush=True)
-    records = run_all(args.seed, cases, args.workers, args.budget_min * 60, Path(args.json) if args.json else None, meta)
+    records = run_all(args.seed, cases, args.workers, args.budget_min * 60, Path(args.json) if args.json else None, meta,
+                      args.duration_s)
     meta["load_at_end"] = os.getloadavg()
     if args.json:
         write(Path(args.json), args.seed, records, meta)
