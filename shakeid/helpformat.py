@@ -33,6 +33,23 @@ class OneLineErrors(argparse.ArgumentParser):
         kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
 
+    def parse_args(self, args=None, namespace=None):
+        """argparse's, but an unrecognized option is told by the subcommand it was given to (`shakeid
+        explain --help` lists the options), not by the top-level parser."""
+        known, extras = self.parse_known_args(args, namespace)
+        if extras:
+            self._chosen(known).error(f"unrecognized arguments: {' '.join(extras)}")
+        return known
+
+    def _chosen(self, known) -> argparse.ArgumentParser:
+        """The innermost (sub)parser the command line chose."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                sub = action.choices.get(getattr(known, action.dest, None) or "")
+                if sub is not None:
+                    return sub._chosen(known) if isinstance(sub, OneLineErrors) else sub
+        return self
+
     def error(self, message):
         self.exit(2, f"shakeid: error: {message} (`{self.prog} --help` lists the options)\n")
 
