@@ -117,13 +117,16 @@ class SparseIdentifier:
 
     def _rig_constants(self) -> tuple[RigConstants, str]:
         """The rig's constants for the physical parameters and where its mass came from: given (rig=), the
-        recording's (a sweep records its rig configuration's moving mass), or the default, assumed."""
+        recordings' (a sweep records its rig configuration's moving mass; a joint fit's recordings must all
+        record the same one, else none is taken), or the default, assumed."""
         if self.rig is not None:
             return self.rig, "given"
         if self.mass_kg is not None:
             return RigConstants(mass_kg=float(self.mass_kg)), "given"
-        mass = (getattr(getattr(self, "recording_", None), "metadata", None) or {}).get("moving_mass_kg")
-        if mass:
+        one = getattr(self, "recording_", None)
+        recordings = [one] if one is not None else getattr(self, "recordings_", None)
+        masses = {(getattr(r, "metadata", None) or {}).get("moving_mass_kg") for r in recordings or []}
+        if len(masses) == 1 and (mass := masses.pop()):
             return RigConstants(mass_kg=float(mass)), "recording"
         return RigConstants(), "assumed"
 

@@ -137,3 +137,22 @@ def test_an_established_even_force_is_refused_with_what_to_do():
     recs = [_record(a, seed, rig) for seed, a in ((1, 1.3), (2, 1.1))]
     with pytest.raises(IdentificationError, match=r"even part \(.*q2\^2.*identify the recordings one by one"):
         SparseIdentifier(validate=False).fit(recs)
+
+
+def test_a_joint_fit_takes_the_moving_mass_its_recordings_agree_on(joint, recordings):
+    """A sweep records its rig's moving mass; a joint fit scales its physical parameters by it when every
+    recording gives the same one (it had always taken the default 0.49 kg, "assumed"), and by none when
+    they differ."""
+    saved = [dict(r.metadata) for r in recordings]
+    try:
+        for r in recordings:
+            r.metadata["moving_mass_kg"] = 0.6
+        phys = joint.result()["physical"]
+        assert phys["mass_kg"] == 0.6 and phys["mass_source"] == "recording"
+        assert phys["stiffness_n_per_m"]["value"] == pytest.approx(-0.6 * joint.model_.coefficient("q1_dot", "q2"))
+        recordings[1].metadata["moving_mass_kg"] = 0.5
+        assert joint.result()["physical"]["mass_source"] == "assumed"
+    finally:
+        for r, m in zip(recordings, saved):
+            r.metadata.clear()
+            r.metadata.update(m)
