@@ -25,6 +25,7 @@ from matplotlib.ticker import MaxNLocator  # noqa: E402
 from identify.export.latex import latex_equations  # noqa: E402
 
 from .frf_overlay import OVERLAY_FIGURE, add_side_by_side, overlay_figure  # noqa: E402
+from .joint import joint_data_section, joint_validation_table  # noqa: E402
 from .html import IDENTIFICATION_DOCUMENTS, IDENTIFICATION_FIGURES, Page, report_folder  # noqa: E402
 from .text import (DESIGN_K3_NOTE, coefficient_rows, coefficient_table, fit_text, mass_text,  # noqa: E402
                    physical_rows, plural, unit, unsettled_lines)
@@ -43,33 +44,45 @@ def write_report(ident, out_dir, result: dict | None = None) -> Path:
     result = ident.result() if result is None else result
     (out / "model.json").write_text(json.dumps(result, indent=2))
     (out / "coefficients.md").write_text(coefficient_table(result))
-    sig, rec = ident.states_, ident.recording_
-    t = np.arange(rec.n_samples) / rec.fs_hz
     labels = _labels(ident)
-
-    fig, ax = plt.subplots(figsize=(9, 3))
-    ax.plot(t, rec.input, lw=0.5)
-    ax.set(xlabel="time (s)", ylabel=labels["input"], title="Input")
-    _save(fig, out / "input.png")
-
-    fig, ax = plt.subplots(figsize=(9, 3))
-    ax.plot(t, sig.q1_dot, lw=0.5)
-    ax.set(xlabel="time (s)", ylabel=labels["acc"], title=labels["output_title"])
-    _save(fig, out / "output.png")
-
+    _signal_figure(ident, out / "input.png", labels["input"], "Input", lambda rec, sig: rec.input)
+    _signal_figure(ident, out / "output.png", labels["acc"], labels["output_title"], lambda rec, sig: sig.q1_dot)
     _path_figure(ident, out / "lambda_path.png")
     if (result.get("frf") or {}).get("status") == "ok":
         overlay_figure(result["frf"], out / OVERLAY_FIGURE)
-    if ident.validation_ is not None:
+    if ident.validation_ is not None and ident.recording_ is not None:  # a joint fit's: its table per recording
         _validation_figure(ident, out / "validation.png", labels)
     (out / "index.html").write_text(_index_html(out, ident, result))
     return out
 
 
+def recordings(ident) -> list:
+    """(recording, its chain states) per recording fitted: one, or a joint fit's several."""
+    if ident.recording_ is not None:
+        return [(ident.recording_, ident.states_)]
+    return list(zip(ident.recordings_, ident.joint_states_))
+
+
+def _signal_figure(ident, path, ylabel: str, title: str, signal) -> None:
+    """signal(recording, states) against time, a panel per recording (a joint fit's, each titled by it)."""
+    recs = recordings(ident)
+    fig, axes = plt.subplots(len(recs), 1, figsize=(9, 3 if len(recs) == 1 else 2.2 * len(recs)), squeeze=False)
+    for ax, (rec, sig) in zip(axes[:, 0], recs):
+        ax.plot(np.arange(rec.n_samples) / rec.fs_hz, signal(rec, sig), lw=0.5)
+        ax.set(xlabel="time (s)", ylabel=ylabel, title=title if len(recs) == 1 else f"{title}: {_name(rec)}")
+    _save(fig, path)
+
+
+def _name(rec) -> str:
+    """A recording as the page names it: its file's name, not its path (a report the service wrote would
+    show the server's folders)."""
+    return Path(str(rec.source)).name
+
+
 def _labels(ident) -> dict:
     """Axis labels with units: the base layout's accelerations (m/s²) and displacement (mm); a force
     layout's input u and output y in the recording's own units (often volts, unnamed)."""
-    rec = ident.recording_
+    rec = recordings(ident)[0][0]  # a joint fit's recordings share one layout
     if ident.states_.input_name == "zdd":
         return {"input": f"table acceleration ({unit(rec.units[0] or 'm/s^2')})", "acc": "relative acceleration (m/s²)",
                 "disp": "relative displacement (mm)", "disp_scale": 1e3, "acc_unit": "m/s²", "vel_unit": "m/s",
@@ -184,14 +197,19 @@ def _shade(ax, t, mask):
 
 
 def _index_html(out: Path, ident, result: dict) -> str:
-    rec = ident.recording_
-    # the file's name, not its path: a report the service wrote would show the server's folders
-    page = Page(f"Identification report: {Path(str(rec.source)).name}", "identification")
+    names = [_name(rec) for rec, _ in recordings(ident)]
+    page = Page(f"Identification report: {', '.join(names)}" + (" (joint)" if len(names) > 1 else ""),
+                "identification")
     if result.get("status") == "failed":
         page.paragraph(f"MODEL FAILED its validation: {result['reason']}")
-    _data_section(page, ident, result)
+    if ident.recording_ is not None:
+        _data_section(page, ident, result)
+    else:
+        joint_data_section(page, result, names)
     _model_section(page, ident, result)
     _validation_section(page, ident, result)
+    if ident.recording_ is None:
+        joint_validation_table(page, result, names)
     _physical_section(page, ident, result)
     _selection_section(page, ident, result)
     _figures_section(page, out, ident)
@@ -299,14 +317,16 @@ def _selection_section(page: Page, ident, result: dict) -> None:
 
 def _figures_section(page: Page, out: Path, ident) -> None:
     """The figures written beside the page, with their captions."""
-    rec, base = ident.recording_, ident.states_.input_name == "zdd"
+    rec, base = recordings(ident)[0][0], ident.states_.input_name == "zdd"
     page.heading("Figures")
+    several = " One panel per recording." if ident.recording_ is None else ""
     captions = {
         "input.png": "Input: " + ("the table acceleration over the whole record, as the accelerometer on the table "
-                                  "measured it (the paper's Fig. 5)." if base else f"{rec.input_name} as recorded."),
+                                  "measured it (the paper's Fig. 5)." if base else f"{rec.input_name} as recorded.")
+                     + several,
         "output.png": ("Output: the relative acceleration (mass − table) after the measurement chain, the left side "
                        "of the q1_dot equation (the paper's Fig. 6)." if base else "Output: the second derivative of "
-                       f"{rec.output_name}, the left side of the q1_dot equation."),
+                       f"{rec.output_name}, the left side of the q1_dot equation.") + several,
         "lambda_path.png": "Selection along the path, one panel per equation (the paper's Fig. 7): training MSE of "
                            "each path point, held-out MSE of its least-squares refit, the tolerance, the chosen point "
                            "(dotted) and the number of terms at each point (grey, right axis). Lambda decreases to "

@@ -3,19 +3,22 @@
 Every file is read and checked as a single `shakeid identify` would (same options, --accept-faulty
 included), then fitted jointly. The table is the joint model's; below it one line per recording: its
 band, the joint model's held-out free-run fit there, and its status ("inconsistent": the rig behaves
-differently in that recording than one model of all of them allows). Exit codes as for one file: 0 a
-model, 2 data refused, 1 the joint model failed (its validation, or a recording is inconsistent).
+differently in that recording than one model of all of them allows); the model's predicted frequency
+response beside every sweep's measured one (identify.frf.side_by_side), and --report writes the joint
+report (reports.identification: the recordings' table, a panel per recording). Exit codes as for one
+file: 0 a model, 2 data refused, 1 the joint model failed (its validation, or a recording is inconsistent).
 """
 from __future__ import annotations
 
 import json
 import os
 import sys
+from pathlib import Path
 
 from identify.errors import ShakeidError
 
 from .argtypes import file_and_samples
-from .files import read_recording
+from .files import read_recording, write_report
 
 
 def _refuse_twice(names: list, cuts: list) -> None:
@@ -38,14 +41,16 @@ def cmd_identify_joint(args, make_identifier) -> int:
     reads one (shakeid.files.read_recording)."""
     from identify.data.quality import check_identifiable
 
-    if args.report:
-        raise ShakeidError("--report takes one recording; identify several without it (or one by one)")
     if getattr(args, "chunked", False) or getattr(args, "chunk_samples", None):
         raise ShakeidError("--chunked identifies one recording out of core; a joint fit of several reads them "
                            "into memory (drop --chunked, or identify the files one by one)")
     cuts = [file_and_samples(name, getattr(args, "samples", None)) for name in args.files]
     _refuse_twice(args.files, cuts)
     ident = make_identifier(args)  # option errors first, before any file is read
+    if args.report:
+        from reports.html import check_report_folder
+
+        check_report_folder(args.report, "identification")  # before the fit: a mistyped --report costs nothing
     recs, quality = [], []
     for path, (file, samples) in zip(args.files, cuts):
         args.file, args.samples = file, samples  # what read_recording reads: FILE[START:STOP] gives each its rows
@@ -57,7 +62,9 @@ def cmd_identify_joint(args, make_identifier) -> int:
         ident.fit(recs)
     except ValueError as exc:  # library/term specification problems
         raise ShakeidError(str(exc)) from None
-    result = ident.result()
+    from identify.frf.side_by_side import identification_document  # all the sweeps beside the model's response
+
+    result = identification_document(ident, recs, names=list(args.files))
     for section, q in zip(result["recordings"], quality):
         section.update(q)
     faulty = [f"{p}: {r}" for p, q in zip(args.files, quality) for r in q.get("accepted_faulty", [])]
@@ -65,10 +72,15 @@ def cmd_identify_joint(args, make_identifier) -> int:
                               "assessed": "per recording (recordings[i].data_quality)"}
     if faulty:
         result["accepted_faulty"] = faulty
+    replaced = write_report("identification", ident, args.report, result)
     if args.json:
         print(json.dumps(result))
     else:
         print(summary(result))
+        for line in result["frf"]["flags"]:
+            print(f"flagged: {line}")
+        if args.report:
+            print(f"report: {Path(args.report) / 'index.html'}{replaced}")
     if result["status"] == "failed":
         print(f"shakeid: identification failed: {len(args.files)} recordings: {result['reason']}", file=sys.stderr)
         return 1

@@ -181,13 +181,15 @@ def identification_document(ident, recordings: list, quality: dict | None = None
     """What an identification delivers (model.json, `shakeid identify --json`, the demo's report): the fitted
     SparseIdentifier's result, the data's quality verdict (identify.data.quality.check_identifiable's), and the
     predicted frequency response beside the measured sweeps. One sequence for the CLI, the demo and the
-    service's jobs. The sweep is read from the identification's own chain states when it fitted exactly
-    `recordings` in memory (the chain is the CLI's largest cost beside the fit: not run twice)."""
+    service's jobs, for one recording or a joint fit's several. The sweeps are read from the
+    identification's own chain states when it fitted exactly `recordings` in memory (the chain is the CLI's
+    largest cost beside the fit: not run twice)."""
     result = {**ident.result(), **(quality or {})}
-    own = (len(recordings) == 1 and getattr(ident, "recording_", None) is recordings[0]
-           and ident.sources_[0].in_core)
-    result["frf"] = for_identification(result, ident.model_, recordings, names,
-                                       [ident.states_] if own else None)
+    fitted = [ident.recording_] if getattr(ident, "recording_", None) is not None else getattr(ident, "recordings_", [])
+    own = (len(fitted) == len(recordings) and all(a is b for a, b in zip(fitted, recordings))
+           and all(s.in_core for s in ident.sources_))
+    states = [ident.states_] if len(recordings) == 1 else getattr(ident, "joint_states_", None)
+    result["frf"] = for_identification(result, ident.model_, recordings, names, states if own else None)
     return result
 
 

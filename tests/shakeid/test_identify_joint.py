@@ -67,9 +67,33 @@ def test_identify_three_files_prints_the_joint_table_and_one_line_per_recording(
     assert len(rows) == 3 and all(line.rstrip().endswith("| ok |") for line in rows)
 
 
-def test_report_is_refused_for_several_files(files, capsys, tmp_path):
-    assert main(["identify", str(files[0]), str(files[1]), "--report", str(tmp_path / "r")]) == 2
-    assert "--report takes one recording" in capsys.readouterr().err
+def test_a_joint_report_has_a_row_and_a_panel_per_recording_and_every_sweep_beside_the_model(files, capsys, tmp_path):
+    """`--report` of a joint fit (it was refused): the recordings' table, the joint model, the pooled and the
+    per-recording validation, input and output figures with a panel per recording, and the predicted
+    frequency response beside every sweep (the three sweeps' 1.1-1.3 mm: two amplitude groups, one table
+    row per sweep); model.json is the --json document. A folder holding the operator's own index.html is
+    refused before any file is read."""
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "index.html").write_text("my notes")
+    assert main(["identify", *map(str, files), "--report", str(tmp_path / "mine")]) == 2
+    assert "not written by a shakeid identification report" in capsys.readouterr().err
+    report = tmp_path / "r"
+    assert main(["identify", *map(str, files), "--placements", "0", "--bias-replicates", "0",
+                 "--report", str(report)]) == 0
+    assert f"report: {report / 'index.html'}" in capsys.readouterr().out
+    assert {"index.html", "model.json", "coefficients.md", "input.png", "output.png", "lambda_path.png",
+            "frf_overlay.png"} <= {p.name for p in report.iterdir()}
+    assert not (report / "validation.png").exists()  # a single recording's time plot: the table says it per recording
+    doc = json.loads((report / "model.json").read_text())
+    assert [r["source"] for r in doc["recordings"]] == list(map(str, files))
+    assert doc["frf"]["status"] == "ok" and len(doc["frf"]["jumps"]) == 3
+    page = (report / "index.html").read_text()
+    assert "Identification report: a.h5, b.h5, c.csv (joint)" in page
+    for f in files:  # in the recordings' table and in the per-recording validation table
+        assert page.count(f"<td>{f.name}</td>") == 2, f.name
+    import matplotlib.image as mpimg
+    one = mpimg.imread(report / "input.png")
+    assert one.shape[0] > 1.8 * one.shape[1] * 3 / 9  # three panels: taller than one 9 x 3 panel
 
 
 def test_one_recording_twice_is_refused(files, capsys, tmp_path):
