@@ -206,7 +206,8 @@ class SparseIdentifier:
             "chain": {"band_hz": list(sig.band_hz), "valid_samples": [sig.valid.start, sig.valid.stop],
                       "fit_samples": int(sum(np.diff(e)[~h].sum() for e, h in self.blocks_)),
                       "heldout_samples": int(sum(np.diff(e)[h].sum() for e, h in self.blocks_)),
-                      "holdout": ("first %d samples" % self.holdout_samples if self.holdout_samples is not None
+                      "holdout": (f"the first {self.holdout_samples} samples; those from sample {sig.valid.start} on, "
+                                  "past the integration filter's cut edge" if self.holdout_samples is not None
                                   else f"{self.holdout_fraction:.0%} in interleaved blocks"),
                       "displacement_below_band": self.offset_},
             "refinement": self.refinement_,

@@ -120,8 +120,10 @@ def summary(result: dict, source: str) -> str:
     val = result.get("validation")
     if val:
         h = val["heldout"]
-        lines.append(f"free-run fit on {val['heldout_samples']} held-out samples: acceleration {fit_text(h['q1_dot'])},"
-                     f" velocity {fit_text(h['q1'])}, displacement {fit_text(h['q2'])}")
+        how = (result.get("chain") or {}).get("holdout", "")
+        lines.append(f"free-run fit on {val['heldout_samples']} held-out samples"
+                     + (f" ({how})" if how.startswith("the first") else "")
+                     + f": acceleration {fit_text(h['q1_dot'])}, velocity {fit_text(h['q1'])}, displacement {fit_text(h['q2'])}")
     offset = result.get("chain", {}).get("displacement_below_band") or {}
     if offset.get("carried"):
         lines.append(f"displacement below the band carried (an even force rectifies it; the terms are those of the "
