@@ -54,7 +54,11 @@ def test_recording_page_shows_the_overlay(page, service):  # noqa: F811
     # what the service stored: one table amplitude, the recorded one; the up-sweep's jump measured and judged
     assert frf["status"] == "ok", frf
     assert model["frf"] == frf  # model.json carries the same document as frf.json
-    assert [a["amplitude_mm"] for a in frf["amplitudes"]] == [pytest.approx(1.2, rel=0.03)]
+    # seen once in a full `make test` (2026-11-29, not reproduced alone): 1.049 mm recorded for the 1.2 mm
+    # asked; the message keeps what would tell why (the sweep's end, the recording's gaps and quality)
+    assert [a["amplitude_mm"] for a in frf["amplitudes"]] == [pytest.approx(1.2, rel=0.03)], \
+        {"frf_amplitudes_mm": [a["amplitude_mm"] for a in frf["amplitudes"]], "sweep": sweep,
+         "recording": {k: v for k, v in rec.items() if k not in ("model",)}}
     assert [j["direction"] for j in frf["jumps"]] == ["up"] and frf["jumps"][0]["measured_hz"] is not None
     assert "frf_overlay.png" in plots
     page.goto(f"{service.url}/#/recording/{rec['id']}")
