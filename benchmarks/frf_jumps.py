@@ -53,6 +53,10 @@ def true_fall(run) -> float:
     return float(0.5 * (f[k - 1] + f[k]))
 
 
+def hz(x, fmt=".3f") -> str:
+    return "-" if x is None else format(x, fmt)
+
+
 def paper_sweeps(seed: int) -> None:
     print("1. the paper's sweep, 1-20 Hz in 60 s, compare_sweep with the true model")
     print(f"{'mm':>4} {'dir':>4} {'measured jump, Hz':>20} {'fold':>7} {'bias':>7} {'own run':>8} "
@@ -63,9 +67,6 @@ def paper_sweeps(seed: int) -> None:
             run = _run(SineSweep(f0, f1, 60.0, amplitude), [seed, k, direction == "up"])
             cmp = compare_sweep(RIG.model(), run.recording)
             j, own = cmp["measured"], cmp["model_sweep_jump"]
-
-            def hz(x, fmt=".3f"):
-                return "-" if x is None else format(x, fmt)
             measured = "none" if j is None else f"{j['frequency_hz']:.3f} +- {j['uncertainty_hz']:.3f}"
             print(f"{amplitude:4.1f} {direction:>4} {measured:>20} {hz(cmp['fold_hz']):>7} "
                   f"{hz(cmp['bias_hz'], '+.3f'):>7} {hz(own and own['frequency_hz']):>8} {str(cmp['agrees']):>6} "

@@ -123,9 +123,7 @@ class SparseIdentifier:
             return self.rig, "given"
         if self.mass_kg is not None:
             return RigConstants(mass_kg=float(self.mass_kg)), "given"
-        one = getattr(self, "recording_", None)
-        recordings = [one] if one is not None else getattr(self, "recordings_", None)
-        masses = {(getattr(r, "metadata", None) or {}).get("moving_mass_kg") for r in recordings or []}
+        masses = {(getattr(r, "metadata", None) or {}).get("moving_mass_kg") for r in getattr(self, "recordings_", [])}
         if len(masses) == 1 and (mass := masses.pop()):
             return RigConstants(mass_kg=float(mass)), "recording"
         return RigConstants(), "assumed"
@@ -146,12 +144,13 @@ class SparseIdentifier:
         if several:
             joint.refuse_mixed_layouts(sources)
         self.library_ = Library(("q1", "q2"), (sources[0].sig.input_name,), self.degree, expand_terms(self.extra_terms))
-        self.recording_, self.joint_ = (None if several else recordings[0]), None
+        # recordings_: what was fitted, one or several (the one list callers read); recording_ only for one
+        self.recordings_, self.recording_, self.joint_ = recordings, (None if several else recordings[0]), None
         runs = fit_sources(self, sources, timings)
         # states_ names the states and input; a joint fit's bands and rows are per recording (joint_)
         self.states_ = self.sources_[0].sig
         if several:
-            self.recordings_, self.joint_states_ = recordings, [s.sig for s in self.sources_]
+            self.joint_states_ = [s.sig for s in self.sources_]
             joint.check_consistency(self, runs, timings)
         self.timings_ = timings
         return self

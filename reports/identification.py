@@ -58,9 +58,7 @@ def write_report(ident, out_dir, result: dict | None = None) -> Path:
 
 def recordings(ident) -> list:
     """(recording, its chain states) per recording fitted: one, or a joint fit's several."""
-    if ident.recording_ is not None:
-        return [(ident.recording_, ident.states_)]
-    return list(zip(ident.recordings_, ident.joint_states_))
+    return [(rec, source.sig) for rec, source in zip(ident.recordings_, ident.sources_)]
 
 
 def _signal_figure(ident, path, ylabel: str, title: str, signal) -> None:

@@ -120,9 +120,8 @@ def summary(result: dict, source: str) -> str:
     val = result.get("validation")
     if val:
         h = val["heldout"]
-        how = (result.get("chain") or {}).get("holdout", "")
-        lines.append(f"free-run fit on {val['heldout_samples']} held-out samples"
-                     + (f" ({how})" if how.startswith("the first") else "")
+        how = (result.get("chain") or {}).get("holdout")
+        lines.append(f"free-run fit on {val['heldout_samples']} held-out samples" + (f" ({how})" if how else "")
                      + f": acceleration {fit_text(h['q1_dot'])}, velocity {fit_text(h['q1'])}, displacement {fit_text(h['q2'])}")
     offset = result.get("chain", {}).get("displacement_below_band") or {}
     if offset.get("carried"):

@@ -185,11 +185,11 @@ def identification_document(ident, recordings: list, quality: dict | None = None
     identification's own chain states when it fitted exactly `recordings` in memory (the chain is the CLI's
     largest cost beside the fit: not run twice)."""
     result = {**ident.result(), **(quality or {})}
-    fitted = [ident.recording_] if getattr(ident, "recording_", None) is not None else getattr(ident, "recordings_", [])
+    fitted = getattr(ident, "recordings_", [])
     own = (len(fitted) == len(recordings) and all(a is b for a, b in zip(fitted, recordings))
            and all(s.in_core for s in ident.sources_))
-    states = [ident.states_] if len(recordings) == 1 else getattr(ident, "joint_states_", None)
-    result["frf"] = for_identification(result, ident.model_, recordings, names, states if own else None)
+    result["frf"] = for_identification(result, ident.model_, recordings, names,
+                                       [s.sig for s in ident.sources_] if own else None)
     return result
 
 
