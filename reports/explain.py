@@ -136,7 +136,24 @@ def _f(v, fmt=".4f") -> str:
 
 
 def _index_html(out: Path, analysis, result: dict, u: str) -> str:
+    """The report's index page: the answer, the gap, what was added, every candidate, where the model
+    misses, the figures, and the frequency response beside the measured sweep."""
     page = Page("Discrepancy report: where the model misses the rig", "explain")
+    _answer(page, result)
+    _gap_table(page, result, u)
+    _effects(page, result)
+    _candidates(page, analysis, result)
+    _where(page, result)
+    _figures(page, out, u)
+    if "frf" in result:  # after the figures the text numbers
+        add_side_by_side(page, result["frf"], OVERLAY_FIGURE if (out / OVERLAY_FIGURE).exists() else None,
+                         "Frequency response before and after, beside the measured sweep")
+    page.links([("explain.json", "explain.json (the whole result)")])
+    return page.render()
+
+
+def _answer(page: Page, result: dict) -> None:
+    """The answer in words and, for several recordings, each one's own gap."""
     effect = result["effect"]
     answer = {"none": "nothing is missing: the baseline's gap is within the sensor-noise floor",
               "unexplained": "something is missing, but no effect of the catalog closes enough of the gap"}
@@ -149,6 +166,10 @@ def _index_html(out: Path, analysis, result: dict, u: str) -> str:
                    "The recordings explained together: one explanation, its errors pooled over all of them. Sweep "
                    "vs time: the rank correlation of the excitation frequency with time (+1 an up-sweep, -1 a "
                    "down-sweep); each recording's own held-out gap before and after.")
+
+
+def _gap_table(page: Page, result: dict, u: str) -> None:
+    """The gap before and after, beside the free-run fit and the noise floor."""
     floor = result.get("noise_floor")
     page.table(["quantity", "before (baseline)", "after"], [
         ["gap: " + result["metric"], _f(result["gap_before"]), _f(result["gap_after"])],
@@ -159,6 +180,10 @@ def _index_html(out: Path, analysis, result: dict, u: str) -> str:
     ], "The gap is the held-out multiple-shooting NRMSE: short free runs restarted from the measured state, "
        "error RMS over the measurement's standard deviation, on samples not used for fitting. A gap near the "
        "noise floor is all the sensors allow; the free-run fit simulates the whole record from its start.")
+
+
+def _effects(page: Page, result: dict) -> None:
+    """The effects added, in order, with their coefficients and confidence."""
     if result["effects"]:
         page.heading("Effects added")
         rows = [[e["name"], e["kind"], ", ".join(f"{t}: {c:.4g}" if isinstance(c, (int, float)) else f"{t}: {c}"
@@ -170,6 +195,10 @@ def _index_html(out: Path, analysis, result: dict, u: str) -> str:
                          "terms are forces per unit mass in the q1_dot equation; measurement effects (sensor "
                          "gain, delay, drift) change the chain instead. Confidence: (1 − p) × the bootstrap "
                          "probability that the effect beats both the runner-up and the explanation before it.")
+
+
+def _candidates(page: Page, analysis, result: dict) -> None:
+    """Every candidate of the first round and why it was not named."""
     page.heading("Every candidate (first round)")
     crow = [[c["name"], c["kind"], f"{c['score']:+.3f}",
              p_value_text(c["p_value"]),
@@ -182,6 +211,10 @@ def _index_html(out: Path, analysis, result: dict, u: str) -> str:
                      f"the share of the held-out squared shooting error it removes; an effect is named when that "
                      f"share is at least {analysis.min_gap_closed:g} and no rule (energy, direction, "
                      f"significance) rejects it.")
+
+
+def _where(page: Page, result: dict) -> None:
+    """Where along the record the model misses most, before and after."""
     worst = result["localisation"]["time"]["worst_window"]
     rows = [["largest misfit, baseline", f"t = {worst['t_start_s']:.1f}-{worst['t_end_s']:.1f} s",
              f"excitation {worst['excitation_hz']:.1f} Hz"]]
@@ -191,6 +224,10 @@ def _index_html(out: Path, analysis, result: dict, u: str) -> str:
                      f"excitation {top['excitation_hz']:.1f} Hz, {100 * top['share_of_error']:.0f} % of the error"])
     page.table(["where", "time", "what the table did"], rows,
                "Where along the record the model misses most (Figure 1).")
+
+
+def _figures(page: Page, out: Path, u: str) -> None:
+    """The figures written to `out`, each with its caption."""
     page.heading("Figures")
     captions = {
         "residual_time.png": "The baseline's equation residual RMS in windows along the record (left axis"
@@ -211,11 +248,6 @@ def _index_html(out: Path, analysis, result: dict, u: str) -> str:
     for f in FIGURES:
         if (out / f).exists():
             page.figure(f, captions[f])
-    if "frf" in result:  # after the figures the text numbers
-        add_side_by_side(page, result["frf"], OVERLAY_FIGURE if (out / OVERLAY_FIGURE).exists() else None,
-                         "Frequency response before and after, beside the measured sweep")
-    page.links([("explain.json", "explain.json (the whole result)")])
-    return page.render()
 
 
 def _fit(validation: dict | None) -> str:
