@@ -32,9 +32,17 @@ MIN_JUMP_RATIO = 1.3
 TRANSITION_SHARE = 0.5
 #: ... where the response is at least JUMP_LEVEL of its largest (not the sweep's quiet ends).
 JUMP_LEVEL = 0.3
-#: Cycles whose table amplitude is off the sweep's (steady_table_mm) by more than this share are left out
-#: (the fades, and the sensor noise of the table at rest before or after the sweep).
+#: Cycles whose table amplitude is off the sweep's (steady_cycles) by more than this share are left out
+#: (the fades, and the sensor noise of the table at rest before or after the sweep)...
 STEADY_TABLE = 0.1
+#: ... and the steady stretch must be at least this share of the time the table moves near its level
+#: (within a factor DRIVEN_RANGE of it, at frequencies within that factor of the stretch's lowest, in one
+#: stretch with it): the fades are short; a ramped or wandering amplitude is refused, not read at one end.
+STEADY_SHARE = 0.5
+DRIVEN_RANGE = 3.0
+#: The steady cycles are one stretch of the record: up to this many cycles off the level inside it are
+#: bridged, and a cycle of rest that happens to read the sweep's level is left out.
+BRIDGE_CYCLES = 3
 #: Cycles left out at each end of the valid rows (the analytic signal's edge).
 EDGE_CYCLES = 3
 
@@ -61,7 +69,8 @@ def table_cycles(zdd: np.ndarray, fs_hz: float) -> dict:
     # raises a peak-to-peak by ~2-3 noise std (0.2-0.5 % at 0.5 % noise), an RMS only by its variance
     mean_square = np.add.reduceat(np.square(zdd[a[0]:b[-1]]), a - a[0]) / (b - a)
     return {"edges": edges, "t_s": 0.5 * (a + b) / fs_hz, "frequency_hz": freq,
-            "table_mm": np.sqrt(2.0 * mean_square) / (2 * np.pi * freq) ** 2 * 1e3}
+            "table_mm": np.sqrt(2.0 * mean_square) / (2 * np.pi * freq) ** 2 * 1e3,
+            "energy": mean_square * (b - a)}
 
 
 def cycle_envelope(q2: np.ndarray, zdd: np.ndarray | None, fs_hz: float, cycles: dict | None = None) -> dict:
@@ -76,10 +85,10 @@ def cycle_envelope(q2: np.ndarray, zdd: np.ndarray | None, fs_hz: float, cycles:
 
 def sweep_envelope(rec, sig=None) -> dict:
     """The recording's per-cycle envelope (cycle_envelope) from the chain's relative displacement and
-    band-limited table acceleration (identify.chain.states), plus the sweep's direction ("up" | "down") and
-    rate (Hz/s) and the table amplitude (mm, median over the cycles). `sig`: the recording's chain states
-    when they are at hand (an identification's: the chain is not run twice on one record), else the
-    chain is run here."""
+    band-limited table acceleration (identify.chain.states) on the sweep's own cycles (steady_cycles), plus
+    the sweep's direction ("up" | "down"), rate (Hz/s) and table amplitude (mm, their median). `sig`: the
+    recording's chain states when they are at hand (an identification's: the chain is not run twice on one
+    record), else the chain is run here."""
     if rec.layout != "base":
         raise IdentificationError(f"{rec.source}: a measured frequency response needs the base layout (table "
                                   "and mass accelerations)")
@@ -88,8 +97,7 @@ def sweep_envelope(rec, sig=None) -> dict:
     cycles = table_cycles(sig.input[rows], rec.fs_hz)
     env = cycle_envelope(sig.q2[rows], None, rec.fs_hz, cycles)
     env["t_s"] = env["t_s"] + rows.start / rec.fs_hz
-    table = steady_table_mm(env["table_mm"], np.diff(cycles["edges"]))
-    keep = (env["frequency_hz"] > 0) & (np.abs(env["table_mm"] - table) < STEADY_TABLE * table)
+    keep = steady_cycles(cycles, rec.source)
     env = {k: v[keep] for k, v in env.items()}
     rate = float(np.polyfit(env["t_s"], env["frequency_hz"], 1)[0])
     env.update(direction="up" if rate > 0 else "down", rate_hz_per_s=rate,
@@ -97,22 +105,72 @@ def sweep_envelope(rec, sig=None) -> dict:
     return env
 
 
-def steady_table_mm(table_mm: np.ndarray, rows: np.ndarray) -> float:
-    """The table amplitude the sweep holds (mm): of the levels within STEADY_TABLE of which the cycles spend
-    the most time (rows: each cycle's length), the median of those cycles. Not the median of all cycles:
-    a recording holds the table at rest too (the recorder started before the PLC's start, kept after its
-    end), and there the "cycles" are its sensor noise, short, many and of any level; with 5 s of rest
-    after a 30 s, 1.2 mm sweep the median of all was 0.68 mm, with 10 s 0.0001 mm
-    (tests/identify/test_frf_measured.py)."""
-    level = np.log(np.maximum(np.asarray(table_mm, np.float64), np.finfo(float).tiny))
-    order = np.argsort(level)
-    level = level[order]
-    time = np.concatenate([[0], np.cumsum(np.asarray(rows, np.float64)[order])])
+def steady_cycles(cycles: dict, source: str = "the recording") -> np.ndarray:
+    """Which table cycles (table_cycles) are the sweep's: those within STEADY_TABLE of the level that holds
+    the most of the table's acceleration energy, in the one stretch of the record (gaps of up to
+    BRIDGE_CYCLES bridged, slow ends trimmed) that holds the most of it. Not the median of all cycles, as it was: a recording
+    holds the table at rest too (the recorder started before the PLC's start, settle_s after its end),
+    and there the "cycles" are sensor noise, many, short and of any level, a few of them at the sweep's
+    (a 1-20 Hz, 30 s, 1.2 mm sweep with 5 s of settle read 0.68 mm, with 10 s 0.0001 mm). Weighed by
+    energy, the rest is ~1e-4 of the sweep. Refused (IdentificationError) where that stretch is less than
+    STEADY_SHARE of the time the table moves within DRIVEN_RANGE of its level (a ramped amplitude) or
+    fewer than 3 cycles are the sweep's."""
+    table_mm, energy = np.asarray(cycles["table_mm"], np.float64), np.asarray(cycles["energy"], np.float64)
+    finite = np.isfinite(table_mm) & (table_mm > 0) & np.isfinite(energy)
+    level = np.log(np.where(finite, table_mm, 1.0))
+    order = np.flatnonzero(finite)[np.argsort(level[finite])]
+    if order.size < 3:
+        raise IdentificationError(f"{source}: not a sine sweep: fewer than 3 cycles of the table")
+    summed = np.concatenate([[0.0], np.cumsum(energy[order])])
     half = np.log1p(STEADY_TABLE)
-    lo = np.searchsorted(level, level - half, side="left")
-    hi = np.searchsorted(level, level + half, side="right")
-    best = int(np.argmax(time[hi] - time[lo]))
-    return float(np.median(np.asarray(table_mm)[order][lo[best]:hi[best]]))
+    lo = np.searchsorted(level[order], level[order] - half, side="left")
+    hi = np.searchsorted(level[order], level[order] + half, side="right")
+    best = int(np.argmax(summed[hi] - summed[lo]))
+    table = float(np.median(table_mm[order[lo[best]:hi[best]]]))
+    freq = np.asarray(cycles["frequency_hz"], np.float64)
+    on = finite & (freq > 0) & (np.abs(table_mm - table) < STEADY_TABLE * table)
+    sweep = _trim_slow_ends(_longest_stretch(on, energy), freq)
+    if sweep.size < 3:
+        raise IdentificationError(f"{source}: not a sine sweep: fewer than 3 table cycles at one amplitude")
+    near = (finite & (table_mm > table / DRIVEN_RANGE) & (table_mm < table * DRIVEN_RANGE)
+            & (freq > freq[sweep].min() / DRIVEN_RANGE))  # not the rest's slow noise "cycles" (0.1 Hz: ~1 mm)
+    driven = next(r for r in _stretches(near) if sweep[0] in r)
+    rows = np.diff(cycles["edges"])
+    share = rows[sweep].sum() / rows[driven[0]:driven[-1] + 1].sum()
+    if share < STEADY_SHARE:
+        raise IdentificationError(
+            f"{source}: not a sine sweep at one amplitude: the table's amplitude is {table:.3g} mm for "
+            f"{100 * share:.0f} % of the time it moves within {DRIVEN_RANGE:g}x of that (a sweep: all but its "
+            f"fades; at least {100 * STEADY_SHARE:.0f} % needed to read a frequency response)")
+    keep = np.zeros(table_mm.size, dtype=bool)
+    keep[sweep] = True
+    return keep
+
+
+def _stretches(mask: np.ndarray) -> list[np.ndarray]:
+    """The indices of mask's True cycles in stretches, gaps of up to BRIDGE_CYCLES bridged."""
+    idx = np.flatnonzero(mask)
+    return np.split(idx, np.flatnonzero(np.diff(idx) > BRIDGE_CYCLES + 1) + 1)
+
+
+def _trim_slow_ends(stretch: np.ndarray, freq: np.ndarray) -> np.ndarray:
+    """The stretch less the cycles at either end whose frequency is off the next five inner cycles' median
+    by more than DRIVEN_RANGE: the rest's slow noise "cycles" at the sweep's level (0.1 Hz and ~10 s long
+    beside a sweep ending at 4 Hz), bridged onto it, which would bend its rate."""
+    while stretch.size > 3:
+        f = freq[stretch]
+        if not 1 / DRIVEN_RANGE < f[0] / np.median(f[1:6]) < DRIVEN_RANGE:
+            stretch = stretch[1:]
+        elif not 1 / DRIVEN_RANGE < f[-1] / np.median(f[-6:-1]) < DRIVEN_RANGE:
+            stretch = stretch[:-1]
+        else:
+            break
+    return stretch
+
+
+def _longest_stretch(mask: np.ndarray, energy: np.ndarray) -> np.ndarray:
+    """The stretch of mask's cycles (_stretches) holding the most energy."""
+    return max(_stretches(mask), key=lambda r: energy[r].sum())
 
 
 def measured_jump(env: dict) -> dict | None:

@@ -54,9 +54,9 @@ def test_recording_page_shows_the_overlay(page, service):  # noqa: F811
     # what the service stored: one table amplitude, the recorded one; the up-sweep's jump measured and judged
     assert frf["status"] == "ok", frf
     assert model["frf"] == frf  # model.json carries the same document as frf.json
-    # seen once in a full `make test` (2026-11-29): 1.049 mm for the 1.2 mm asked, the median of every table
-    # cycle, the rest around the sweep's noise among them (identify.frf.measured.steady_table_mm now; its
-    # own test: tests/identify/test_frf_measured.py); the message keeps the sweep and the recording
+    # seen once in a full `make test` (2026-11-29, not reproduced): 1.049 mm for the 1.2 mm asked; most likely
+    # the median of every table cycle, the rest's noise around the sweep among them (identify.frf.measured.
+    # steady_cycles now, tests/identify/test_frf_measured.py); the message keeps the sweep and the recording
     assert [a["amplitude_mm"] for a in frf["amplitudes"]] == [pytest.approx(1.2, rel=0.03)], \
         {"frf_amplitudes_mm": [a["amplitude_mm"] for a in frf["amplitudes"]], "sweep": sweep,
          "recording": {k: v for k, v in rec.items() if k not in ("model",)}}
