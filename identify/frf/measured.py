@@ -108,13 +108,13 @@ def sweep_envelope(rec, sig=None) -> dict:
 def steady_cycles(cycles: dict, source: str = "the recording") -> np.ndarray:
     """Which table cycles (table_cycles) are the sweep's: those within STEADY_TABLE of the level that holds
     the most of the table's acceleration energy, in the one stretch of the record (gaps of up to
-    BRIDGE_CYCLES bridged, slow ends trimmed) that holds the most of it. Not the median of all cycles, as it was: a recording
-    holds the table at rest too (the recorder started before the PLC's start, settle_s after its end),
-    and there the "cycles" are sensor noise, many, short and of any level, a few of them at the sweep's
-    (a 1-20 Hz, 30 s, 1.2 mm sweep with 5 s of settle read 0.68 mm, with 10 s 0.0001 mm). Weighed by
-    energy, the rest is ~1e-4 of the sweep. Refused (IdentificationError) where that stretch is less than
-    STEADY_SHARE of the time the table moves within DRIVEN_RANGE of its level (a ramped amplitude) or
-    fewer than 3 cycles are the sweep's."""
+    BRIDGE_CYCLES bridged, slow ends trimmed) that holds the most of it. Not the median of all cycles, as
+    it was: a recording holds the table at rest too (the recorder started before the PLC's start, settle_s
+    after its end), and there the "cycles" are sensor noise, many, short and of any level, a few of them at
+    the sweep's (a 1-20 Hz, 30 s, 1.2 mm sweep with 5 s of settle read 0.68 mm, with 10 s 0.0001 mm).
+    Weighed by energy, 10-60 s of rest at 0.5 % noise is 6e-7 - 2e-6 of that sweep. Refused
+    (IdentificationError) where that stretch is less than STEADY_SHARE of the time the table moves within
+    DRIVEN_RANGE of its level (a ramped amplitude) or fewer than 3 cycles are the sweep's."""
     table_mm, energy = np.asarray(cycles["table_mm"], np.float64), np.asarray(cycles["energy"], np.float64)
     finite = np.isfinite(table_mm) & (table_mm > 0) & np.isfinite(energy)
     level = np.log(np.where(finite, table_mm, 1.0))
