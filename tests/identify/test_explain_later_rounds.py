@@ -86,19 +86,23 @@ def test_a_later_round_starts_from_the_explanation():
 
 
 @pytest.mark.slow
-def test_a_fitted_gain_standing_in_for_a_spring_goes_once_the_spring_is_named():
+def test_a_fault_the_recording_lacks_is_not_left_standing_in_for_a_spring():
     """A wide draw (benchmarks/explain_robustness.py --seed 2602334400 --case 23: Coulomb friction 4.2 % and a
     quadratic stiffness 7.6 %, 10.7-1.7 Hz in 83 s, 1.4 % noise, no sensor fault). After Coulomb a fitted
-    channel fault stands in for the spring and is named (a -1.9 % mass gain closing 96 % before the later
-    rounds were anchored, a -0.8 ms delay since); the stiffness comes next. Re-checked then, the fault
-    goes (the explanation with the gain had 3.7x the held-out squared error of the one without; with the
-    delay, 24x), no fault is left in the model, and the document, with the re-check's row in its rounds,
-    matches its schema."""
+    channel fault can stand in for the spring: a -1.9 % mass gain closing 96 % before the later rounds were
+    anchored, a -0.8 ms delay named in round 1 while the candidates' refits ran to 12 evaluations; the
+    re-check then took it out once the stiffness was named (the explanation with the delay had 24x the
+    held-out squared error of the one without). Since the candidates' refits stop at
+    structure.REFIT_FTOL the delay's refit leaves it worse than the explanation (gap closed -0.63) and the
+    stiffness is named in round 1 directly. Either way: the two true effects, no fault left in the model,
+    any fault the rounds named taken out by the re-check as a measurement row, and the document matches its
+    schema. (The re-check itself on a hand-built explanation: the two tests above.)"""
     sc = make_scenario(np.random.default_rng([2602334400, 23]), "two_effects", None, wide=True)
     assert sorted(sc.truth_effects) == ["coulomb_friction", "quadratic_stiffness"]
     res = DiscrepancyAnalysis().fit(sc.run(seed=[2602334400, 23, 1]).recording).result()
     assert [e["name"] for e in res["effects"]] == ["coulomb_friction", "quadratic_stiffness"]
     rows = [c for table in res["rounds"] for c in table if "not needed once" in c["rejected"]]
-    assert rows and all(c["kind"] == "measurement" and not c["admissible"] for c in rows)
+    assert all(c["kind"] == "measurement" and not c["admissible"] for c in rows)
     assert res["measurement"] == {} and res["effects"][-1]["gap_after"] == pytest.approx(res["gap_after"])
+    assert res["gap_after"] < 2 * res["noise_floor"]
     jsonschema.Draft202012Validator(SCHEMA).validate(json.loads(json.dumps(res)))
