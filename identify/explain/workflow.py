@@ -68,16 +68,12 @@ LOOK_FACTOR = 1.0
 #: took displacement-dependent damping at 0.95x the floor, confidence 1.0, for what Bouc-Wen n = 1 left.
 CONTINUE_FACTOR = 1.0
 #: The explanation so far is refit on the shooting error to convergence (this many evaluations; a
-#: candidate's refit stops at 12) before the gap decides whether something is still missing: case 88 of
+#: candidate's refit stops at 12 or at structure.CANDIDATE_REFIT_FTOL) before the gap decides whether
+#: something is still missing: case 88 of
 #: benchmarks/explain_robustness.py (quadratic stiffness + Bouc-Wen hysteresis, both named) left 1.79x
 #: the floor after 12, 1.10x after 40 (as after 100), and took cubic damping, confidence 1.0, for the
 #: difference.
 POLISH_NFEV = 40
-#: ... and its stopping rule: scipy's default, to convergence. A step gaining little is not the end of it
-#: here: with structure.REFIT_FTOL (1e-3) a Coulomb explanation's polish stopped after a step gaining 1e-4,
-#: where the next 16 evaluations took 5.5 % off, and the round after it named a stiffness drift that was not
-#: there for the rest (benchmark seed 2602334400, case 11; tests/identify/test_explain_later_rounds.py).
-POLISH_FTOL = 1e-8
 #: Above this multiple of the noise floor after the explanation, the rest is outside the catalog: the named
 #: effects are flagged as surrogates for it, their confidence scaled by the share of the excess they explain.
 #: In runs 24-27 of benchmarks/explain_robustness.py (the current decisions, 4 fresh seeds), right in-catalog
@@ -346,7 +342,7 @@ class DiscrepancyAnalysis(Rounds):
         """(structure, per-segment errors) refit to convergence on the training segments' shooting error
         (kept only if the training error falls)."""
         train = ~fitter.seg_held
-        out = fitter.refine(st, max_nfev=POLISH_NFEV, ftol=POLISH_FTOL)
+        out = fitter.refine(st, max_nfev=POLISH_NFEV)  # to convergence (structure.CONVERGED_FTOL)
         if out is st:
             return st, err
         e = fitter.errors(out)

@@ -90,13 +90,14 @@ def test_a_fault_the_recording_lacks_is_not_left_standing_in_for_a_spring():
     """A wide draw (benchmarks/explain_robustness.py --seed 2602334400 --case 23: Coulomb friction 4.2 % and a
     quadratic stiffness 7.6 %, 10.7-1.7 Hz in 83 s, 1.4 % noise, no sensor fault). After Coulomb a fitted
     channel fault can stand in for the spring: a -1.9 % mass gain closing 96 % before the later rounds were
-    anchored, a -0.8 ms delay named in round 1 while the candidates' refits ran to 12 evaluations; the
-    re-check then took it out once the stiffness was named (the explanation with the delay had 24x the
-    held-out squared error of the one without). Since the candidates' refits stop at
-    structure.REFIT_FTOL the delay's refit leaves it worse than the explanation (gap closed -0.63) and the
-    stiffness is named in round 1 directly. Either way: the two true effects, no fault left in the model,
-    any fault the rounds named taken out by the re-check as a measurement row, and the document matches its
-    schema. (The re-check itself on a hand-built explanation: the two tests above.)"""
+    anchored, then a -0.8 ms delay named in the second round (rounds[1]) while the candidates' refits ran up
+    to 12 evaluations, which the re-check took out once the stiffness was named (the explanation with the
+    delay had 24x the held-out squared error of the one without). Since the candidates' refits stop at
+    structure.CANDIDATE_REFIT_FTOL, the delay's refit leaves it worse than the explanation (gap closed -0.63,
+    measured) and the stiffness is named in that round directly. On either path: the two true effects, no
+    fault left in the model, the gap after under twice the floor, the document matching its schema, and a
+    re-check row, if a fault was named (none on the current path), a rejected measurement row. The re-check
+    itself: test_a_gain_the_later_effects_make_unneeded_is_taken_out and test_a_gain_the_recording_has_stays."""
     sc = make_scenario(np.random.default_rng([2602334400, 23]), "two_effects", None, wide=True)
     assert sorted(sc.truth_effects) == ["coulomb_friction", "quadratic_stiffness"]
     res = DiscrepancyAnalysis().fit(sc.run(seed=[2602334400, 23, 1]).recording).result()
