@@ -41,7 +41,7 @@ import numpy as np
 
 from .clustered import cr3_covariance, wald_p
 from .effects import CATALOG, Candidate
-from .structure import CANDIDATE_REFIT_FTOL, Fit, Fitter, Structure
+from .structure import Fit, Fitter, Structure
 from ..threads import map_runs
 
 #: A masked effect is added only when the block bootstrap says it beats the explanation before it with at
@@ -201,8 +201,8 @@ def masked_candidates(fitter: Fitter, cur: Structure, named: str, catalog: dict)
     def refit(member):  # on the shooting error alone: the refits run side by side (identify.threads.map_runs)
         _, _, cand, move = member
         start = dict(cur.coefficients, **move)
-        st = fitter.refine(replace(cand.structure, coef=tuple((t, start[t]) for t in cand.structure.coefficients)),
-                           ftol=CANDIDATE_REFIT_FTOL)
+        st = fitter.refine_candidate(replace(cand.structure,
+                                             coef=tuple((t, start[t]) for t in cand.structure.coefficients)))
         return (st, *shooting_test(fitter, st, cand.terms))
 
     for (_, _, cand, _), (st, se, p) in zip(kept[:MASKED_REFITS], map_runs(refit, kept[:MASKED_REFITS])):

@@ -13,7 +13,7 @@ from . import admissibility
 from .effects import CATALOG, Candidate
 from .masking import MASKED_P_BEATS, masked_admissibility, masked_candidates
 from ..simulation.shooting import bootstrap_prob, trimmed_total
-from .structure import CANDIDATE_REFIT_FTOL, Fitter, Structure
+from .structure import Fitter, Structure
 from ..threads import map_runs
 
 #: Candidates refit on the shooting error per round: the best REFINE_TOP - 1 by shooting error at their
@@ -112,7 +112,7 @@ class Rounds:
             chosen = list({id(c): c for c in ok[:REFINE_TOP - 1] + by_eq[:REFINE_TOP - 1]
                            + self._judged_after_refit(cands, ok, self.alpha)}.values())
             # the refits side by side (each its own; scored after, in order, as one after another would be)
-            refits = map_runs(lambda c: fitter.refine(c.structure, ftol=CANDIDATE_REFIT_FTOL), chosen)
+            refits = map_runs(lambda c: fitter.refine_candidate(c.structure), chosen)
             for c, st in zip(chosen, refits):
                 refined = c.refit(st)
                 self._score(fitter, refined, cur, err, cur_se, mse_cur)

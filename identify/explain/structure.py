@@ -380,7 +380,7 @@ class Fitter:
         end stop just added, its travel too (log scale: the grid's step is 6-10 % of the peak, and a
         stiff contact's force is its stiffness times a penetration of that order). It stops after max_nfev
         evaluations or at a trusted step gaining less than ftol of the error (by default CONVERGED_FTOL; the
-        candidates pass CANDIDATE_REFIT_FTOL)."""
+        candidates' refits: refine_candidate)."""
         ties = st.ties
         names = [t for t in st.coefficients if t not in ties]  # tied terms follow their free term
         theta0 = np.array([st.coefficients[t] for t in names])
@@ -414,3 +414,7 @@ class Fitter:
         if not (np.all(np.isfinite(sol.x)) and 2 * sol.cost < float(r0 @ r0)):
             return st
         return build(sol.x)
+
+    def refine_candidate(self, st: Structure) -> Structure:
+        """A candidate's refit (a round's, the masking check's): refine, stopped at CANDIDATE_REFIT_FTOL."""
+        return self.refine(st, ftol=CANDIDATE_REFIT_FTOL)

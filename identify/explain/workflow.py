@@ -69,10 +69,9 @@ LOOK_FACTOR = 1.0
 CONTINUE_FACTOR = 1.0
 #: The explanation so far is refit on the shooting error to convergence (this many evaluations; a
 #: candidate's refit stops at 12 or at structure.CANDIDATE_REFIT_FTOL) before the gap decides whether
-#: something is still missing: case 88 of
-#: benchmarks/explain_robustness.py (quadratic stiffness + Bouc-Wen hysteresis, both named) left 1.79x
-#: the floor after 12, 1.10x after 40 (as after 100), and took cubic damping, confidence 1.0, for the
-#: difference.
+#: something is still missing: case 88 of benchmarks/explain_robustness.py (quadratic stiffness +
+#: Bouc-Wen hysteresis, both named) left 1.79x the floor after 12, 1.10x after 40 (as after 100), and
+#: took cubic damping, confidence 1.0, for the difference.
 POLISH_NFEV = 40
 #: Above this multiple of the noise floor after the explanation, the rest is outside the catalog: the named
 #: effects are flagged as surrogates for it, their confidence scaled by the share of the excess they explain.

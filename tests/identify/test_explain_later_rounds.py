@@ -12,7 +12,7 @@ import jsonschema
 import numpy as np
 import pytest
 
-from identify.explain import masking, rounds
+from identify.explain import structure
 from identify.explain.effects import CATALOG
 from identify.explain.structure import CANDIDATE_REFIT_FTOL, CONVERGED_FTOL
 from identify.explain.workflow import DiscrepancyAnalysis
@@ -102,8 +102,7 @@ def test_a_fault_the_recording_lacks_is_not_left_standing_in_for_a_spring(candid
     (Rounds._recheck, built by hand in the two tests above). On either path: the two true effects, no fault
     left in the model, the gap after under twice the floor, the document matching its schema, and every
     re-check row a rejected measurement row."""
-    monkeypatch.setattr(rounds, "CANDIDATE_REFIT_FTOL", candidate_ftol)
-    monkeypatch.setattr(masking, "CANDIDATE_REFIT_FTOL", candidate_ftol)
+    monkeypatch.setattr(structure, "CANDIDATE_REFIT_FTOL", candidate_ftol)  # read by Fitter.refine_candidate
     sc = make_scenario(np.random.default_rng([2602334400, 23]), "two_effects", None, wide=True)
     assert sorted(sc.truth_effects) == ["coulomb_friction", "quadratic_stiffness"]
     res = DiscrepancyAnalysis().fit(sc.run(seed=[2602334400, 23, 1]).recording).result()
